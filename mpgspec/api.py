@@ -1,0 +1,128 @@
+"""Python API: everything the CLI does, callable from a notebook.
+
+    result = mpgspec.api.verify(["specs/"], out_dir="reports")
+    result.exit_code, result.projects[0].report
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from .check.assertions import evaluate_assertions
+from .compile.primitive import CompiledPrimitive, compile_primitive
+from .compile.system import compile_system
+from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, UsageError  # noqa: F401
+from .execute.sequence import simulate_sequence
+from .graph.build import build_graph
+from .graph.transition import MotionPrimitiveGraph
+from .plan.planner import lookup_table, shortest_plan
+from .report.build import build_report, failure_traces
+from .settings import OracleSettings
+from .spec.loader import ProjectSpec, discover, load_project
+
+Progress = Callable[[str, str, int, int], None]
+
+
+@dataclass
+class ProjectResult:
+    """Outcome of one project: 'pass', 'fail' or 'error', with its report and written files."""
+
+    path: Path
+    name: str = ""
+    status: str = "error"
+    report: dict | None = None
+    errors: list[dict] = field(default_factory=list)
+    files: dict[str, str] = field(default_factory=dict)
+    graph: MotionPrimitiveGraph | None = None
+
+
+@dataclass
+class VerifyResult:
+    projects: list[ProjectResult]
+
+    @property
+    def exit_code(self) -> int:
+        st = {p.status for p in self.projects}
+        return EXIT_USAGE if "error" in st else EXIT_CHECK_FAILED if "fail" in st else EXIT_OK
+
+
+def settings_for(spec: ProjectSpec, overrides: dict | None = None) -> OracleSettings:
+    """Oracle settings of a project: its accuracy preset, then explicit overrides."""
+    o = spec.project.oracle
+    s = OracleSettings.with_accuracy(o.accuracy, horizon=o.horizon, dt=o.dt, method=o.method,
+                                     h_tolerance=o.h_tolerance)
+    return s.replace(**(overrides or {}))
+
+
+def compile_project(spec: ProjectSpec) -> dict[str, CompiledPrimitive]:
+    """System and every primitive of a project as CasADi Functions, keyed by node name."""
+    sys = compile_system(spec)
+    return {inst.name: compile_primitive(inst, sys) for inst in spec.primitives}
+
+
+def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None):
+    """Compile and run Algorithm 1; returns (primitives, graph, oracles, timing)."""
+    t0 = time.perf_counter()
+    prims = compile_project(spec)
+    t1 = time.perf_counter()
+    oracles: dict = {}
+    cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
+    g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, oracles)
+    t2 = time.perf_counter()
+    calls = sum(len(tr.t_A) * len(tr.t_B) for tr in g.transitions.values())
+    return prims, g, oracles, {"compile_s": t1 - t0, "graph_s": t2 - t1, "oracle_calls": calls,
+                               "oracle_calls_per_s": calls / max(t2 - t1, 1e-9)}
+
+
+def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
+                progress: Progress | None = None, formats: tuple[str, ...] = ("json", "html", "dot", "graphml")) -> ProjectResult:
+    """Verify one project file and write its reports under out_dir/<project>/."""
+    res = ProjectResult(Path(path))
+    try:
+        spec = load_project(path)
+        res.name = spec.name
+        settings = settings_for(spec, overrides)
+        prims, g, oracles, timing = build(spec, settings, progress)
+    except SpecErrors as e:
+        res.errors = [x.to_dict() | {"text": x.format()} for x in e.errors]
+        return res
+    except (SpecError, MpgError) as e:
+        res.errors = [e.to_dict() | {"text": e.format()} if isinstance(e, SpecError) else
+                      {"code": e.code, "message": str(e), "text": f"{path}: {e.code} {e}"}]
+        return res
+    res.graph = g
+    t0 = time.perf_counter()
+    names = list(prims)
+    plans = [shortest_plan(g, a, b, "duration") for a in names for b in names if a != b]
+    table = {"weight": "duration", "next": lookup_table(g, "duration")}
+    runs = {}
+    if spec.project.sequence is not None:
+        if progress:
+            progress(spec.name, "sequence", 0, 2)
+        for mode in ("naive", "graph"):
+            runs[mode] = simulate_sequence(prims, g, table["next"], spec.project.sequence, settings, mode)
+    checks = evaluate_assertions(spec.project.assertions, g, runs)
+    timing["plan_execute_s"] = time.perf_counter() - t0
+    status = "error" if any(c.status == "error" for c in checks) else \
+        "fail" if any(c.status == "fail" for c in checks) else "pass"
+    pairs = [(a, b) for a in names for b in names if a != b]
+    failures = failure_traces(g, prims, settings, oracles, pairs)
+    report = build_report(spec=spec, prims=prims, graph=g, settings=settings, plans=plans, table=table,
+                          assertions=checks, runs=runs, failures=failures, timing=timing, status=status)
+    res.status, res.report = status, report
+    if out_dir is not None:
+        from .report.files import write_reports
+
+        res.files = write_reports(report, g, Path(out_dir) / spec.name, formats)
+    return res
+
+
+def verify(paths, out_dir: str | Path | None = "reports", overrides: dict | None = None,
+           progress: Progress | None = None) -> VerifyResult:
+    """Verify every project found under `paths`; reports go to out_dir (None: write nothing)."""
+    files: list[Path] = []
+    for p in [paths] if isinstance(paths, (str, Path)) else paths:
+        files.extend(discover(p))
+    return VerifyResult([run_project(f, Path(out_dir) if out_dir else None, overrides, progress) for f in files])

@@ -1,0 +1,82 @@
+"""Evaluate a project's assertions: required and forbidden edges, plans, reachability, sequences."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import networkx as nx
+
+from ..graph.transition import MotionPrimitiveGraph
+from ..plan.planner import plan_graph, shortest_plan
+from ..spec.models import ForbidEdge, RequireEdge, RequirePlan, RequireReachable, RequireSimulation
+
+
+@dataclass
+class AssertionResult:
+    """One assertion: status is pass, fail or error; message says what was found."""
+
+    index: int
+    kind: str
+    description: str
+    status: str
+    message: str
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _edge_text(a, b):
+    return f"{a} -> {b}"
+
+
+def evaluate_assertions(assertions, g: MotionPrimitiveGraph, runs: dict) -> list[AssertionResult]:
+    """Check every assertion against the built graph and the sequence runs (mode -> SequenceRun)."""
+    out = []
+    G = plan_graph(g)
+    for i, a in enumerate(assertions):
+        if isinstance(a, RequireEdge):
+            e = a.edge
+            tr = g.edge(e.from_, e.to)
+            want = f" of class {e.class_}" if e.class_ else ""
+            desc = f"edge {_edge_text(e.from_, e.to)}{want}"
+            if tr is None:
+                ok, msg = False, "no transition was verified"
+            elif e.class_ and int(tr.cls) != e.class_:
+                ok, msg = False, f"found class {int(tr.cls)}"
+            else:
+                ok, msg = True, f"class {int(tr.cls)}"
+            out.append(AssertionResult(i, "edge", desc, "pass" if ok else "fail", msg))
+        elif isinstance(a, ForbidEdge):
+            e = a.no_edge
+            tr = g.edge(e.from_, e.to)
+            out.append(AssertionResult(i, "no_edge", f"no edge {_edge_text(e.from_, e.to)}",
+                                       "pass" if tr is None else "fail",
+                                       "no transition" if tr is None else f"a class {int(tr.cls)} transition exists"))
+        elif isinstance(a, RequirePlan):
+            p = a.plan
+            plan = shortest_plan(g, p.from_, p.to, p.weight, G)
+            desc = f"plan {p.from_} => {p.to}" + (f" with {p.weight} <= {p.max_cost:g}" if p.max_cost is not None else "")
+            if not plan.found:
+                ok, msg = False, "unreachable"
+            elif p.max_cost is not None and plan.cost > p.max_cost:
+                ok, msg = False, f"cheapest costs {plan.cost:.3g}: {' -> '.join(plan.path)}"
+            else:
+                ok, msg = True, f"{' -> '.join(plan.path)} (cost {plan.cost:.3g})"
+            out.append(AssertionResult(i, "plan", desc, "pass" if ok else "fail", msg))
+        elif isinstance(a, RequireReachable):
+            src = a.reachable_from
+            missing = sorted(set(G.nodes) - nx.descendants(G, src) - {src})
+            out.append(AssertionResult(i, "reachable_from", f"every primitive reachable from {src}",
+                                       "fail" if missing else "pass",
+                                       f"unreachable: {', '.join(missing)}" if missing else "all reachable"))
+        elif isinstance(a, RequireSimulation):
+            run = runs.get(a.simulation_safe)
+            desc = f"{a.simulation_safe} sequence is {'safe' if a.expect else 'unsafe'}"
+            if run is None:
+                out.append(AssertionResult(i, "simulation_safe", desc, "error", "the project has no sequence"))
+                continue
+            ok = run.safe == a.expect
+            first = run.violations[0] if run.violations else None
+            msg = ("safe throughout" if run.safe else
+                   f"violated {first['h']} of {first['primitive']} at t = {first['t']:.3f} s")
+            out.append(AssertionResult(i, "simulation_safe", desc, "pass" if ok else "fail", msg))
+    return out

@@ -1,0 +1,181 @@
+"""Compile a motion primitive (Definition 1) to named CasADi Functions.
+
+Every function takes (x, t, s, x_sw): the state, the primitive's clock t, the time s since the
+primitive was switched in, and the state at switch-in (used by motion profiles). The safety
+oracle composes them; nothing here integrates.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from ..errors import SpecError
+from ..spec.loader import PrimitiveInstance
+from ..spec.models import PrimitiveClass
+from .controllers import LAWS, ControlContext
+from .expr_casadi import interp_cubic, interp_linear
+from .exprs import ExprCompiler
+from .system import CompiledSystem
+
+INACTIVE = 1e9
+"""Value of a safety function outside its active window: never binding."""
+
+
+@dataclass
+class CompiledPrimitive:
+    """A motion primitive as CasADi Functions plus the numbers the graph builder needs."""
+
+    name: str
+    cls: PrimitiveClass
+    system: CompiledSystem
+    period: float | None
+    domain: tuple[float, float] | None
+    next: str | None
+    horizon: float | None
+    grid_A: int
+    grid_B: int
+    h_names: list[str]
+    radius: float
+    f_cl: ca.Function  # (x, t, s, x_sw) -> xdot under the saturated control law
+    control: ca.Function  # (x, t, s, x_sw) -> (u_raw, u_sat)
+    h: ca.Function  # (x, t, s, x_sw) -> h values; >= 0 is safe
+    roa_margin: ca.Function  # (x, t) -> r - ||x - x*(t)||_W ; > 0 is inside E
+    setpoint: ca.Function  # t -> x*(t)
+    info: dict = field(default_factory=dict)
+
+    @property
+    def t_range(self) -> tuple[float, float]:
+        """Clock interval sampled by the grids (Algorithm 1)."""
+        if self.cls is PrimitiveClass.PERIODIC:
+            return (0.0, float(self.period))
+        if self.cls is PrimitiveClass.TRANSIENT:
+            return self.domain
+        return (0.0, 0.0)
+
+    def clock_grid(self, n: int, role: str = "B") -> np.ndarray:
+        """Grid over the clock: one point (fixed), n over one period, n over the domain.
+
+        As a source (role 'A') a transient's grid ends at t_f, where it hands over to `next`;
+        as a target (role 'B') it stops short of t_f, where no time would be left to converge.
+        """
+        a, b = self.t_range
+        if self.cls is PrimitiveClass.FIXED:
+            return np.zeros(1)
+        if self.cls is PrimitiveClass.PERIODIC:
+            return a + (b - a) * np.arange(n) / n
+        if n == 1:
+            return np.array([b if role == "A" else a])
+        return np.linspace(a, b, n) if role == "A" else np.linspace(a, b, n + 1)[:-1]
+
+    def x_star(self, t) -> np.ndarray:
+        return np.array(self.setpoint(t)).ravel()
+
+
+def _constants(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler) -> dict[str, float]:
+    env: dict[str, float] = dict(sys.parameters)
+    env.update(inst.argument)
+    for k, v in inst.spec.let.items():
+        env[k] = ec.number(v, ("let", k), env)
+    return env
+
+
+def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledPrimitive:
+    """Build f_cl, control, h, roa_margin and setpoint for one graph node."""
+    p = inst.spec
+    ec = ExprCompiler(inst.locate, f"primitive '{inst.name}'")
+    consts = _constants(inst, sys, ec)
+    period = ec.number(p.period, ("period",), consts) if p.period is not None else None
+    if period is not None and period <= 0:
+        raise SpecError("period must be > 0", location=inst.locate(("period",)), key=f"primitive '{inst.name}': period",
+                        expected="T_p > 0", found=f"{period:g}", code="MPG104")
+    domain = None
+    if p.domain is not None:
+        domain = (ec.number(p.domain[0], ("domain", 0), consts), ec.number(p.domain[1], ("domain", 1), consts))
+        if domain[1] <= domain[0]:
+            raise SpecError("domain must be [t0, tf] with tf > t0", location=inst.locate(("domain",)),
+                            key=f"primitive '{inst.name}': domain", expected="tf > t0", found=f"{list(domain)}",
+                            code="MPG104")
+    t = ca.SX.sym("t")
+    s = ca.SX.sym("s")
+    x_sw = ca.SX.sym("x_sw", sys.nx)
+    x = sys.x
+    # clock seen by setpoint and windows: wrapped into one period for periodic primitives
+    tc = t - period * ca.floor(t / period) if period is not None else t
+    env: dict[str, object] = {**sys.env(), **consts, "t": t, "s": s}
+    sp = p.setpoint
+    if sp.expr is not None:
+        if len(sp.expr) != sys.nx:
+            raise SpecError("setpoint needs one expression per state", location=inst.locate(("setpoint", "expr")),
+                            key=f"primitive '{inst.name}': setpoint.expr", expected=f"{sys.nx}", found=f"{len(sp.expr)}",
+                            code="MPG106")
+        x_star_t = ec.vector(sp.expr, ("setpoint", "expr"), {**consts, "t": t})
+    else:
+        if any(len(r) != sys.nx for r in sp.samples):
+            raise SpecError("each sample needs one value per state", location=inst.locate(("setpoint", "samples")),
+                            key=f"primitive '{inst.name}': setpoint.samples", expected=f"{sys.nx} values",
+                            found=f"{sorted({len(r) for r in sp.samples})}", code="MPG106")
+        ts = np.asarray(sp.times, float)
+        ys = np.asarray(sp.samples, float)
+        interp = interp_cubic if sp.interpolation == "cubic" else interp_linear
+        x_star_t = ca.vertcat(*[interp(t, ts, ys[:, i]) for i in range(sys.nx)])
+    x_star_raw = ca.Function("x_star_raw", [t], [x_star_t])
+    x_star = x_star_raw(tc)
+    x_star_dot = ca.jacobian(x_star_raw(t), t)
+    x_star_dot = ca.substitute(x_star_dot, t, tc)
+    setpoint = ca.Function(f"setpoint_{_ident(inst.name)}", [t], [x_star])
+    for i, n in enumerate(sys.state_names):
+        env[f"{n}_star"] = x_star[i]
+        env[f"{n}_star_dot"] = x_star_dot[i]
+    ctx = ControlContext(sys, t, s, x_sw, x_star, x_star_dot, setpoint, env, ec,
+                         fixed=p.class_ is PrimitiveClass.FIXED)
+    u_raw = LAWS[p.controller.type](p.controller, ctx)
+    u_sat = ca.fmin(ca.fmax(u_raw, ca.DM(sys.u_lo)), ca.DM(sys.u_hi)) if sys.nu else u_raw
+    xdot = ca.substitute(sys.xdot, sys.u, u_sat) if sys.nu else sys.xdot
+    args = [x, t, s, x_sw]
+    ident = _ident(inst.name)
+    f_cl = ca.Function(f"f_cl_{ident}", args, [xdot], ["x", "t", "s", "x_sw"], ["xdot"])
+    control = ca.Function(f"k_{ident}", args, [u_raw, u_sat], ["x", "t", "s", "x_sw"], ["u_raw", "u"])
+    # safety functions may name inputs (the saturated control)
+    henv = {**env, **{n: u_sat[i] for i, n in enumerate(sys.input_names)}}
+    hs, names = [], []
+    for j, sf in enumerate(inst.safe_set):
+        path = ("safe_set", j)
+        if sf.h is not None:
+            hv = ec.sx(sf.h, path + ("h",), henv)
+        else:
+            hv = sf.tol - ca.fabs(ec.sx(sf.eq, path + ("eq",), henv))
+        if sf.when is not None:
+            a, b = sf.when
+            hv = ca.if_else(ca.logic_and(tc >= a, tc < b), hv, INACTIVE)
+        hs.append(hv)
+        names.append(sf.name or f"h{j}")
+    h = ca.Function(f"h_{ident}", args, [ca.vertcat(*hs) if hs else ca.SX(0, 1)], ["x", "t", "s", "x_sw"], ["h"])
+    roa = p.roa
+    dx = sys.wrapped_error(x - x_star)
+    if roa.matrix is not None:
+        W = np.asarray(roa.matrix, float)
+        if W.shape != (sys.nx, sys.nx) or not np.allclose(W, W.T) or np.linalg.eigvalsh(W).min() <= 0:
+            raise SpecError("roa.matrix must be symmetric positive definite", location=inst.locate(("roa", "matrix")),
+                            key=f"primitive '{inst.name}': roa.matrix", expected=f"an SPD {sys.nx}x{sys.nx} matrix",
+                            found=f"shape {W.shape}", code="MPG106")
+    else:
+        w = np.ones(sys.nx) if roa.weights is None else np.asarray(roa.weights, float)
+        if w.shape != (sys.nx,):
+            raise SpecError("roa.weights needs one weight per state", location=inst.locate(("roa", "weights")),
+                            key=f"primitive '{inst.name}': roa.weights", expected=f"{sys.nx}", found=f"{w.size}",
+                            code="MPG106")
+        W = np.diag(w)
+    margin = roa.radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
+    roa_margin = ca.Function(f"roa_{ident}", [x, t], [margin], ["x", "t"], ["margin"])
+    grid = p.grid
+    return CompiledPrimitive(
+        name=inst.name, cls=p.class_, system=sys, period=period, domain=domain, next=p.next, horizon=p.horizon,
+        grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=roa.radius,
+        f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info,
+    )
+
+
+def _ident(name: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in name)

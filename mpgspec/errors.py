@@ -1,0 +1,120 @@
+"""Errors a person can act on: what, where (file:line:col), expected vs found, and a stable code.
+
+Exit codes follow the convention of linters and CI tools: 0 all checks pass, 1 a check failed,
+2 the input or the run was broken.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+EXIT_OK = 0
+EXIT_CHECK_FAILED = 1
+EXIT_USAGE = 2
+
+
+@dataclass
+class Location:
+    """A place in a spec file; line and column are 1-based (0 when unknown)."""
+
+    file: str = "<string>"
+    line: int = 0
+    column: int = 0
+
+    def __str__(self) -> str:
+        if self.line:
+            return f"{self.file}:{self.line}:{self.column}"
+        return self.file
+
+
+class MpgError(Exception):
+    """Base class of all mpgspec errors."""
+
+    code = "MPG000"
+
+
+class SpecError(MpgError, ValueError):
+    """A user's spec is wrong. Carries location, key, expectation and what was found.
+
+    Codes: MPG1xx spec structure and values, MPG2xx expressions, MPG3xx references between specs.
+    """
+
+    code = "MPG100"
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        location: Location | None = None,
+        key: str = "",
+        expected: str = "",
+        found: str = "",
+        hint: str = "",
+        code: str | None = None,
+        context: str = "",
+    ):
+        self.message = message
+        self.location = location or Location()
+        self.key = key
+        self.expected = expected
+        self.found = found
+        self.hint = hint
+        self.context = context
+        if code:
+            self.code = code
+        super().__init__(self.format())
+
+    def format(self) -> str:
+        parts = [f"{self.location} {self.code}"]
+        if self.key:
+            parts.append(f"{self.key}:")
+        parts.append(self.message)
+        text = " ".join(parts)
+        if self.expected:
+            text += f"; expected {self.expected}"
+        if self.found:
+            text += f"; found {self.found}"
+        if self.hint:
+            text += f" (hint: {self.hint})"
+        return text
+
+    def to_dict(self) -> dict:
+        return {
+            "code": self.code,
+            "file": self.location.file,
+            "line": self.location.line,
+            "column": self.location.column,
+            "key": self.key,
+            "message": self.message,
+            "expected": self.expected,
+            "found": self.found,
+            "hint": self.hint,
+        }
+
+
+@dataclass
+class SpecErrors(MpgError, ValueError):
+    """Several spec errors found in one pass (all are reported, not only the first)."""
+
+    errors: list[SpecError] = field(default_factory=list)
+    code = "MPG100"
+
+    def __str__(self) -> str:
+        return "\n".join(e.format() for e in self.errors)
+
+
+class ExprError(SpecError):
+    """An expression in a spec does not parse or names something unknown."""
+
+    code = "MPG200"
+
+
+class UsageError(MpgError, ValueError):
+    """The command line or API was called wrongly (missing path, unknown primitive name...)."""
+
+    code = "MPG001"
+
+
+class CompileError(MpgError, RuntimeError):
+    """A valid spec could not be compiled to CasADi (e.g. singular linearisation for LQR)."""
+
+    code = "MPG300"

@@ -1,0 +1,103 @@
+"""Transitions (Definition 2) and the motion primitive graph that holds them (Definition 3)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import networkx as nx
+import numpy as np
+
+from ..oracle.evidence import OracleEvidence
+
+
+class TransitionClass(IntEnum):
+    """Class 1: some t_B works for every t_A (solid edge); Class 2: only for some t_A (dashed)."""
+
+    NONE = 0
+    CLASS_1 = 1
+    CLASS_2 = 2
+
+
+@dataclass
+class Transition:
+    """Oracle grid of one ordered pair (A, B) and what it implies for switching from A to B."""
+
+    source: str
+    target: str
+    t_A: np.ndarray
+    t_B: np.ndarray
+    evidence: list[list[OracleEvidence]]  # [i_A][i_B]
+    cls: TransitionClass = TransitionClass.NONE
+    best_t_B: list[float | None] = field(default_factory=list)  # per t_A: the t_B to switch in at
+    windows: list[tuple[float, float]] = field(default_factory=list)  # t_A intervals with a safe t_B
+    weights: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def verdicts(self) -> np.ndarray:
+        return np.array([[e.verdict for e in row] for row in self.evidence], dtype=int)
+
+    @property
+    def available(self) -> np.ndarray:
+        """Per t_A: does some t_B give O_B = 1."""
+        return self.verdicts.any(axis=1)
+
+    def classify(self, t_A_end: float) -> None:
+        """Algorithm 1 lines 9-14, then the switch-in clock, windows and weights."""
+        V = self.verdicts
+        avail = V.any(axis=1)
+        self.cls = (TransitionClass.CLASS_1 if avail.all() else
+                    TransitionClass.CLASS_2 if avail.any() else TransitionClass.NONE)
+        self.best_t_B, durations, peaks = [], [], []
+        for i in range(len(self.t_A)):
+            ok = [j for j in range(len(self.t_B)) if V[i, j]]
+            if not ok:
+                self.best_t_B.append(None)
+                continue
+            j = min(ok, key=lambda j: self.evidence[i][j].t_enter)
+            e = self.evidence[i][j]
+            self.best_t_B.append(float(self.t_B[j]))
+            durations.append(e.t_enter)
+            peaks.append(max(e.peak_input, default=0.0))
+        self.windows = _windows(self.t_A, avail, t_A_end)
+        if durations:
+            self.weights = {"duration": float(max(durations)), "peak_input": float(max(peaks)), "hops": 1.0}
+
+    def switch_clock(self, t_A: float) -> float | None:
+        """The verified t_B for a grid time t_A, None where no transition starts."""
+        i = int(np.argmin(np.abs(self.t_A - t_A)))
+        return self.best_t_B[i] if abs(self.t_A[i] - t_A) < 1e-9 else None
+
+
+def _windows(t: np.ndarray, avail: np.ndarray, t_end: float) -> list[tuple[float, float]]:
+    """Maximal runs of available grid points as [first, last] t_A intervals."""
+    out, start = [], None
+    for i, a in enumerate(avail):
+        if a and start is None:
+            start = float(t[i])
+        if not a and start is not None:
+            out.append((start, float(t[i - 1])))
+            start = None
+    if start is not None:
+        out.append((start, float(t[-1])))
+    return out
+
+
+class MotionPrimitiveGraph:
+    """A networkx DiGraph of primitives (nodes, with their class) and Class 1/2 transitions (edges)."""
+
+    def __init__(self, nodes: dict[str, dict], transitions: dict[tuple[str, str], Transition]):
+        self.transitions = transitions
+        self.G = nx.DiGraph()
+        for name, attrs in nodes.items():
+            self.G.add_node(name, **attrs)
+        for (a, b), tr in transitions.items():
+            if tr.cls is not TransitionClass.NONE:
+                self.G.add_edge(a, b, cls=int(tr.cls), **tr.weights)
+
+    def edge(self, a: str, b: str) -> Transition | None:
+        tr = self.transitions.get((a, b))
+        return tr if tr is not None and tr.cls is not TransitionClass.NONE else None
+
+    @property
+    def nodes(self) -> list[str]:
+        return list(self.G.nodes)

@@ -1,0 +1,109 @@
+"""Assemble the versioned JSON report of one project from the pipeline's results."""
+from __future__ import annotations
+
+import datetime as _dt
+from dataclasses import asdict
+
+import numpy as np
+
+from .. import __version__
+from ..compile.primitive import CompiledPrimitive
+from ..graph.transition import MotionPrimitiveGraph, TransitionClass
+from ..oracle.trace import trace
+from ..settings import OracleSettings
+
+SCHEMA_VERSION = "1.0"
+
+
+def _f(v):
+    if v is None:
+        return None
+    v = float(v)
+    return v if np.isfinite(v) else None
+
+
+def primitive_entry(p: CompiledPrimitive, spec) -> dict:
+    c = spec.controller
+    return {
+        "name": p.name, "class": p.cls.value, "period": _f(p.period),
+        "domain": list(p.domain) if p.domain else None, "next": p.next,
+        "controller": c.type, "safety_functions": p.h_names, "roa_radius": p.radius,
+        "roa_method": "given", "horizon": _f(p.horizon), "setpoint_t0": [float(v) for v in p.x_star(p.t_range[0])],
+        "description": spec.description.strip(), "info": p.info,
+    }
+
+
+def transition_entry(tr) -> dict:
+    ev = tr.evidence
+    cells = [[{"verdict": e.verdict, "reason": e.reason.value, "t_stop": _f(e.t_stop), "t_enter": _f(e.t_enter),
+               "violated": e.violated, "checked": e.checked, "refined": e.refined,
+               "peak_input": [_f(v) for v in e.peak_input], "saturated": e.saturated,
+               "min_margins": {k: _f(v) for k, v in e.min_margins.items()},
+               "best_roa_margin": _f(e.best_roa_margin), "message": e.message} for e in row] for row in ev]
+    flat = [e for row in ev for e in row]
+    return {
+        "from": tr.source, "to": tr.target, "class": int(tr.cls), "method": "simulated",
+        "t_A": [float(t) for t in tr.t_A], "t_B": [float(t) for t in tr.t_B],
+        "verdicts": tr.verdicts.tolist(), "cells": cells,
+        "windows": [list(w) for w in tr.windows], "best_t_B": tr.best_t_B, "weights": tr.weights,
+        "counts": {"safe": sum(e.verdict for e in flat), "total": len(flat),
+                   "refined": sum(e.refined for e in flat), "errors": sum(e.reason.value == "error" for e in flat)},
+    }
+
+
+def failure_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
+                   oracles: dict, pairs: list[tuple[str, str]]) -> list[dict]:
+    """For pairs without an edge: h over time from the start point whose flow came closest to E."""
+    out = []
+    for a, b in pairs:
+        tr = g.transitions.get((a, b))
+        if tr is None or tr.cls is not TransitionClass.NONE:
+            continue
+        best, where = None, None
+        for i, row in enumerate(tr.evidence):
+            for j, e in enumerate(row):
+                score = (e.t_stop, e.best_roa_margin or -np.inf)
+                if best is None or score > best:
+                    best, where = score, (i, j)
+        i, j = where
+        e = tr.evidence[i][j]
+        horizon = float(oracles[b].horizons(np.array([tr.t_B[j]]))[0]) if b in oracles else settings.horizon
+        horizon = min(horizon, max(e.t_stop * 1.2 + 0.2, 0.5))
+        try:
+            series = trace(prims[b], prims[a].x_star(float(tr.t_A[i])), float(tr.t_B[j]), horizon, settings)
+        except Exception as err:
+            series = {"error": str(err)[:300]}
+        out.append({"from": a, "to": b, "t_A": float(tr.t_A[i]), "t_B": float(tr.t_B[j]), "reason": e.reason.value,
+                    "violated": e.violated, "t_stop": _f(e.t_stop), "series": series})
+    return out
+
+
+def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs, failures, timing,
+                 status: str) -> dict:
+    """The report dict; see mpgspec/report/schema/report-v1.json."""
+    sysm = spec.system
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "mpgspec_version": __version__,
+        "generated_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "project": {"name": spec.name, "path": str(spec.path), "description": spec.project.description.strip()},
+        "status": status,
+        "settings": asdict(settings),
+        "system": {"name": sysm.name, "kind": sysm.kind, "states": list(sysm.states), "inputs": list(sysm.inputs),
+                   "input_bounds": {k: list(v) for k, v in sysm.input_bounds.items()}},
+        "primitives": [primitive_entry(prims[i.name], i.spec) for i in spec.primitives],
+        "transitions": [transition_entry(tr) for tr in graph.transitions.values()],
+        "edges": [{"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in ("duration", "peak_input", "hops") if k in d}}
+                  for a, b, d in graph.G.edges(data=True)],
+        "failures": failures,
+        "plans": [p.to_dict() for p in plans],
+        "lookup_table": table,
+        "assertions": [a.to_dict() for a in assertions],
+        "sequence": None if spec.project.sequence is None else {
+            "start": spec.project.sequence.start, "duration": spec.project.sequence.duration,
+            "commands": [{"t": c.t, "goal": c.goal} for c in spec.project.sequence.commands],
+            "state_names": list(sysm.states),
+            "runs": {m: r.to_dict() for m, r in runs.items()},
+        },
+        "timing": timing,
+    }

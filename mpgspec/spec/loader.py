@@ -1,0 +1,253 @@
+"""Load projects: find project files, read YAML with positions, validate, expand and cross-check.
+
+The result is a `ProjectSpec`: validated models plus a way to locate any key in its source file,
+so that later stages (expression compilation) can still report file:line:column.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from pydantic import ValidationError
+
+from ..errors import Location, SpecError, SpecErrors, UsageError
+from .models import (
+    ForbidEdge,
+    Primitive,
+    PrimitiveClass,
+    Project,
+    RequireEdge,
+    RequirePlan,
+    RequireReachable,
+    SafetyFunction,
+)
+from .yamlpos import PositionMap, load_yaml
+
+PROJECT_FILE = "project.yaml"
+
+Locator = Callable[[tuple], Location]
+
+
+@dataclass(frozen=True)
+class PrimitiveInstance:
+    """One node of the graph: a primitive, with its argument value bound (Section III-B)."""
+
+    name: str
+    base: str
+    spec: Primitive
+    argument: dict[str, float]
+    safe_set: tuple[SafetyFunction, ...]
+    locate: Locator = field(compare=False, repr=False)
+
+    @property
+    def cls(self) -> PrimitiveClass:
+        return self.spec.class_
+
+
+@dataclass
+class ProjectSpec:
+    """A validated project, ready to compile."""
+
+    path: Path
+    project: Project
+    system: Any
+    system_locate: Locator
+    primitives: list[PrimitiveInstance]
+    locate: Locator
+
+    @property
+    def name(self) -> str:
+        return self.project.project
+
+    def primitive(self, name: str) -> PrimitiveInstance:
+        for p in self.primitives:
+            if p.name == name:
+                return p
+        raise KeyError(name)
+
+
+def discover(path: str | Path) -> list[Path]:
+    """Project files under `path`: the file itself, `path/project.yaml`, or all below a folder."""
+    p = Path(path)
+    if not p.exists():
+        raise UsageError(f"{p}: no such file or folder")
+    if p.is_file():
+        return [p]
+    if (p / PROJECT_FILE).is_file():
+        return [p / PROJECT_FILE]
+    found = sorted(p.rglob(PROJECT_FILE))
+    if not found:
+        raise UsageError(f"{p}: no {PROJECT_FILE} found in this folder or below it")
+    return found
+
+
+def _validation_errors(err: ValidationError, positions: PositionMap, prefix: tuple = ()) -> list[SpecError]:
+    out = []
+    for e in err.errors():
+        loc = prefix + tuple(e["loc"])
+        data_loc = tuple(x for x in loc if not (isinstance(x, str) and x[:1].isupper() and x not in ("Q", "R")))
+        key = ".".join(str(x) for x in data_loc) or "<root>"
+        found = e.get("input")
+        found_s = repr(found) if not isinstance(found, (dict, list)) else type(found).__name__
+        msg = e["msg"]
+        if msg.startswith("Value error, "):
+            msg = msg[len("Value error, ") :]
+        code = "MPG102" if e["type"] == "extra_forbidden" else "MPG103" if e["type"] == "missing" else "MPG104"
+        expected = ""
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key"
+            found_s = repr(data_loc[-1]) if data_loc else ""
+        elif e["type"] == "missing":
+            msg = "required key is missing"
+            found_s = ""
+        out.append(
+            SpecError(msg, location=positions.locate(data_loc), key=key, expected=expected, found=found_s, code=code)
+        )
+    # one union branch usually explains the problem best; keep distinct locations
+    seen, unique = set(), []
+    for s in out:
+        k = (s.key, s.message)
+        if k not in seen:
+            seen.add(k)
+            unique.append(s)
+    return unique
+
+
+def _at(pos: PositionMap, loc: tuple, offset: int | None) -> Location:
+    """Location of a key, or of character `offset` inside its value when an offset is given."""
+    return pos.locate(loc) if offset is None else pos.locate_in_value(loc, offset)
+
+
+def _read(path: Path) -> tuple[Any, PositionMap]:
+    return load_yaml(path)
+
+
+def _format_arg(v: float) -> str:
+    return f"{v:g}"
+
+
+def _expand(p: Primitive) -> list[tuple[str, dict[str, float]]]:
+    if not p.arguments:
+        return [(p.name, {})]
+    (arg, values), = p.arguments.items()
+    items = values.items() if isinstance(values, dict) else ((_format_arg(v), v) for v in values)
+    return [(f"{p.name}({label})", {arg: float(v)}) for label, v in items]
+
+
+def load_project(path: str | Path) -> ProjectSpec:
+    """Read, validate and cross-check one project file; raise SpecErrors listing every problem."""
+    path = Path(path)
+    data, pos = _read(path)
+    if not isinstance(data, dict):
+        raise SpecErrors([SpecError("a project file must be a mapping", location=Location(str(path), 1, 1),
+                                    expected="keys project, system, primitives", found=type(data).__name__,
+                                    code="MPG104")])
+    errors: list[SpecError] = []
+    # resolve included files, keeping each one's positions
+    system_locate: Locator = lambda loc, offset=None: _at(pos, ("system",) + tuple(loc), offset)
+    sys_data = data.get("system")
+    if isinstance(sys_data, str):
+        sys_path = path.parent / sys_data
+        if not sys_path.is_file():
+            errors.append(SpecError("included file not found", location=pos.locate_value(("system",)), key="system",
+                                    expected="a path relative to the project file", found=repr(sys_data),
+                                    code="MPG301"))
+        else:
+            sd, spos = _read(sys_path)
+            data = {**data, "system": sd}
+            system_locate = lambda loc, offset=None, spos=spos: _at(spos, tuple(loc), offset)
+    prim_locates: list[Locator] = []
+    prims_in: list = []
+    for i, item in enumerate(data.get("primitives") or []):
+        if isinstance(item, str):
+            ppath = path.parent / item
+            if not ppath.is_file():
+                errors.append(SpecError("included file not found", location=pos.locate_value(("primitives", i)),
+                                        key=f"primitives.{i}", expected="a path relative to the project file",
+                                        found=repr(item), code="MPG301"))
+                continue
+            pd_, ppos = _read(ppath)
+            items = pd_ if isinstance(pd_, list) else [pd_]
+            for j, it in enumerate(items):
+                prims_in.append(it)
+                pre = (j,) if isinstance(pd_, list) else ()
+                prim_locates.append(lambda loc, offset=None, ppos=ppos, pre=pre: _at(ppos, pre + tuple(loc), offset))
+        else:
+            prims_in.append(item)
+            prim_locates.append(lambda loc, offset=None, i=i: _at(pos, ("primitives", i) + tuple(loc), offset))
+    if errors:
+        raise SpecErrors(errors)
+    data = {**data, "primitives": prims_in}
+
+    class _Pos:
+        """Positions for the merged document: route into the file each part came from."""
+
+        def locate(self, loc, offset=None):
+            if loc and loc[0] == "system" and isinstance(sys_data, str):
+                return system_locate(loc[1:], offset)
+            if len(loc) >= 2 and loc[0] == "primitives" and isinstance(loc[1], int) and loc[1] < len(prim_locates):
+                return prim_locates[loc[1]](loc[2:], offset)
+            return _at(pos, loc, offset)
+
+    merged = _Pos()
+    try:
+        project = Project.model_validate(data)
+    except ValidationError as e:
+        raise SpecErrors(_validation_errors(e, merged)) from None
+
+    instances: list[PrimitiveInstance] = []
+    names: dict[str, Location] = {}
+    for i, p in enumerate(project.primitives):
+        loc_fn = prim_locates[i]
+        resolved: list[SafetyFunction] = []
+        for j, sf in enumerate(p.safe_set):
+            if sf.use is not None:
+                if sf.use not in project.safe_sets:
+                    errors.append(SpecError("unknown safe-set block", location=loc_fn(("safe_set", j, "use")),
+                                            key=f"primitive '{p.name}': safe_set.{j}.use",
+                                            expected="one of " + (", ".join(sorted(project.safe_sets)) or "(none defined)"),
+                                            found=repr(sf.use), code="MPG302"))
+                else:
+                    resolved.extend(project.safe_sets[sf.use])
+            else:
+                resolved.append(sf)
+        for name, arg in _expand(p):
+            if name in names:
+                errors.append(SpecError("duplicate primitive name", location=loc_fn(("name",)),
+                                        key="name", expected="unique names",
+                                        found=f"{name!r} also defined at {names[name]}", code="MPG303"))
+            names[name] = loc_fn(("name",))
+            instances.append(PrimitiveInstance(name, p.name, p, arg, tuple(resolved), loc_fn))
+    node_names = {p.name for p in instances}
+
+    def check_name(n: str, loc: tuple, key: str):
+        if n not in node_names:
+            errors.append(SpecError("unknown primitive", location=merged.locate(loc), key=key,
+                                    expected="one of " + ", ".join(sorted(node_names)), found=repr(n), code="MPG304"))
+
+    for i, p in enumerate(project.primitives):
+        if p.next is not None and p.next not in node_names:
+            errors.append(SpecError("unknown next primitive", location=prim_locates[i](("next",)),
+                                    key=f"primitive '{p.name}': next",
+                                    expected="one of " + ", ".join(sorted(node_names)), found=repr(p.next),
+                                    code="MPG304"))
+    for i, a in enumerate(project.assertions):
+        base = ("assertions", i)
+        if isinstance(a, (RequireEdge, ForbidEdge)):
+            ref = a.edge if isinstance(a, RequireEdge) else a.no_edge
+            k = "edge" if isinstance(a, RequireEdge) else "no_edge"
+            check_name(ref.from_, base + (k, "from"), f"assertions.{i}.{k}.from")
+            check_name(ref.to, base + (k, "to"), f"assertions.{i}.{k}.to")
+        elif isinstance(a, RequirePlan):
+            check_name(a.plan.from_, base + ("plan", "from"), f"assertions.{i}.plan.from")
+            check_name(a.plan.to, base + ("plan", "to"), f"assertions.{i}.plan.to")
+        elif isinstance(a, RequireReachable):
+            check_name(a.reachable_from, base + ("reachable_from",), f"assertions.{i}.reachable_from")
+    if project.sequence is not None:
+        check_name(project.sequence.start, ("sequence", "start"), "sequence.start")
+        for i, c in enumerate(project.sequence.commands):
+            check_name(c.goal, ("sequence", "commands", i, "goal"), f"sequence.commands.{i}.goal")
+    if errors:
+        raise SpecErrors(errors)
+    return ProjectSpec(path, project, project.system, system_locate, instances, merged.locate)

@@ -1,0 +1,1 @@
+"""Verification backends of mpgspec, registered through the `mpgspec.verifiers` entry-point group."""
