@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import time
+from functools import partial
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -62,14 +63,20 @@ def compile_project(spec: ProjectSpec) -> dict[str, CompiledPrimitive]:
     return {inst.name: compile_primitive(inst, sys) for inst in spec.primitives}
 
 
-def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None):
+def compile_path(path: str | Path) -> dict[str, CompiledPrimitive]:
+    """Load and compile a project file (picklable as a factory for worker processes)."""
+    return compile_project(load_project(path))
+
+
+def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None, workers: int = 1):
     """Compile and run Algorithm 1; returns (primitives, graph, oracles, timing)."""
     t0 = time.perf_counter()
     prims = compile_project(spec)
     t1 = time.perf_counter()
     oracles: dict = {}
     cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
-    g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, oracles)
+    g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, oracles,
+                    workers=workers, factory=partial(compile_path, spec.path))
     t2 = time.perf_counter()
     calls = sum(len(tr.t_A) * len(tr.t_B) for tr in g.transitions.values())
     return prims, g, oracles, {"compile_s": t1 - t0, "graph_s": t2 - t1, "oracle_calls": calls,
@@ -77,14 +84,15 @@ def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None
 
 
 def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
-                progress: Progress | None = None, formats: tuple[str, ...] = ("json", "html", "dot", "graphml")) -> ProjectResult:
+                progress: Progress | None = None, formats: tuple[str, ...] = ("json", "html", "dot", "graphml"),
+                workers: int = 1) -> ProjectResult:
     """Verify one project file and write its reports under out_dir/<project>/."""
     res = ProjectResult(Path(path))
     try:
         spec = load_project(path)
         res.name = spec.name
         settings = settings_for(spec, overrides)
-        prims, g, oracles, timing = build(spec, settings, progress)
+        prims, g, oracles, timing = build(spec, settings, progress, workers)
     except SpecErrors as e:
         res.errors = [x.to_dict() | {"text": x.format()} for x in e.errors]
         return res
@@ -120,9 +128,10 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
 
 
 def verify(paths, out_dir: str | Path | None = "reports", overrides: dict | None = None,
-           progress: Progress | None = None) -> VerifyResult:
+           progress: Progress | None = None, workers: int = 1) -> VerifyResult:
     """Verify every project found under `paths`; reports go to out_dir (None: write nothing)."""
     files: list[Path] = []
     for p in [paths] if isinstance(paths, (str, Path)) else paths:
         files.extend(discover(p))
-    return VerifyResult([run_project(f, Path(out_dir) if out_dir else None, overrides, progress) for f in files])
+    return VerifyResult([run_project(f, Path(out_dir) if out_dir else None, overrides, progress, workers=workers)
+                         for f in files])

@@ -67,7 +67,7 @@ def cmd_verify(args) -> int:
     if args.method:
         overrides["method"] = args.method
     res = api.verify(args.paths, out_dir=None if args.no_write else args.out, overrides=overrides,
-                     progress=None if args.quiet else _progress(sys.stderr))
+                     progress=None if args.quiet else _progress(sys.stderr), workers=args.jobs)
     if args.format == "json":
         print(json.dumps({"exit_code": res.exit_code, "projects": [
             {"path": str(p.path), "name": p.name, "status": p.status, "errors": p.errors, "files": p.files,
@@ -151,6 +151,7 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--no-write", action="store_true", help="write no report files")
     v.add_argument("--format", choices=("human", "json", "github"), default="human")
     v.add_argument("--method", help="oracle backend (default: the project's, usually rk4)")
+    v.add_argument("-j", "--jobs", type=int, default=1, help="worker processes for oracle batches (default 1)")
     v.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     v.set_defaults(fn=cmd_verify)
     p = sub.add_parser("plan", help="shortest safe transition sequence between two primitives")
