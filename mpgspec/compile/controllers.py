@@ -28,6 +28,8 @@ class ControlContext:
     env: dict
     ec: ExprCompiler
     fixed: bool
+    xdot: ca.SX | None = None  # open-loop xdot(x, u) of the primitive's dynamics mode
+    contacts: tuple[str, ...] = ()
     info: dict = field(default_factory=dict)
 
 
@@ -67,7 +69,8 @@ def pd_law(c: PDController, ctx: ControlContext) -> ca.SX:
     y = ctx.ec.vector(c.outputs, ("controller", "outputs"), ctx.env)
     ny = y.shape[0]
     Jy = ca.jacobian(y, x)
-    drift = ca.substitute(sys.xdot, sys.u, ca.DM.zeros(sys.nu)) if sys.nu else sys.xdot
+    xdot = sys.xdot if ctx.xdot is None else ctx.xdot
+    drift = ca.substitute(xdot, sys.u, ca.DM.zeros(sys.nu)) if sys.nu else xdot
     ydot = ca.mtimes(Jy, drift)
     y_of = ca.Function("y", [x], [y, ydot])
     yd, yd_dot = y_of(ctx.x_star)
@@ -96,6 +99,13 @@ def pd_law(c: PDController, ctx: ControlContext) -> ca.SX:
     u = ca.mtimes(By, v)
     if c.feedforward is not None:
         u = u + ctx.ec.vector(c.feedforward, ("controller", "feedforward"), ctx.env)
+    if c.gravity_compensation:
+        if not hasattr(sys, "static_torque"):
+            raise SpecError("gravity compensation needs a rigid-body system",
+                            location=ctx.ec.locate(("controller", "gravity_compensation")),
+                            key=f"{ctx.ec.owner}: controller.gravity_compensation", expected="system kind rigid_body",
+                            found="an analytic system", code="MPG108")
+        u = u + sys.static_torque(ctx.contacts)
     return u
 
 
@@ -113,8 +123,9 @@ def lqr_law(c: LQRController, ctx: ControlContext) -> ca.SX:
     except ValueError as err:
         raise SpecError(str(err), location=ctx.ec.locate(("controller",)), key=f"{ctx.ec.owner}: controller",
                         code="MPG106") from None
-    f = ca.Function("f", [sys.x, sys.u], [sys.xdot])
-    A_fn = ca.Function("A", [sys.x, sys.u], [ca.jacobian(sys.xdot, sys.x), ca.jacobian(sys.xdot, sys.u)])
+    xdot = sys.xdot if ctx.xdot is None else ctx.xdot
+    f = ca.Function("f", [sys.x, sys.u], [xdot])
+    A_fn = ca.Function("A", [sys.x, sys.u], [ca.jacobian(xdot, sys.x), ca.jacobian(xdot, sys.u)])
     if c.u_eq is not None:
         env = {**ctx.env}
         us = np.array([ctx.ec.number(v, ("controller", "u_eq", i), {k: float(v2) for k, v2 in env.items()

@@ -105,7 +105,23 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     tc = t - period * ca.floor(t / period) if period is not None else t
     env: dict[str, object] = {**sys.env(), **consts, "t": t, "s": s}
     sp = p.setpoint
-    if sp.expr is not None:
+    loop = sys.open_loop(p.contacts)
+    if sp.named is not None:
+        unknown = [k for k in sp.named if k not in sys.state_names]
+        if unknown:
+            raise SpecError("setpoint names an unknown state", location=inst.locate(("setpoint", "named", unknown[0])),
+                            key=f"primitive '{inst.name}': setpoint.named", expected="state names of the system",
+                            found=repr(unknown[0]), code="MPG106")
+        base = sys.default_state()
+        x_star_t = ca.vertcat(*[ec.sx(sp.named[n], ("setpoint", "named", n), {**consts, "t": t}) if n in sp.named
+                                else ca.SX(base[i]) for i, n in enumerate(sys.state_names)])
+        if sp.feet_on_ground:
+            from .rigidbody.system import feet_on_ground
+
+            x_fixed = feet_on_ground(sys, np.array(ca.Function("x0", [t], [x_star_t])(0.0)).ravel())
+            i = sys.state_names.index("base_z")
+            x_star_t = ca.vertcat(x_star_t[:i], x_fixed[i], x_star_t[i + 1:])
+    elif sp.expr is not None:
         if len(sp.expr) != sys.nx:
             raise SpecError("setpoint needs one expression per state", location=inst.locate(("setpoint", "expr")),
                             key=f"primitive '{inst.name}': setpoint.expr", expected=f"{sys.nx}", found=f"{len(sp.expr)}",
@@ -129,28 +145,38 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         env[f"{n}_star"] = x_star[i]
         env[f"{n}_star_dot"] = x_star_dot[i]
     ctx = ControlContext(sys, t, s, x_sw, x_star, x_star_dot, setpoint, env, ec,
-                         fixed=p.class_ is PrimitiveClass.FIXED)
+                         fixed=p.class_ is PrimitiveClass.FIXED, xdot=loop.xdot, contacts=loop.contacts)
     u_raw = LAWS[p.controller.type](p.controller, ctx)
     u_sat = ca.fmin(ca.fmax(u_raw, ca.DM(sys.u_lo)), ca.DM(sys.u_hi)) if sys.nu else u_raw
-    xdot = ca.substitute(sys.xdot, sys.u, u_sat) if sys.nu else sys.xdot
+    xdot = ca.substitute(loop.xdot, sys.u, u_sat) if sys.nu else loop.xdot
     args = [x, t, s, x_sw]
     ident = _ident(inst.name)
     f_cl = ca.Function(f"f_cl_{ident}", args, [xdot], ["x", "t", "s", "x_sw"], ["xdot"])
     control = ca.Function(f"k_{ident}", args, [u_raw, u_sat], ["x", "t", "s", "x_sw"], ["u_raw", "u"])
     # safety functions may name inputs (the saturated control)
-    henv = {**env, **{n: u_sat[i] for i, n in enumerate(sys.input_names)}}
+    henv = {**env, **loop.env, **{n: u_sat[i] for i, n in enumerate(sys.input_names)}}
     hs, names = [], []
     for j, sf in enumerate(inst.safe_set):
         path = ("safe_set", j)
-        if sf.h is not None:
-            hv = ec.sx(sf.h, path + ("h",), henv)
+        if sf.use is not None:
+            try:
+                items = sys.builtin_safe_set(sf.use, loop.contacts)
+            except KeyError:
+                raise SpecError("this safe-set block does not apply to the system", location=inst.locate(path + ("use",)),
+                                key=f"primitive '{inst.name}': safe_set.{j}.use", expected="a block of the project or, "
+                                "for rigid bodies, joint_limits, ground_contact, no_slip or aerial",
+                                found=repr(sf.use), code="MPG302") from None
+        elif sf.h is not None:
+            items = [(sf.name, ec.sx(sf.h, path + ("h",), henv))]
         else:
-            hv = sf.tol - ca.fabs(ec.sx(sf.eq, path + ("eq",), henv))
-        if sf.when is not None:
-            a, b = sf.when
-            hv = ca.if_else(ca.logic_and(tc >= a, tc < b), hv, INACTIVE)
-        hs.append(hv)
-        names.append(sf.name or f"h{j}")
+            items = [(sf.name, sf.tol - ca.fabs(ec.sx(sf.eq, path + ("eq",), henv)))]
+        for name, hv in items:
+            hv = ca.substitute(hv, sys.u, u_sat) if sys.nu else hv
+            if sf.when is not None:
+                a, b = sf.when
+                hv = ca.if_else(ca.logic_and(tc >= a, tc < b), hv, INACTIVE)
+            hs.append(hv)
+            names.append(name or f"h{j}")
     h = ca.Function(f"h_{ident}", args, [ca.vertcat(*hs) if hs else ca.SX(0, 1)], ["x", "t", "s", "x_sw"], ["h"])
     roa = p.roa
     dx = sys.wrapped_error(x - x_star)

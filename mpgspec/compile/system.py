@@ -12,6 +12,15 @@ from .exprs import ExprCompiler
 
 
 @dataclass
+class OpenLoop:
+    """xdot(x, u) of one dynamics mode, with the extra symbols it defines (e.g. contact forces)."""
+
+    xdot: ca.SX
+    env: dict
+    contacts: tuple[str, ...] = ()
+
+
+@dataclass
 class CompiledSystem:
     """Open-loop dynamics (eq. 1) with named states, inputs and parameters.
 
@@ -46,6 +55,21 @@ class CompiledSystem:
         env.update(self.extra_env)
         return env
 
+    def default_state(self) -> np.ndarray:
+        """Value of states a setpoint leaves unnamed."""
+        return np.zeros(self.nx)
+
+    def open_loop(self, contacts: list[str] | None) -> OpenLoop:
+        """The open-loop dynamics a primitive runs on; analytic systems have one mode."""
+        return OpenLoop(self.xdot, dict(self.extra_env))
+
+    def project(self, x: ca.SX) -> ca.SX:
+        """Map a state back onto the state manifold after a step (identity here)."""
+        return x
+
+    def builtin_safe_set(self, name: str, contacts: tuple[str, ...]) -> list[tuple[str, ca.SX]]:
+        raise KeyError(name)
+
     def wrapped_error(self, dx: ca.SX) -> ca.SX:
         """x - x* with wrapped states (angles) mapped into [-P/2, P/2)."""
         parts = []
@@ -57,6 +81,15 @@ class CompiledSystem:
 
 
 def compile_system(spec: ProjectSpec) -> CompiledSystem:
+    """Build the CasADi symbols and dynamics of the project's system."""
+    if spec.system.kind == "rigid_body":
+        from .rigidbody.system import compile_rigid_body
+
+        return compile_rigid_body(spec)
+    return compile_analytic(spec)
+
+
+def compile_analytic(spec: ProjectSpec) -> CompiledSystem:
     """Build the CasADi symbols and dynamics of an analytic system."""
     s = spec.system
     ec = ExprCompiler(spec.system_locate, f"system '{s.name}'")

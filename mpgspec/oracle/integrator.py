@@ -27,16 +27,33 @@ def _jit_opts(flags: tuple[str, ...]) -> dict:
             "jit_options": {"flags": list(flags), "verbose": False, "directory": str(folder) + os.sep}}
 
 
-def rk4_step(f: ca.Function, nx: int, dt: float) -> ca.Function:
-    """z -> z_next, one classical RK4 step of f(x, t, s, x_sw) with the clocks advanced."""
-    z = ca.SX.sym("z", 2 * nx + 2)
+INLINE_NODES = 4000
+"""Closed loops up to this many SX nodes are inlined (fastest code); larger ones become calls
+in an MX graph, so each Function is generated once and jit compilation stays quick."""
+
+
+def _sym(f: ca.Function):
+    return ca.SX.sym if f.is_a("SXFunction") and f.n_nodes() <= INLINE_NODES else ca.MX.sym
+
+
+def rk4_step(f: ca.Function, nx: int, dt: float, project=lambda x: x) -> ca.Function:
+    """z -> z_next, one classical RK4 step of f(x, t, s, x_sw) with the clocks advanced.
+
+    `project` maps the new state back onto the state manifold (unit base quaternion).
+    """
+    z = _sym(f)("z", 2 * nx + 2)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
     k1 = f(x, t, s, xs)
     k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2, xs)
     k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2, xs)
     k4 = f(x + dt * k3, t + dt, s + dt, xs)
-    x_next = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    x_next = project(x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4))
     return ca.Function("rk4", [z], [ca.vertcat(x_next, t + dt, s + dt, xs)])
+
+
+def _project_fn(system, nx: int):
+    xs = ca.SX.sym("x", nx)
+    return ca.Function("project", [xs], [system.project(xs)])
 
 
 @dataclass
@@ -68,11 +85,11 @@ def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
                 flags: tuple[str, ...] = ("-O1",), with_state: bool = False) -> Chunk:
     """Compile K steps of RK4 with per-step outputs for one primitive (and the states, if asked)."""
     nx = prim.system.nx
-    z = ca.SX.sym("z", 2 * nx + 2)
+    z = _sym(prim.f_cl)("z", 2 * nx + 2)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
     u_raw, _ = prim.control(x, t, s, xs)
     out = ca.vertcat(prim.h(x, t, s, xs), prim.roa_margin(x, t), u_raw, *([x] if with_state else []))
-    step = rk4_step(prim.f_cl, nx, dt)
+    step = rk4_step(prim.f_cl, nx, dt, _project_fn(prim.system, nx))
     body = ca.Function("body", [z], [step(z), out])
     acc = body.mapaccum("acc", K)
     Z = ca.MX.sym("Z", 2 * nx + 2)

@@ -25,6 +25,8 @@ from .models import (
 from .yamlpos import PositionMap, load_yaml
 
 PROJECT_FILE = "project.yaml"
+BUILTIN_BLOCKS = ("joint_limits", "ground_contact", "no_slip", "aerial")
+"""Safe-set blocks the rigid-body system provides (the paper's C_{q,qdot}, C_ground, no slip, C_aerial)."""
 
 Locator = Callable[[tuple], Location]
 
@@ -203,10 +205,12 @@ def load_project(path: str | Path) -> ProjectSpec:
         resolved: list[SafetyFunction] = []
         for j, sf in enumerate(p.safe_set):
             if sf.use is not None:
-                if sf.use not in project.safe_sets:
+                if sf.use in BUILTIN_BLOCKS and sf.use not in project.safe_sets:
+                    resolved.append(sf)  # expanded by the system at compile time
+                elif sf.use not in project.safe_sets:
                     errors.append(SpecError("unknown safe-set block", location=loc_fn(("safe_set", j, "use")),
                                             key=f"primitive '{p.name}': safe_set.{j}.use",
-                                            expected="one of " + (", ".join(sorted(project.safe_sets)) or "(none defined)"),
+                                            expected="one of " + ", ".join(sorted(project.safe_sets) + list(BUILTIN_BLOCKS)),
                                             found=repr(sf.use), code="MPG302"))
                 else:
                     resolved.extend(project.safe_sets[sf.use])

@@ -48,7 +48,33 @@ class AnalyticSystem(Strict):
         return self
 
 
-System = Annotated[Union[AnalyticSystem], Field(discriminator="kind")]
+class BaumgarteGains(Strict):
+    """Contact drift stabilisation: J a + Jdot v = -2 alpha J v - beta^2 (foot height)."""
+
+    alpha: float = Field(default=10.0, ge=0)
+    beta: float = Field(default=10.0, ge=0)
+
+
+class RigidBodySystem(Strict):
+    """A URDF robot: floating base, actuated joints, point-contact feet (Section IV).
+
+    States are q = [base_x, base_y, base_z, base_qx, base_qy, base_qz, base_qw, joints...] and
+    v = [base_vx, base_vy, base_vz, base_wx, base_wy, base_wz, <joint>_dot...] (base twist in
+    the base frame, as in pinocchio).
+    """
+
+    kind: Literal["rigid_body"]
+    name: str
+    urdf: str = Field(description="path relative to the spec, or 'share:<path>' inside cmeel.prefix/share")
+    floating_base: bool = True
+    contacts: list[str] = Field(default_factory=list, description="contact frames (feet)")
+    torque_limit: float | list[float] | None = Field(default=None, description="U = [-l, l]^m; URDF efforts if omitted")
+    friction: float = Field(default=0.7, gt=0)
+    baumgarte: BaumgarteGains = BaumgarteGains()
+    parameters: dict[str, float] = Field(default_factory=dict)
+
+
+System = Annotated[Union[AnalyticSystem, RigidBodySystem], Field(discriminator="kind")]
 
 
 # ----------------------------------------------------------------------------- primitive parts
@@ -64,14 +90,17 @@ class Setpoint(Strict):
     """x*(t): constants or expressions of t (`expr`), or tabulated samples (`samples`)."""
 
     expr: list[ExprText] | None = None
+    named: dict[str, ExprText] | None = Field(
+        default=None, description="state name -> value; others take the system's default (0; unit quaternion)")
+    feet_on_ground: bool = Field(default=False, description="rigid bodies: set base_z so the lowest foot is at z = 0")
     times: list[float] | None = None
     samples: list[list[float]] | None = None
     interpolation: Literal["linear", "cubic"] = "linear"
 
     @model_validator(mode="after")
     def _one_form(self):
-        if (self.expr is None) == (self.samples is None):
-            raise ValueError("give exactly one of 'expr' or 'samples' (with 'times')")
+        if sum(v is not None for v in (self.expr, self.named, self.samples)) != 1:
+            raise ValueError("give exactly one of 'expr', 'named' or 'samples' (with 'times')")
         if self.samples is not None:
             if self.times is None or len(self.times) != len(self.samples):
                 raise ValueError("'times' must list one time per row of 'samples'")
@@ -104,6 +133,8 @@ class PDController(Strict):
         default=None, description="inputs x outputs matrix B_y; identity when omitted"
     )
     feedforward: list[ExprText] | None = None
+    gravity_compensation: bool = Field(
+        default=False, description="rigid bodies: add the torques that hold the current pose on the contact feet")
     profile: MotionProfile | None = None
 
     @model_validator(mode="after")
@@ -190,6 +221,7 @@ class Primitive(Strict):
     controller: Controller
     safe_set: list[SafetyFunction] = Field(default_factory=list)
     roa: ExplicitRoA
+    contacts: list[str] | None = Field(default=None, description="rigid bodies: feet in contact (default: all)")
     horizon: float | None = Field(default=None, gt=0)
     grid: Grid | None = None
     description: str = ""

@@ -1,0 +1,175 @@
+"""A rigid-body spec compiled to the CompiledSystem interface, with one open loop per contact set.
+
+Expressions of a rigid-body primitive may name, besides the states: for every contact frame F,
+F_x, F_y, F_z (world position), F_vx, F_vy, F_vz (velocity J v) and, for feet in the primitive's
+contact set, F_fx, F_fy, F_fz (ground force lambda on the foot, world axes, F_fz > 0 pushing
+up); com_x, com_y, com_z; and `mass`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from ...errors import SpecError
+from ..system import CompiledSystem, OpenLoop
+from .constrained import Baumgarte, ContactDynamics
+from .dynamics import RigidBodyDynamics
+from .frames import center_of_mass
+from .linalg import dense_ldl_solve
+from .liegroup import normalize_quaternion, qdot
+from .model import RigidBodyModel, find_urdf
+
+BASE_Q = ["base_x", "base_y", "base_z", "base_qx", "base_qy", "base_qz", "base_qw"]
+BASE_V = ["base_vx", "base_vy", "base_vz", "base_wx", "base_wy", "base_wz"]
+
+
+@dataclass
+class RigidBodyCompiledSystem(CompiledSystem):
+    """CompiledSystem of a floating-base robot; xdot depends on the primitive's contact set."""
+
+    dyn: RigidBodyDynamics | None = None
+    friction: float = 0.7
+    baumgarte: Baumgarte | None = None
+    _loops: dict = field(default_factory=dict)
+
+    @property
+    def model(self) -> RigidBodyModel:
+        return self.dyn.model
+
+    def default_state(self) -> np.ndarray:
+        x = np.zeros(self.nx)
+        x[self.state_names.index("base_qw")] = 1.0
+        return x
+
+    def open_loop(self, contacts: list[str] | None) -> OpenLoop:
+        """Constrained dynamics for `contacts` (None: all contact frames), with lambda in env."""
+        key = tuple(self.model.contact_frames if contacts is None else contacts)
+        if key in self._loops:
+            return self._loops[key]
+        cd = ContactDynamics(self.dyn, key, self.baumgarte)
+        a, lam = cd.solution
+        sub_in = [self.dyn.q, self.dyn.v, cd.u]
+        nq = self.model.nq
+        xq, xv = self.x[:nq], self.x[nq:]
+        a, lam = ca.substitute([a, lam], sub_in, [xq, xv, self.u])
+        xdot = ca.vertcat(qdot(self.model, xq, xv), a)
+        env = dict(self.extra_env)
+        for k, f in enumerate(key):
+            for j, ax in enumerate("xyz"):
+                env[f"{f}_f{ax}"] = lam[3 * k + j]
+        loop = OpenLoop(xdot, env, contacts=key)
+        self._loops[key] = loop
+        return loop
+
+    def static_torque(self, contacts: tuple[str, ...]) -> ca.SX:
+        """Joint torques that hold the current pose against gravity with the feet in `contacts`.
+
+        The least-norm solution of H(q, 0) = B u + J^T lam, weighting tangential contact forces
+        100x and normal forces 0.01x against torques, so the ground carries the weight through
+        near-vertical forces: an equality-constrained inverse-dynamics QP solved in closed form.
+        """
+        m, nq = self.model, self.model.nq
+        xq = self.x[:nq]
+        g = ca.substitute(self.dyn.nle_expr, ca.vertcat(self.dyn.q, self.dyn.v), ca.vertcat(xq, ca.DM.zeros(m.nv)))
+        B = ca.DM(m.actuation_matrix)
+        if contacts:
+            J = ca.substitute(self.dyn.contact_jacobian_expr(contacts), self.dyn.q, xq)
+            A = ca.horzcat(B, J.T)
+            w = [1.0] * m.nu + [100.0, 100.0, 0.01] * len(contacts)
+        else:
+            A, w = B, [1.0] * m.nu
+        Winv = ca.DM(np.diag(1.0 / np.asarray(w)))
+        AW = ca.mtimes(A, Winv)
+        y = dense_ldl_solve(ca.mtimes(AW, A.T) + 1e-9 * ca.DM.eye(A.shape[0]), g)
+        return ca.mtimes(AW.T, y)[: m.nu]
+
+    def project(self, x: ca.SX) -> ca.SX:
+        """Renormalise the base quaternion after each integration step."""
+        nq = self.model.nq
+        return ca.vertcat(normalize_quaternion(self.model, x[:nq]), x[nq:])
+
+    def builtin_safe_set(self, name: str, contacts: tuple[str, ...], tol: float = 1e-3) -> list[tuple[str, ca.SX]]:
+        """The paper's common safe sets as lists of (name, h) with h >= 0 safe."""
+        env, m = self.extra_env, self.model
+        out = []
+        if name == "joint_limits":  # C_{q, qdot}
+            lo, hi = m.position_limits
+            vmax = m.velocity_limits
+            nq0, nv0 = 7 if m.n_base else 0, m.n_base
+            for i, j in enumerate(m.joint_names):
+                q = self.x[nq0 + i]
+                v = self.x[m.nq + nv0 + i]
+                out += [(f"q_min[{j}]", q - lo[i]), (f"q_max[{j}]", hi[i] - q),
+                        (f"qdot_max[{j}]", vmax[i] - ca.fabs(v))]
+        elif name == "ground_contact":  # C_ground: feet on the ground and not moving
+            for f in contacts:
+                out += [(f"on_ground[{f}]", tol - ca.fabs(env[f"{f}_z"])),
+                        (f"foot_still[{f}]", tol - ca.norm_2(ca.vertcat(*[env[f"{f}_v{a}"] for a in "xyz"])))]
+        elif name == "no_slip":  # lambda in the friction cone, lambda_z >= 0
+            loop = self.open_loop(list(contacts))
+            for f in contacts:
+                fx, fy, fz = (loop.env[f"{f}_f{a}"] for a in "xyz")
+                out += [(f"normal_force[{f}]", fz), (f"friction_cone[{f}]", self.friction * fz - ca.sqrt(fx**2 + fy**2 + 1e-12))]
+        elif name == "aerial":  # C_aerial: no foot below the ground
+            for f in m.contact_frames:
+                out.append((f"above_ground[{f}]", env[f"{f}_z"]))
+        else:
+            raise KeyError(name)
+        return out
+
+
+def _urdf_path(spec, urdf: str) -> Path:
+    if urdf.startswith("share:"):
+        return find_urdf(urdf[len("share:"):])
+    return (Path(spec.path).parent / urdf).resolve()
+
+
+def compile_rigid_body(spec) -> RigidBodyCompiledSystem:
+    """Load the URDF with pinocchio and build symbols, env and limits."""
+    s = spec.system
+    try:
+        path = _urdf_path(spec, s.urdf)
+        model = RigidBodyModel(path, s.contacts, floating_base=s.floating_base)
+    except (FileNotFoundError, OSError, ValueError, KeyError) as err:
+        raise SpecError("cannot load the robot model", location=spec.system_locate(("urdf",)), key="system.urdf",
+                        expected="a readable URDF with the named contact frames", found=f"{s.urdf!r} ({err})",
+                        code="MPG109") from None
+    dyn = RigidBodyDynamics(model)
+    qn = (BASE_Q if model.n_base else []) + list(model.joint_names)
+    vn = (BASE_V if model.n_base else []) + [f"{j}_dot" for j in model.joint_names]
+    x = ca.SX.sym("x", model.nq + model.nv)
+    u = ca.SX.sym("u", model.nu)
+    xq, xv = x[:model.nq], x[model.nq:]
+    tree = dyn.state(xq, xv)
+    env: dict[str, object] = {"mass": float(model.total_mass)}
+    for f in model.contact_frames:
+        p = tree.frame_position(f)
+        vel = dyn.contact_velocity_expr([f])
+        vel = ca.substitute(vel, ca.vertcat(dyn.q, dyn.v), x)
+        for j, ax in enumerate("xyz"):
+            env[f"{f}_{ax}"] = p[j]
+            env[f"{f}_v{ax}"] = vel[j]
+    com = center_of_mass(tree)
+    for j, ax in enumerate("xyz"):
+        env[f"com_{ax}"] = com[j]
+    lim = s.torque_limit
+    hi = model.effort_limits if lim is None else np.broadcast_to(np.asarray(lim, float), (model.nu,)).copy()
+    sysc = RigidBodyCompiledSystem(
+        name=s.name, state_names=qn + vn, input_names=[f"tau_{j}" for j in model.joint_names],
+        parameters=dict(s.parameters), x=x, u=u, xdot=ca.SX(0, 1), u_lo=-hi, u_hi=hi,
+        wrap=np.zeros(model.nq + model.nv), extra_env=env, dyn=dyn, friction=s.friction,
+        baumgarte=Baumgarte(s.baumgarte.alpha, s.baumgarte.beta),
+    )
+    sysc.xdot = sysc.open_loop(None).xdot
+    return sysc
+
+
+def feet_on_ground(sys: RigidBodyCompiledSystem, x: np.ndarray) -> np.ndarray:
+    """Shift base_z so that the lowest contact frame touches z = 0."""
+    x = np.array(x, float)
+    fk = ca.Function("fk", [sys.x], [ca.vertcat(*[sys.extra_env[f"{f}_z"] for f in sys.model.contact_frames])])
+    x[sys.state_names.index("base_z")] -= float(np.min(np.array(fk(x))))
+    return x

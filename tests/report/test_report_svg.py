@@ -1,0 +1,71 @@
+"""SVG builders: well-formed XML, escaped text, missing values and decimation."""
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from mpgspec.report.svg import graph_svg, grid_svg, series_svg, trajectory_svg
+
+SAMPLE = Path(__file__).with_name("data") / "sample_report.json"
+NS = "{http://www.w3.org/2000/svg}"
+
+
+@pytest.fixture
+def sample() -> dict:
+    return json.loads(SAMPLE.read_text(encoding="utf-8"))
+
+
+def _parse(text: str) -> ET.Element:
+    root = ET.fromstring(text)
+    assert root.tag == NS + "svg"
+    return root
+
+
+def test_series_breaks_lines_at_none():
+    root = _parse(series_svg([0.0, 1.0, 2.0, 3.0, 4.0], {"h1": [1.0, None, 0.5, -0.5, None], "h2": [None] * 5}))
+    paths = [p.get("d") for p in root.iter(NS + "path")]
+    assert len(paths) == 1 and paths[0].count("M") == 2  # h1 in two pieces, h2 has no line
+    assert any(r.get("fill") == "#d64541" for r in root.iter(NS + "rect"))  # h < 0 is shaded
+
+
+def test_series_all_missing_and_nan():
+    root = _parse(series_svg([0.0, float("nan")], {"h": [None, float("inf")]}))
+    assert "no data" in "".join(root.itertext())
+
+
+def test_series_decimates():
+    t = [i * 0.001 for i in range(20000)]
+    text = series_svg(t, {"h": [1.0 - x for x in t]}, max_points=300)
+    assert len(text) < 20000
+
+
+def test_text_is_escaped(sample):
+    sample["primitives"][0]["name"] = "<b>&x"
+    for e in sample["edges"]:
+        e["from"], e["to"] = ("<b>&x" if e[k] == "Hang" else e[k] for k in ("from", "to"))
+    text = graph_svg(sample)
+    assert "<b>&x" not in text and "&lt;b&gt;&amp;x" in text
+    _parse(text)
+
+
+def test_graph_shapes(sample):
+    root = _parse(graph_svg(sample))
+    dashed = [p for p in root.iter(NS + "path") if p.get("stroke-dasharray") and p.find(NS + "title") is not None]
+    assert len(dashed) == sum(e["class"] == 2 for e in sample["edges"])
+    assert root.find(f".//{NS}polygon") is not None and root.find(f".//{NS}ellipse") is not None
+    assert graph_svg(sample) == graph_svg(sample)
+
+
+def test_grid_and_trajectory(sample):
+    tr = next(t for t in sample["transitions"] if t["class"] == 2)
+    tr["cells"][0][0]["refined"] = True
+    root = _parse(grid_svg(tr))
+    assert root.find(f".//{NS}circle") is not None
+    seq = sample["sequence"]
+    for run in seq["runs"].values():
+        root = _parse(trajectory_svg(run, seq["state_names"], seq["commands"]))
+        labels = "".join(root.itertext())
+        assert all(f"→ {s['to']}" in labels for s in run["switches"])
