@@ -334,7 +334,8 @@ def main(argv=None) -> int:
         f"to a verdict {steps_used / n:.0f} of a mean horizon of {mean_h:.0f}; re-run at dt/{settings.refine} "
         f"by the check: {checked}, verdicts changed by it: {refined}")
     log(f"  compiled chunk calls: oracle {len(rec.calls)} (check='none': {len(rec_low.calls)}); step-columns "
-        f"computed: oracle {rec.step_columns:,} (check='none': {rec_low.step_columns:,}), full-horizon loop {fl_work:,}")
+        f"computed: oracle {rec.step_columns:,} (check='none': {rec_low.step_columns:,}, of which needed for the "
+        f"verdicts {steps_used + n:,}), full-horizon loop {fl_work:,}")
 
     # timed rounds -------------------------------------------------------------------------------
     log(f"\n(a)+(c) {R} interleaved rounds")

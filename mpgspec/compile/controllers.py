@@ -157,4 +157,10 @@ def lqr_law(c: LQRController, ctx: ControlContext) -> ca.SX:
     return ca.DM(us) - ca.mtimes(ca.DM(K), dx)
 
 
-LAWS = {"expression": expression_law, "pd": pd_law, "lqr": lqr_law}
+def idqp(c, ctx: ControlContext):
+    from .rigidbody.idqp import idqp_law
+
+    return idqp_law(c, ctx)
+
+
+LAWS = {"expression": expression_law, "pd": pd_law, "lqr": lqr_law, "id_qp": idqp}

@@ -147,14 +147,12 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     ctx = ControlContext(sys, t, s, x_sw, x_star, x_star_dot, setpoint, env, ec,
                          fixed=p.class_ is PrimitiveClass.FIXED, xdot=loop.xdot, contacts=loop.contacts)
     u_raw = LAWS[p.controller.type](p.controller, ctx)
-    u_sat = ca.fmin(ca.fmax(u_raw, ca.DM(sys.u_lo)), ca.DM(sys.u_hi)) if sys.nu else u_raw
-    xdot = ca.substitute(loop.xdot, sys.u, u_sat) if sys.nu else loop.xdot
+    sat_u = ca.fmin(ca.fmax(sys.u, ca.DM(sys.u_lo)), ca.DM(sys.u_hi)) if sys.nu else sys.u
     args = [x, t, s, x_sw]
     ident = _ident(inst.name)
-    f_cl = ca.Function(f"f_cl_{ident}", args, [xdot], ["x", "t", "s", "x_sw"], ["xdot"])
-    control = ca.Function(f"k_{ident}", args, [u_raw, u_sat], ["x", "t", "s", "x_sw"], ["u_raw", "u"])
+    f_u = ca.Function("f_u", args + [sys.u], [ca.substitute(loop.xdot, sys.u, sat_u) if sys.nu else loop.xdot])
     # safety functions may name inputs (the saturated control)
-    henv = {**env, **loop.env, **{n: u_sat[i] for i, n in enumerate(sys.input_names)}}
+    henv = {**env, **loop.env, **{n: sat_u[i] for i, n in enumerate(sys.input_names)}}
     hs, names = [], []
     for j, sf in enumerate(inst.safe_set):
         path = ("safe_set", j)
@@ -171,13 +169,14 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         else:
             items = [(sf.name, sf.tol - ca.fabs(ec.sx(sf.eq, path + ("eq",), henv)))]
         for name, hv in items:
-            hv = ca.substitute(hv, sys.u, u_sat) if sys.nu else hv
+            hv = ca.substitute(hv, sys.u, sat_u) if sys.nu else hv
             if sf.when is not None:
                 a, b = sf.when
                 hv = ca.if_else(ca.logic_and(tc >= a, tc < b), hv, INACTIVE)
             hs.append(hv)
             names.append(name or f"h{j}")
-    h = ca.Function(f"h_{ident}", args, [ca.vertcat(*hs) if hs else ca.SX(0, 1)], ["x", "t", "s", "x_sw"], ["h"])
+    h_u = ca.Function("h_u", args + [sys.u], [ca.vertcat(*hs) if hs else ca.SX(0, 1)])
+    f_cl, control, h = _close_loop(ident, args, u_raw, f_u, h_u, sys)
     roa = p.roa
     dx = sys.wrapped_error(x - x_star)
     if roa.matrix is not None:
@@ -201,6 +200,24 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=roa.radius,
         f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info,
     )
+
+
+def _close_loop(ident: str, args: list, u_raw, f_u: ca.Function, h_u: ca.Function, sys: CompiledSystem):
+    """Compose the open loop and the safety functions with the control law.
+
+    An expression law is inlined (SX); a law given as a Function (an optimisation-based law such
+    as the ID-QP) is called from an MX graph, so it is evaluated numerically at every RK4 stage.
+    """
+    k = u_raw if isinstance(u_raw, ca.Function) else ca.Function("k", args, [u_raw])
+    sym = ca.SX.sym if k.is_a("SXFunction") else ca.MX.sym
+    a = [sym(n, *arg.shape) for n, arg in zip(("x", "t", "s", "x_sw"), args)]
+    ur = k(*a)
+    us = ca.fmin(ca.fmax(ur, ca.DM(sys.u_lo)), ca.DM(sys.u_hi)) if sys.nu else ur
+    names = ["x", "t", "s", "x_sw"]
+    f_cl = ca.Function(f"f_cl_{ident}", a, [f_u(*a, ur)], names, ["xdot"])
+    control = ca.Function(f"k_{ident}", a, [ur, us], names, ["u_raw", "u"])
+    h = ca.Function(f"h_{ident}", a, [h_u(*a, ur)], names, ["h"])
+    return f_cl, control, h
 
 
 def _ident(name: str) -> str:

@@ -154,8 +154,22 @@ class LQRController(Strict):
     u_eq: list[ExprText] | None = Field(default=None, description="equilibrium input; solved when omitted")
 
 
+class IDQPController(Strict):
+    """The ID-QP of the paper's Stand: CoM task with a cubic profile, posture task, friction cone."""
+
+    type: Literal["id_qp"]
+    kp: list[float] = Field(default=[100.0, 100.0, 100.0], min_length=3, max_length=3)
+    kd: list[float] = Field(default=[20.0, 20.0, 20.0], min_length=3, max_length=3)
+    profile_duration: float = Field(default=1.0, gt=0)
+    posture_kp: float = Field(default=50.0, ge=0)
+    posture_kd: float = Field(default=5.0, ge=0)
+    posture_weight: float = Field(default=0.01, ge=0)
+    regularization: float = Field(default=1e-6, gt=0)
+    max_iter: int = Field(default=100, ge=1)
+
+
 Controller = Annotated[
-    Union[ExpressionController, PDController, LQRController], Field(discriminator="type")
+    Union[ExpressionController, PDController, LQRController, IDQPController], Field(discriminator="type")
 ]
 
 
