@@ -99,7 +99,9 @@ class RK4Runner:
                 continue
             Zf, out = Zf[:, :m], out[:, :m, :]
             H, M, U = out[:nh], out[nh], out[nh + 1:]
-            finite = np.isfinite(out).all(axis=0) & np.isfinite(Zf).all(axis=0)[:, None]
+            # a step is judged on its own outputs; a non-finite end state fails the chunk's last step
+            finite = np.isfinite(out).all(axis=0)
+            finite[:, -1] &= np.isfinite(Zf).all(axis=0)
             bad = (H < -tol).any(axis=0) | ~finite
             enter = M > 0
             keep = []

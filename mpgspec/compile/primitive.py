@@ -44,6 +44,7 @@ class CompiledPrimitive:
     roa_margin: ca.Function  # (x, t) -> r - ||x - x*(t)||_W ; > 0 is inside E
     setpoint: ca.Function  # t -> x*(t)
     info: dict = field(default_factory=dict)
+    cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
 
     @property
     def t_range(self) -> tuple[float, float]:

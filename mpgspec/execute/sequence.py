@@ -38,26 +38,14 @@ class SequenceRun:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
 
 
-class _Chunks:
-    def __init__(self, prims, settings):
-        self.prims, self.s, self.cache = prims, settings, {}
-
-    def __getitem__(self, name):
-        if name not in self.cache:
-            self.cache[name] = build_chunk(self.prims[name], self.s.dt, 32, self.s.jit, self.s.jit_flags,
-                                           with_state=True)
-        return self.cache[name]
-
-
 def _start_clock(p: CompiledPrimitive) -> float:
     return p.domain[0] if p.cls is PrimitiveClass.TRANSIENT else 0.0
 
 
 def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiveGraph | None,
                       table: dict | None, seq: Sequence, settings: OracleSettings, mode: str,
-                      chunks: _Chunks | None = None, max_points: int = 1500) -> SequenceRun:
+                      max_points: int = 1500) -> SequenceRun:
     """Run the sequence from the start primitive's setpoint; returns what happened."""
-    chunks = chunks or _Chunks(prims, settings)
     dt, tol = settings.dt, settings.h_tolerance
     run = SequenceRun(mode)
     cur = seq.start
@@ -80,7 +68,7 @@ def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiv
 
     while k < nsteps:
         p = prims[cur]
-        ch = chunks[cur]
+        ch = build_chunk(p, dt, 64, settings.jit, settings.jit_flags, with_state=True)
         zf, out = ch.run(z[:, None])
         nh, nu, nx = ch.nh, ch.nu, p.system.nx
         H, M, X = out[:nh, 0], out[nh, 0], out[nh + 1 + nu:, 0]

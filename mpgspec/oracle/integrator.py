@@ -83,7 +83,18 @@ class Chunk:
 
 def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
                 flags: tuple[str, ...] = ("-O1",), with_state: bool = False) -> Chunk:
-    """Compile K steps of RK4 with per-step outputs for one primitive (and the states, if asked)."""
+    """Compile K steps of RK4 with per-step outputs for one primitive (and the states, if asked).
+
+    Compiled chunks are remembered on the primitive, so oracles, traces and executions share them.
+    """
+    key = (dt, K, jit, tuple(flags), with_state)
+    if key not in prim.cache:
+        prim.cache[key] = _build_chunk(prim, dt, K, jit, flags, with_state)
+    return prim.cache[key]
+
+
+def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: tuple[str, ...],
+                 with_state: bool) -> Chunk:
     nx = prim.system.nx
     z = _sym(prim.f_cl)("z", 2 * nx + 2)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]

@@ -1,0 +1,100 @@
+"""The A1 project end to end: Lie <-> Stand are safe transitions, impossible stands are not, and
+long rollouts keep the quaternion, the contacts and the energy in check."""
+import shutil
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mpgspec.api import compile_project, settings_for
+from mpgspec.oracle.oracle import SafetyOracle
+from mpgspec.oracle.trace import trace
+from mpgspec.spec.loader import load_project
+
+SPEC = Path(__file__).parents[2] / "specs" / "a1"
+
+
+@pytest.fixture(scope="module")
+def a1():
+    spec = load_project(SPEC / "project.yaml")
+    return spec, compile_project(spec), settings_for(spec)
+
+
+def test_setpoints_are_on_the_ground(a1):
+    _, prims, _ = a1
+    sys = prims["Lie"].system
+    feet = ca.Function("feet", [sys.x], [ca.vertcat(*[sys.extra_env[f"{f}_z"] for f in sys.model.contact_frames])])
+    for p in prims.values():
+        z = np.array(feet(p.x_star(0.0))).ravel()
+        assert np.allclose(z, 0.0, atol=1e-9)
+    assert prims["Stand"].x_star(0)[2] > prims["Lie"].x_star(0)[2] + 0.1
+
+
+@pytest.mark.slow
+def test_lie_to_stand_and_back_are_safe(a1):
+    _, prims, settings = a1
+    up = SafetyOracle(prims["Stand"], settings)(prims["Lie"].x_star(0.0), 0.0)
+    down = SafetyOracle(prims["Lie"], settings)(prims["Stand"].x_star(0.0), 0.0)
+    for ev in (up, down):
+        assert ev.verdict == 1, ev
+        assert ev.reason.value == "entered_E"
+        assert 0.5 < ev.t_enter < settings.horizon
+        assert max(ev.peak_input) <= 33.5 + 1e-9 or ev.saturated
+        assert ev.min_margins["friction_cone[FL_foot]"] >= 0
+
+
+def _variant(tmp_path, edit):
+    dst = tmp_path / "a1"
+    shutil.copytree(SPEC, dst)
+    edit(dst)
+    spec = load_project(dst / "project.yaml")
+    return compile_project(spec), settings_for(spec)
+
+
+def test_unreachable_stand_is_unsafe(tmp_path):
+    """Legs stretched past the calf joint limit: the flow must leave C before reaching E."""
+    def edit(d):
+        lie = (d / "primitives" / "lie.yaml").read_text()
+        tall = lie.replace("name: Lie", "name: StandTall").replace("1.25", "0.2").replace("-2.6", "-0.5")
+        (d / "primitives" / "lie.yaml").write_text(tall)
+        p = (d / "project.yaml").read_text().replace("  - primitives/stand.yaml\n", "")
+        p = p[: p.index("assertions:")]
+        (d / "project.yaml").write_text(p)
+    prims, settings = _variant(tmp_path, edit)
+    start = load_project(SPEC / "project.yaml")
+    lie = compile_project(start)["Lie"]
+    ev = SafetyOracle(prims["StandTall"], settings)(lie.x_star(0.0), 0.0)
+    assert ev.verdict == 0
+    assert ev.reason.value in ("left_C", "horizon_reached")
+
+
+def test_far_start_is_unsafe(a1):
+    """A start tilted 0.6 rad about x with the feet off the ground is outside C_ground at once."""
+    _, prims, settings = a1
+    x0 = prims["Lie"].x_star(0.0).copy()
+    x0[3:7] = [np.sin(0.3), 0, 0, np.cos(0.3)]
+    ev = SafetyOracle(prims["Lie"], settings)(x0, 0.0)
+    assert ev.verdict == 0 and ev.reason.value == "left_C" and ev.t_stop == 0.0
+
+
+def test_long_rollout_drift_is_bounded(a1):
+    """Five seconds holding Lie: unit quaternion, feet on the ground, energy not growing."""
+    _, prims, settings = a1
+    lie = prims["Lie"]
+    sys = lie.system
+    x0 = lie.x_star(0.0)
+    x0 = x0 + np.r_[np.zeros(sys.model.nq), 0.05 * np.ones(sys.model.nv)]  # a small kick
+    out = trace(lie, x0, 0.0, 5.0, settings, max_points=100000)
+    X = np.array(out["x"], dtype=float)
+    quat = X[3:7]
+    assert np.abs(np.linalg.norm(quat, axis=0) - 1).max() < 1e-9
+    feet = ca.Function("feet", [sys.x], [ca.vertcat(*[sys.extra_env[f"{f}_z"] for f in sys.model.contact_frames])])
+    z = np.array(feet.map(X.shape[1])(X))
+    # the kick violates J v = 0; Baumgarte stabilisation keeps the drift small and removes it
+    assert np.abs(z).max() < 5e-3
+    assert np.abs(z[:, -1]).max() < 1e-6
+    M = sys.dyn.M
+    v = X[sys.model.nq:]
+    ke = np.array([0.5 * v[:, k] @ np.array(M(X[:sys.model.nq, k])) @ v[:, k] for k in range(0, X.shape[1], 50)])
+    assert ke[-1] < 1e-6 and ke.max() <= ke[0] * 10 + 1e-3
