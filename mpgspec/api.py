@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Callable
 
 from .check.assertions import evaluate_assertions
+from .check.assumptions import check_primitive
 from .compile.primitive import CompiledPrimitive, compile_primitive
 from .compile.system import compile_system
 from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, UsageError  # noqa: F401
@@ -83,6 +84,20 @@ def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None
                                "oracle_calls_per_s": calls / max(t2 - t1, 1e-9)}
 
 
+def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict) -> list:
+    """Definition-1 checks of every primitive; a failure counts as the project's severity says."""
+    out = []
+    for p in prims.values():
+        for c in check_primitive(p):
+            sev = severity.get(c.name, "fail")
+            if sev == "off":
+                continue
+            if c.status == "fail" and sev == "warn":
+                c.status, c.message = "warn", c.message + " (reported as a warning by the project)"
+            out.append(c)
+    return out
+
+
 def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
                 progress: Progress | None = None, formats: tuple[str, ...] = ("json", "html", "dot", "graphml"),
                 workers: int = 1) -> ProjectResult:
@@ -113,12 +128,16 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
             runs[mode] = simulate_sequence(prims, g, table["next"], spec.project.sequence, settings, mode)
     checks = evaluate_assertions(spec.project.assertions, g, runs)
     timing["plan_execute_s"] = time.perf_counter() - t0
-    status = "error" if any(c.status == "error" for c in checks) else \
-        "fail" if any(c.status == "fail" for c in checks) else "pass"
+    t0 = time.perf_counter()
+    assumed = check_assumptions(prims, spec.project.assumptions)
+    timing["assumptions_s"] = time.perf_counter() - t0
+    st = [c.status for c in checks] + [a.status for a in assumed]
+    status = "error" if "error" in st else "fail" if "fail" in st else "pass"
     pairs = [(a, b) for a in names for b in names if a != b]
     failures = failure_traces(g, prims, settings, oracles, pairs)
     report = build_report(spec=spec, prims=prims, graph=g, settings=settings, plans=plans, table=table,
-                          assertions=checks, runs=runs, failures=failures, timing=timing, status=status)
+                          assertions=checks, runs=runs, failures=failures, timing=timing, status=status,
+                          assumptions=assumed)
     res.status, res.report = status, report
     if out_dir is not None:
         from .report.files import write_reports

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 from . import __version__, api
 from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors
 from .spec.yamlpos import format_context
 
-MARK = {"pass": "PASS", "fail": "FAIL", "error": "ERROR"}
+MARK = {"pass": "PASS", "fail": "FAIL", "error": "ERROR", "warn": "WARN"}
 
 
 def _progress(stream):
@@ -58,6 +59,9 @@ def _human(res: api.VerifyResult, fmt: str):
                 print(f"::error file={p.path},title=mpgspec assertion::{a['description']}: {a['message']}")
             else:
                 print(line)
+        for c in r.get("assumptions", []):
+            if c["status"] != "pass":
+                print(f"  {c['status'].upper():5} assumption {c['name']} of {c['primitive']}: {c['message']}")
         for k, path in p.files.items():
             print(f"  wrote {k}: {path}")
 
@@ -187,6 +191,18 @@ def main(argv=None) -> int:
         return EXIT_USAGE
     except MpgError as e:
         print(f"mpgspec: {e.code} {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("mpgspec: interrupted", file=sys.stderr)
+        return EXIT_USAGE
+    except Exception as e:  # a bug, not the user's mistake: say so, keep the details
+        import traceback
+
+        print(f"mpgspec: internal error: {type(e).__name__}: {e}", file=sys.stderr)
+        if os.environ.get("MPGSPEC_DEBUG"):
+            traceback.print_exc()
+        else:
+            print("set MPGSPEC_DEBUG=1 for the traceback", file=sys.stderr)
         return EXIT_USAGE
 
 

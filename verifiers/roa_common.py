@@ -185,7 +185,7 @@ def bisect(ok: Callable[[float], bool], lo: float, hi: float, cap: float, rtol: 
 
     hi is the first guess: it is grown by 4x while it passes. Returns (value, capped, calls).
     """
-    calls = 0
+    calls, hi = 0, min(hi, cap)
     while hi < cap:
         calls += 1
         if not ok(hi):
@@ -195,7 +195,8 @@ def bisect(ok: Callable[[float], bool], lo: float, hi: float, cap: float, rtol: 
         calls += 1
         if ok(cap):
             return cap, True, calls
-    while hi - lo > rtol * max(hi, 1e-300) and calls < max_iter:
+    floor = 1e-9 * hi
+    while hi - lo > rtol * hi and hi > floor and calls < max_iter:
         mid = 0.5 * (lo + hi)
         calls += 1
         if ok(mid):

@@ -299,3 +299,22 @@ class LevelSetProgram:
 def prove_sos(p: Poly, n: int, **kw) -> Certificate:
     """Try to certify that p is a sum of squares (Gram basis from its degree range)."""
     return LevelSetProgram(p, None, n, **kw).solve(0.0)
+
+
+class SOSVerifier:
+    """The certified route of the Lyapunov verifier only: fails unless every part has an SOS certificate."""
+
+    name = "sos"
+    description = "quadratic Lyapunov level set certified by checked SOS certificates (polynomial loops only)"
+
+    @staticmethod
+    def is_installed() -> bool:
+        return bool({"CLARABEL", "SCS"} & set(cp.installed_solvers()))
+
+    def estimate(self, problem, options: dict | None = None):
+        from .lyapunov import verifier as lyap
+
+        return lyap.estimate(problem, {**(options or {}), "require_certified": True, "method_name": self.name})
+
+
+verifier = SOSVerifier()

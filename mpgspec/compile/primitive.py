@@ -194,6 +194,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
                             code="MPG106")
         W = np.diag(w)
     margin = roa.radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
+    ctx.info["roa_W"] = W.tolist()
     roa_margin = ca.Function(f"roa_{ident}", [x, t], [margin], ["x", "t"], ["margin"])
     grid = p.grid
     return CompiledPrimitive(

@@ -79,9 +79,12 @@ def failure_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive],
 
 
 def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs, failures, timing,
-                 status: str) -> dict:
+                 status: str, assumptions=()) -> dict:
     """The report dict; see mpgspec/report/schema/report-v1.json."""
     sysm = spec.system
+    csys = next(iter(prims.values())).system
+    bounds = {n: [float(lo), float(hi)] for n, lo, hi in zip(csys.input_names, csys.u_lo, csys.u_hi)
+              if np.isfinite(lo) or np.isfinite(hi)}
     return {
         "schema_version": SCHEMA_VERSION,
         "mpgspec_version": __version__,
@@ -89,8 +92,8 @@ def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs
         "project": {"name": spec.name, "path": str(spec.path), "description": spec.project.description.strip()},
         "status": status,
         "settings": asdict(settings),
-        "system": {"name": sysm.name, "kind": sysm.kind, "states": list(sysm.states), "inputs": list(sysm.inputs),
-                   "input_bounds": {k: list(v) for k, v in sysm.input_bounds.items()}},
+        "system": {"name": sysm.name, "kind": sysm.kind, "states": list(csys.state_names),
+                   "inputs": list(csys.input_names), "input_bounds": bounds},
         "primitives": [primitive_entry(prims[i.name], i.spec) for i in spec.primitives],
         "transitions": [transition_entry(tr) for tr in graph.transitions.values()],
         "edges": [{"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in ("duration", "peak_input", "hops") if k in d}}
@@ -99,10 +102,11 @@ def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs
         "plans": [p.to_dict() for p in plans],
         "lookup_table": table,
         "assertions": [a.to_dict() for a in assertions],
+        "assumptions": [a.to_dict() for a in assumptions],
         "sequence": None if spec.project.sequence is None else {
             "start": spec.project.sequence.start, "duration": spec.project.sequence.duration,
             "commands": [{"t": c.t, "goal": c.goal} for c in spec.project.sequence.commands],
-            "state_names": list(sysm.states),
+            "state_names": list(csys.state_names),
             "runs": {m: r.to_dict() for m, r in runs.items()},
         },
         "timing": timing,

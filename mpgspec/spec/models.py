@@ -350,5 +350,9 @@ class Project(Strict):
     primitives: list[Union[str, Primitive]] = Field(min_length=1)
     safe_sets: dict[str, list[SafetyFunction]] = Field(default_factory=dict)
     oracle: OracleConfig = OracleConfig()
+    assumptions: dict[
+        Literal["setpoint_dynamics", "setpoint_safe", "roa_in_safe_set", "local_stability"],
+        Literal["fail", "warn", "off"],
+    ] = Field(default_factory=dict, description="what a failed assumption check does (default: fail)")
     assertions: list[Assertion] = Field(default_factory=list)
     sequence: Sequence | None = None
