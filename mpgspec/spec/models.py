@@ -164,7 +164,7 @@ class IDQPController(Strict):
     posture_kp: float = Field(default=50.0, ge=0)
     posture_kd: float = Field(default=5.0, ge=0)
     posture_weight: float = Field(default=0.01, ge=0)
-    regularization: float = Field(default=1e-6, gt=0)
+    regularization: float = Field(default=1e-8, gt=0)
     max_iter: int = Field(default=100, ge=1)
 
 
