@@ -47,6 +47,9 @@ class LyapunovVerifier:
         P = np.asarray(o["P"], float) if "P" in o else lyapunov_P(A, o.get("Q"))
         Qdec = -(A.T @ P + P @ A)
         ev["P"] = P
+        if np.linalg.eigvalsh(P).min() <= 0 or np.linalg.eigvalsh(Qdec).min() <= 0:
+            return RoAResult(0.0, "failed", method, ev, "P is not a Lyapunov matrix of the linearisation "
+                             "(needs P > 0 and A'P + PA < 0)")
         y = ca.SX.sym("y", n)
         fy = problem.f(ca.DM(xs) + y)
         vdot = 2 * ca.mtimes([y.T, ca.DM(P), fy])

@@ -157,40 +157,44 @@ def batch(fn: ca.Function, n: int) -> Callable[..., np.ndarray]:
     return lambda *a: np.array(m(*a), float)
 
 
-def rk4(f: Callable[[np.ndarray, float | np.ndarray], np.ndarray], x0: np.ndarray, t0: np.ndarray,
-        horizon: float, dt: float, h: Callable | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Fixed-step RK4 of columns x0 (nx x N) from clocks t0; final states and min of each h row."""
-    n = int(np.ceil(horizon / dt - 1e-9))
-    dt = horizon / n
-    x, t = np.array(x0, float), np.array(t0, float)
-    hmin = h(x, t).min(axis=0) if h is not None else np.full(x.shape[1], np.inf)
-    with np.errstate(all="ignore"):
-        for _ in range(n):
-            k1 = f(x, t)
-            k2 = f(x + 0.5 * dt * k1, t + 0.5 * dt)
-            k3 = f(x + 0.5 * dt * k2, t + 0.5 * dt)
-            k4 = f(x + dt * k3, t + dt)
-            x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-            t = t + dt
-            if h is not None:
-                hmin = np.fmin(hmin, h(x, t).min(axis=0))
-    bad = ~np.isfinite(x).all(axis=0)
+def rk4_flow(f: ca.Function, h: ca.Function | None, dt: float, steps: int, n: int) -> ca.Function:
+    """Batched RK4 flow: (z0) -> z after `steps` steps, z = [x; t; min h so far], one column per rollout.
+
+    f and h take (x, t); the whole horizon is one folded CasADi Function, so a batch is one call.
+    """
+    nx = f.size1_in(0)
+    x, t, m = ca.SX.sym("x", nx), ca.SX.sym("t"), ca.SX.sym("m")
+    k1 = f(x, t)
+    k2 = f(x + dt / 2 * k1, t + dt / 2)
+    k3 = f(x + dt / 2 * k2, t + dt / 2)
+    k4 = f(x + dt * k3, t + dt)
+    xn = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    mn = ca.fmin(m, ca.mmin(h(xn, t + dt))) if h is not None else m
+    step = ca.Function("rk4_step", [ca.vertcat(x, t, m)], [ca.vertcat(xn, t + dt, mn)])
+    return step.fold(steps).map(n)
+
+
+def rk4(flow: ca.Function, x0: np.ndarray, t0: np.ndarray, h0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Final states (nx x N) and min h along each rollout of an rk4_flow, from x0 with h(x0) = h0."""
+    z = np.array(flow(np.vstack([x0, t0[None, :], h0[None, :]])), float)
+    x, hmin = z[:-2], z[-1]
+    bad = ~np.isfinite(x).all(axis=0) | np.isnan(hmin)
     hmin[bad] = -np.inf
     return x, hmin
 
 
 def bisect(ok: Callable[[float], bool], lo: float, hi: float, cap: float, rtol: float = 1e-3,
-           max_iter: int = 60) -> tuple[float, bool, int]:
+           max_iter: int = 60, grow: float = 4.0) -> tuple[float, bool, int]:
     """Largest value in [lo, cap] passing `ok`, assuming monotonicity; lo must pass or be 0.
 
-    hi is the first guess: it is grown by 4x while it passes. Returns (value, capped, calls).
+    hi is the first guess: it is multiplied by `grow` while it passes. Returns (value, capped, calls).
     """
     calls, hi = 0, min(hi, cap)
     while hi < cap:
         calls += 1
         if not ok(hi):
             break
-        lo, hi = hi, min(4 * hi, cap)
+        lo, hi = hi, min(grow * hi, cap)
     else:
         calls += 1
         if ok(cap):
@@ -210,3 +214,24 @@ def weakest(*levels: str) -> str:
     """The least trusted of several levels."""
     order = {"failed": 0, "empirical": 1, "given": 2, "certified": 3}
     return min(levels, key=order.__getitem__)
+
+
+def from_primitive(prim, weights: np.ndarray | None = None, s: float = 1e6) -> RoAProblem | PeriodicProblem:
+    """The RoA problem of a compiled primitive (duck-typed CompiledPrimitive) with x_sw = x*(0).
+
+    s is the time since switch-in, by default long after any motion profile has finished, so the
+    loop tracks x* itself and a fixed primitive's loop is autonomous. Transient primitives have
+    no RoA problem here.
+    """
+    cls = getattr(prim.cls, "value", prim.cls)
+    nx = prim.f_cl.size1_in(0)
+    x, t = ca.SX.sym("x", nx), ca.SX.sym("t")
+    xs0 = np.array(prim.setpoint(0.0), float).ravel()
+    if cls == "fixed":
+        return RoAProblem(ca.Function("f", [x], [prim.f_cl(x, 0.0, s, xs0)]), xs0,
+                          ca.Function("h", [x], [prim.h(x, 0.0, s, xs0)]), weights, prim.name)
+    if cls == "periodic":
+        return PeriodicProblem(ca.Function("f", [x, t], [prim.f_cl(x, t, s, xs0)]), prim.setpoint,
+                               float(prim.period), ca.Function("h", [x, t], [prim.h(x, t, s, xs0)]), weights,
+                               prim.name)
+    raise ValueError(f"no region-of-attraction problem for a {cls} primitive")

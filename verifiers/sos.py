@@ -16,12 +16,14 @@ from __future__ import annotations
 import itertools
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import casadi as ca
 import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
+from scipy.optimize import linprog
 
 from .roa_common import validate_gram
 
@@ -35,14 +37,8 @@ class NotPolynomial(ValueError):
 
 def monomials(n: int, dmin: int, dmax: int) -> list[tuple[int, ...]]:
     """Exponent tuples of all monomials in n variables with total degree in [dmin, dmax]."""
-    out = []
-    for d in range(max(dmin, 0), dmax + 1):
-        for c in itertools.combinations_with_replacement(range(n), d):
-            e = [0] * n
-            for i in c:
-                e[i] += 1
-            out.append(tuple(e))
-    return out
+    return [tuple(c.count(i) for i in range(n)) for d in range(max(dmin, 0), dmax + 1)
+            for c in itertools.combinations_with_replacement(range(n), d)]
 
 
 def padd(a: Poly, b: Poly, sb: float = 1.0) -> Poly:
@@ -74,12 +70,25 @@ def min_degree(p: Poly) -> int:
 
 def quadratic(P: np.ndarray) -> Poly:
     """y' P y as a polynomial."""
-    n = len(P)
-    out: Poly = {}
-    for i, j in itertools.product(range(n), range(n)):
-        k = tuple(int(i == m) + int(j == m) for m in range(n))
-        out[k] = out.get(k, 0.0) + float(P[i, j])
-    return {k: v for k, v in out.items() if v != 0.0}
+    return {k: v for k, v in gram_poly(P, monomials(len(P), 1, 1)).items() if v != 0.0}
+
+
+def newton_basis(basis: list[tuple[int, ...]], support) -> list[tuple[int, ...]]:
+    """Monomials m of the basis with 2m in the convex hull of the support (Newton polytope).
+
+    Any Gram representation puts zero rows on the other monomials, which would leave no
+    positive definite Gram matrix to validate.
+    """
+    S = np.array(sorted(support), float).T
+    if S.size == 0:
+        return []
+    keep = []
+    for m in basis:
+        A_eq = np.vstack([S, np.ones(S.shape[1])])
+        b_eq = np.concatenate([2 * np.array(m, float), [1.0]])
+        if linprog(np.zeros(S.shape[1]), A_eq=A_eq, b_eq=b_eq, bounds=(0, None), method="highs").status == 0:
+            keep.append(m)
+    return keep
 
 
 def gram_poly(Q: np.ndarray, basis: list[tuple[int, ...]]) -> Poly:
@@ -89,12 +98,6 @@ def gram_poly(Q: np.ndarray, basis: list[tuple[int, ...]]) -> Poly:
         k = tuple(x + y for x, y in zip(a, b))
         out[k] = out.get(k, 0.0) + float(Q[i, j])
     return out
-
-
-def evaluate(p: Poly, Y: np.ndarray) -> np.ndarray:
-    """p at the rows of Y."""
-    Y = np.atleast_2d(Y)
-    return sum((c * np.prod(Y ** np.array(k), axis=1) for k, c in p.items()), np.zeros(len(Y)))
 
 
 def from_casadi(fn: ca.Function, shift: np.ndarray | None = None) -> list[Poly]:
@@ -198,7 +201,7 @@ class LevelSetProgram:
 
     def __init__(self, p: Poly, V: Poly | None, n: int, mult_half_degree: int | None = None,
                  solver: str = "CLARABEL", solver_opts: dict | None = None, tol_eig: float = 1e-8,
-                 tol_res: float = 1e-6):
+                 tol_res: float = 1e-6, newton: bool = True):
         self.p, self.V, self.n = p, V or {}, n
         self.solver, self.solver_opts = solver, dict(solver_opts or {})
         self.tol_eig, self.tol_res = tol_eig, tol_res * max(1.0, max(map(abs, p.values()), default=1.0))
@@ -208,14 +211,14 @@ class LevelSetProgram:
         self.B1 = monomials(n, lo, hi) if V else []
         dmin = min(min_degree(p), 2 * lo) if self.B1 else min_degree(p)
         dmax = max(degree(p), 2 * hi + dV) if self.B1 else degree(p)
+        lam = gram_poly(np.ones((len(self.B1),) * 2), self.B1)
+        support = set(p) | set(lam) | set(pmul(lam, {m: 1.0 for m in self.V}))
         self.B0 = monomials(n, math.ceil(dmin / 2), dmax // 2)
+        self.B0 = newton_basis(self.B0, support) if newton else self.B0
         self.rho = cp.Parameter(nonneg=True, value=1.0)
         self.Q0 = cp.Variable((len(self.B0),) * 2, PSD=True)
         self.Q1 = cp.Variable((len(self.B1),) * 2, PSD=True) if self.B1 else None
-        monos = set(p) | set(gram_poly(np.ones((len(self.B0),) * 2), self.B0))
-        if self.B1:
-            lam = gram_poly(np.ones((len(self.B1),) * 2), self.B1)
-            monos |= set(lam) | set(pmul(lam, {m: 1.0 for m in self.V}))
+        monos = support | set(gram_poly(np.ones((len(self.B0),) * 2), self.B0))
         self.index = {m: k for k, m in enumerate(sorted(monos))}
         c = np.zeros(len(self.index))
         for m, v in p.items():
@@ -243,7 +246,9 @@ class LevelSetProgram:
         self.rho.value = float(rho)
         t0 = time.perf_counter()
         try:
-            self.problem.solve(solver=self.solver, **self.solver_opts)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)
+                self.problem.solve(solver=self.solver, **self.solver_opts)
         except cp.error.SolverError as e:
             return Certificate(False, f"solver error: {e}", rho, "error", self.solver, time.perf_counter() - t0)
         dt = time.perf_counter() - t0
@@ -256,43 +261,45 @@ class LevelSetProgram:
         return cert
 
     def check(self, rho: float, Q0: np.ndarray, Q1: np.ndarray) -> Certificate:
-        """Float64 check of the identity p - lam (rho - V) = z0'Q0z0 with lam = z1'Q1z1."""
+        """Float64 check of p - lam (rho - V) = z0'Q0z0 with lam = z1'Q1z1; names every failed check."""
         Q0, Q1 = 0.5 * (Q0 + Q0.T), 0.5 * (Q1 + Q1.T)
         ok1, e1 = validate_gram(Q1, self.tol_eig)
-        eigs = {"multiplier": e1, "sigma0": validate_gram(Q0, self.tol_eig)[1]}
+        ok0, e0 = validate_gram(Q0, self.tol_eig)
+        eigs, fails = {"multiplier": e1, "sigma0": e0}, []
         if not ok1:
-            return Certificate(False, f"Gram eigenvalue check failed: multiplier Gram min eigenvalue {e1:.3g} "
-                               f"< -{self.tol_eig:.1g}", rho, gram_min_eig=eigs)
+            fails.append(f"Gram eigenvalue check failed: multiplier min eigenvalue {e1:.3g} < -{self.tol_eig:.1g}")
+        if not ok0:
+            fails.append(f"Gram eigenvalue check failed: sigma0 min eigenvalue {e0:.3g} < -{self.tol_eig:.1g}")
+        if not (np.isfinite(Q0).all() and np.isfinite(Q1).all()):
+            return Certificate(False, "; ".join(fails) or "non-finite Gram matrix", rho, gram_min_eig=eigs)
         target = dict(self.p)
         if len(Q1):
             w, U = np.linalg.eigh(Q1)
             Q1 = (U * np.clip(w, 0, None)) @ U.T  # exactly-PSD multiplier
-            lam = gram_poly(Q1, self.B1)
-            target = padd(target, pmul(lam, padd(pconst(rho, self.n), self.V, -1.0)), -1.0)
+            target = padd(target, pmul(gram_poly(Q1, self.B1), padd(pconst(rho, self.n), self.V, -1.0)), -1.0)
         r = padd(target, gram_poly(Q0, self.B0), -1.0)
         res = max(map(abs, r.values()), default=0.0)
-        grams = {"Q0": Q0, "Q1": Q1, "B0": self.B0, "B1": self.B1}
-        if res > self.tol_res:
-            return Certificate(False, f"residual check failed: max coefficient residual {res:.3g} > {self.tol_res:.1g}",
-                               rho, gram_min_eig=eigs, residual=res, grams=grams)
-        E = np.zeros_like(Q0)
-        where = {}
+        grams = {"Q0": Q0, "Q1": Q1}
+        where: dict = {}
         for (i, a), (j, b) in itertools.product(enumerate(self.B0), enumerate(self.B0)):
             where.setdefault(tuple(x + y for x, y in zip(a, b)), (i, j))
+        if res > self.tol_res:
+            fails.append(f"residual check failed: max coefficient residual {res:.3g} > {self.tol_res:.1g}")
+        if any(m not in where for m in r):
+            fails.append("residual check failed: residual on monomials outside the Gram support")
+        if fails:
+            return Certificate(False, "; ".join(fails), rho, gram_min_eig=eigs, residual=res, grams=grams)
+        E = np.zeros_like(Q0)  # move the leftover coefficients into Q0, then Q0 + E must be PD
         for m, v in r.items():
-            if m not in where:
-                return Certificate(False, f"residual check failed: monomial {m} outside the Gram support", rho,
-                                   gram_min_eig=eigs, residual=res, grams=grams)
             i, j = where[m]
             E[i, j] += v / 2
             E[j, i] += v / 2
-        e0 = float(np.linalg.eigvalsh(Q0 + E).min()) if len(Q0) else float("inf")
-        eigs["sigma0_corrected"] = e0
+        ec = float(np.linalg.eigvalsh(Q0 + E).min()) if len(Q0) else float("inf")
+        eigs["sigma0_corrected"] = ec
         margin = 1e-10 * max(1.0, float(np.abs(Q0).max(initial=0.0)))
-        if not e0 > margin:
-            return Certificate(False, f"Gram eigenvalue check failed: sigma0 Gram min eigenvalue {e0:.3g} after "
-                               f"absorbing residuals (needs > {margin:.1g})", rho, gram_min_eig=eigs,
-                               residual=res, grams=grams)
+        if not ec > margin:
+            return Certificate(False, f"Gram eigenvalue check failed: sigma0 min eigenvalue {ec:.3g} after absorbing "
+                               f"residuals (needs > {margin:.1g})", rho, gram_min_eig=eigs, residual=res, grams=grams)
         return Certificate(True, "validated", rho, gram_min_eig=eigs, residual=res, grams=grams)
 
 

@@ -168,6 +168,17 @@ class Assertion(_Strict):
     message: str
 
 
+class AssumptionCheck(_Strict):
+    """A Definition-1 check of one primitive; level says how it was established."""
+
+    primitive: str
+    name: str
+    status: Literal["pass", "warn", "fail"]
+    level: Literal["certified", "computed", "empirical", "none"]
+    message: str
+    numbers: dict[str, Any]
+
+
 class Command(_Strict):
     t: float
     goal: str
@@ -227,6 +238,7 @@ class Report(_Strict):
     plans: list[Plan]
     lookup_table: LookupTable
     assertions: list[Assertion]
+    assumptions: list[AssumptionCheck] = Field(default_factory=list)
     sequence: Sequence | None
     timing: dict[str, float]
 
