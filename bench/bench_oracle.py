@@ -446,7 +446,7 @@ def main(argv=None) -> int:
             for _ in range(BR):
                 jit_acc[0] = 0.0
                 t = time.perf_counter()
-                _p, g, _o, info = build(sp_l, st)
+                _p, g, _o, info, _roa = build(sp_l, st)
                 runs.append((time.perf_counter() - t, info["graph_s"], jit_acc[0], info, g))
         finally:
             _vr.build_chunk = _orig_bc

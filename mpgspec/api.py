@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from .check.assertions import evaluate_assertions
+from .certify.roa import RANK, apply_radii, size_regions
+from .check.assertions import AssertionResult, evaluate_assertions
 from .check.assumptions import check_primitive
 from .compile.primitive import CompiledPrimitive, compile_primitive
 from .compile.system import compile_system
@@ -64,9 +65,12 @@ def compile_project(spec: ProjectSpec) -> dict[str, CompiledPrimitive]:
     return {inst.name: compile_primitive(inst, sys) for inst in spec.primitives}
 
 
-def compile_path(path: str | Path) -> dict[str, CompiledPrimitive]:
-    """Load and compile a project file (picklable as a factory for worker processes)."""
-    return compile_project(load_project(path))
+def compile_path(path: str | Path, radii: dict[str, float] | None = None) -> dict[str, CompiledPrimitive]:
+    """Load and compile a project file with the given E radii (a picklable factory for workers)."""
+    spec = load_project(path)
+    prims = compile_project(spec)
+    apply_radii(spec, prims, radii or {})
+    return prims
 
 
 def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None, workers: int = 1):
@@ -74,14 +78,34 @@ def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None
     t0 = time.perf_counter()
     prims = compile_project(spec)
     t1 = time.perf_counter()
+    if progress:
+        progress(spec.name, "regions of attraction", 0, len(prims))
+    roa = size_regions(spec, prims)
+    t2 = time.perf_counter()
     oracles: dict = {}
     cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
+    radii = {n: r.radius for n, r in roa.items()}
     g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, oracles,
-                    workers=workers, factory=partial(compile_path, spec.path))
-    t2 = time.perf_counter()
+                    workers=workers, factory=partial(compile_path, spec.path, radii))
+    t3 = time.perf_counter()
     calls = sum(len(tr.t_A) * len(tr.t_B) for tr in g.transitions.values())
-    return prims, g, oracles, {"compile_s": t1 - t0, "graph_s": t2 - t1, "oracle_calls": calls,
-                               "oracle_calls_per_s": calls / max(t2 - t1, 1e-9)}
+    timing = {"compile_s": t1 - t0, "roa_s": t2 - t1, "graph_s": t3 - t2, "oracle_calls": calls,
+              "oracle_calls_per_s": calls / max(t3 - t2, 1e-9)}
+    return prims, g, oracles, timing, roa
+
+
+def roa_requirements(spec: ProjectSpec, roa: dict, start: int) -> list[AssertionResult]:
+    """`roa.require` of each primitive as an assertion on the level of evidence of its radius."""
+    out = []
+    for inst in spec.primitives:
+        need = inst.spec.roa.require
+        if need is None:
+            continue
+        rec = roa[inst.name]
+        ok = RANK[rec.level] >= RANK[need]
+        out.append(AssertionResult(start + len(out), "roa_level", f"E of {inst.name} is {need}",
+                                   "pass" if ok else "fail", f"{rec.level} by {rec.method}, r = {rec.radius:.4g}"))
+    return out
 
 
 def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict) -> list:
@@ -107,7 +131,7 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
         spec = load_project(path)
         res.name = spec.name
         settings = settings_for(spec, overrides)
-        prims, g, oracles, timing = build(spec, settings, progress, workers)
+        prims, g, oracles, timing, roa = build(spec, settings, progress, workers)
     except SpecErrors as e:
         res.errors = [x.to_dict() | {"text": x.format()} for x in e.errors]
         return res
@@ -127,6 +151,7 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
         for mode in ("naive", "graph"):
             runs[mode] = simulate_sequence(prims, g, table["next"], spec.project.sequence, settings, mode)
     checks = evaluate_assertions(spec.project.assertions, g, runs)
+    checks += roa_requirements(spec, roa, start=len(checks))
     timing["plan_execute_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     assumed = check_assumptions(prims, spec.project.assumptions)
@@ -137,7 +162,7 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
     failures = failure_traces(g, prims, settings, oracles, pairs)
     report = build_report(spec=spec, prims=prims, graph=g, settings=settings, plans=plans, table=table,
                           assertions=checks, runs=runs, failures=failures, timing=timing, status=status,
-                          assumptions=assumed)
+                          assumptions=assumed, roa=roa)
     res.status, res.report = status, report
     if out_dir is not None:
         from .report.files import write_reports

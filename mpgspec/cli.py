@@ -87,7 +87,7 @@ def _one_project(path):
         raise api.UsageError(f"{path}: expected one project, found {len(files)}")
     spec = api.load_project(files[0])
     settings = api.settings_for(spec)
-    prims, g, _, _ = api.build(spec, settings)
+    prims, g, _, _, _ = api.build(spec, settings)
     return spec, settings, prims, g
 
 

@@ -122,9 +122,11 @@ def local_stability(p: CompiledPrimitive, rel_tol: float = 1e-6) -> AssumptionCh
     Directions that E does not weigh (for example a robot's position on flat ground) may be
     neutral; those eigenvalues give 'warn', not 'fail'.
     """
+    if p.cls is PrimitiveClass.PERIODIC:
+        return floquet_stability(p)
     if p.cls is not PrimitiveClass.FIXED:
         return AssumptionCheck(p.name, "local_stability", "warn", "none",
-                               "no eigenvalue test for time-varying setpoints; see the Floquet verifier", {})
+                               "no stability test for transient primitives (finite domain)", {})
     xs = p.x_star(0.0)
     nx = xs.size
     A = np.zeros((nx, nx))
@@ -142,6 +144,25 @@ def local_stability(p: CompiledPrimitive, rel_tol: float = 1e-6) -> AssumptionCh
                            f"max Re(eig) {re:.3g}; {unstable} unstable, {neutral} neutral (|Re| <= {tol:.2g}) of {nx}",
                            {"max_real": float(re), "neutral_band": tol, "unstable": unstable, "neutral": neutral,
                             "eigenvalues": [[float(z.real), float(z.imag)] for z in ev]})
+
+
+def floquet_stability(p: CompiledPrimitive, tol: float = 1e-6) -> AssumptionCheck:
+    """Periodic primitives: Floquet multipliers of the orbit (monodromy from the variational equation)."""
+    from verifiers.floquet import monodromy
+    from verifiers.roa_common import from_primitive
+
+    m = monodromy(from_primitive(p))
+    mu = np.linalg.eigvals(m["Phi"])
+    mags = np.sort(np.abs(mu))[::-1]
+    if m["autonomous"] and mags.size:  # the multiplier along the orbit is 1 by construction
+        mags = mags[1:]
+    worst = float(mags.max()) if mags.size else 0.0
+    status = "pass" if worst < 1 - tol else "fail"
+    return AssumptionCheck(p.name, "local_stability", status, "computed",
+                           f"max |Floquet multiplier| {worst:.3g} over period {p.period:.4g}"
+                           + (" (orbitally, one multiplier at 1 set aside)" if m["autonomous"] else ""),
+                           {"max_abs_multiplier": worst, "multipliers": [[float(z.real), float(z.imag)] for z in mu],
+                            "orbit_defect": m["orbit_defect"]})
 
 
 def check_primitive(p: CompiledPrimitive, h_tol: float = 1e-9, dyn_tol: float = 1e-3) -> list[AssumptionCheck]:

@@ -193,13 +193,14 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
                             key=f"primitive '{inst.name}': roa.weights", expected=f"{sys.nx}", found=f"{w.size}",
                             code="MPG106")
         W = np.diag(w)
-    margin = roa.radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
+    radius = float(roa.radius) if roa.radius is not None else 0.0  # 0 until a verifier sizes E
+    margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
     ctx.info["roa_W"] = W.tolist()
     roa_margin = ca.Function(f"roa_{ident}", [x, t], [margin], ["x", "t"], ["margin"])
     grid = p.grid
     return CompiledPrimitive(
         name=inst.name, cls=p.class_, system=sys, period=period, domain=domain, next=p.next, horizon=p.horizon,
-        grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=roa.radius,
+        grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=radius,
         f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info,
     )
 

@@ -22,13 +22,15 @@ def _f(v):
     return v if np.isfinite(v) else None
 
 
-def primitive_entry(p: CompiledPrimitive, spec) -> dict:
+def primitive_entry(p: CompiledPrimitive, spec, roa=None) -> dict:
     c = spec.controller
+    rec = roa.to_dict() if roa is not None else {"method": "given", "level": "given", "message": "", "evidence": {}}
     return {
         "name": p.name, "class": p.cls.value, "period": _f(p.period),
         "domain": list(p.domain) if p.domain else None, "next": p.next,
         "controller": c.type, "safety_functions": p.h_names, "roa_radius": p.radius,
-        "roa_method": "given", "horizon": _f(p.horizon), "setpoint_t0": [float(v) for v in p.x_star(p.t_range[0])],
+        "roa_method": rec["method"], "roa_level": rec["level"], "roa_message": rec["message"],
+        "roa_evidence": rec["evidence"], "horizon": _f(p.horizon), "setpoint_t0": [float(v) for v in p.x_star(p.t_range[0])],
         "description": spec.description.strip(), "info": p.info,
     }
 
@@ -79,7 +81,7 @@ def failure_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive],
 
 
 def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs, failures, timing,
-                 status: str, assumptions=()) -> dict:
+                 status: str, assumptions=(), roa=None) -> dict:
     """The report dict; see mpgspec/report/schema/report-v1.json."""
     sysm = spec.system
     csys = next(iter(prims.values())).system
@@ -94,7 +96,7 @@ def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs
         "settings": asdict(settings),
         "system": {"name": sysm.name, "kind": sysm.kind, "states": list(csys.state_names),
                    "inputs": list(csys.input_names), "input_bounds": bounds},
-        "primitives": [primitive_entry(prims[i.name], i.spec) for i in spec.primitives],
+        "primitives": [primitive_entry(prims[i.name], i.spec, (roa or {}).get(i.name)) for i in spec.primitives],
         "transitions": [transition_entry(tr) for tr in graph.transitions.values()],
         "edges": [{"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in ("duration", "peak_input", "hops") if k in d}}
                   for a, b, d in graph.G.edges(data=True)],

@@ -55,7 +55,10 @@ class Primitive(_Strict):
     controller: str
     safety_functions: list[str]
     roa_radius: float = Field(description="radius of the region of attraction E")
-    roa_method: str = Field(description="how E was obtained, e.g. 'given' in the spec")
+    roa_method: str = Field(description="how E was obtained: 'given' in the spec, or a verifier's name")
+    roa_level: Literal["certified", "empirical", "given", "failed"] = "given"
+    roa_message: str = ""
+    roa_evidence: dict[str, Any] = Field(default_factory=dict, description="P, rho, Gram eigenvalues, solver...")
     horizon: Num
     setpoint_t0: list[float]
     description: str

@@ -84,11 +84,27 @@ def discover(path: str | Path) -> list[Path]:
     return found
 
 
-def _validation_errors(err: ValidationError, positions: PositionMap, prefix: tuple = ()) -> list[SpecError]:
+def _data_path(data, loc: tuple) -> tuple:
+    """The part of a pydantic error location that indexes the document (drops union tags and types)."""
+    out, node = [], data
+    for i, k in enumerate(loc):
+        if isinstance(node, dict) and k in node:
+            out.append(k)
+            node = node[k]
+        elif isinstance(node, list) and isinstance(k, int) and k < len(node):
+            out.append(k)
+            node = node[k]
+        elif isinstance(node, dict) and i == len(loc) - 1 and isinstance(k, str) and "[" not in k:
+            out.append(k)  # a missing or unknown key: name it
+    return tuple(out)
+
+
+def _validation_errors(err: ValidationError, positions: PositionMap, prefix: tuple = (),
+                       data=None) -> list[SpecError]:
     out = []
     for e in err.errors():
         loc = prefix + tuple(e["loc"])
-        data_loc = tuple(x for x in loc if not (isinstance(x, str) and x[:1].isupper() and x not in ("Q", "R")))
+        data_loc = _data_path(data, loc)
         key = ".".join(str(x) for x in data_loc) or "<root>"
         found = e.get("input")
         found_s = repr(found) if not isinstance(found, (dict, list)) else type(found).__name__
@@ -196,7 +212,7 @@ def load_project(path: str | Path) -> ProjectSpec:
     try:
         project = Project.model_validate(data)
     except ValidationError as e:
-        raise SpecErrors(_validation_errors(e, merged)) from None
+        raise SpecErrors(_validation_errors(e, merged, data=data)) from None
 
     instances: list[PrimitiveInstance] = []
     names: dict[str, Location] = {}

@@ -6,7 +6,7 @@ CasADi by later stages. Unknown keys are rejected so a typo never passes silentl
 from __future__ import annotations
 
 from enum import Enum
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
 
@@ -74,7 +74,15 @@ class RigidBodySystem(Strict):
     parameters: dict[str, float] = Field(default_factory=dict)
 
 
-System = Annotated[Union[AnalyticSystem, RigidBodySystem], Field(discriminator="kind")]
+def _system_kind(v):
+    return (v.get("kind", "analytic") if isinstance(v, dict) else getattr(v, "kind", None))
+
+
+System = Annotated[
+    Union[Annotated[AnalyticSystem, Tag("analytic")], Annotated[RigidBodySystem, Tag("rigid_body")]],
+    Discriminator(_system_kind, custom_error_type="system_kind",
+                  custom_error_message="system.kind must be 'analytic' (default) or 'rigid_body'"),
+]
 
 
 # ----------------------------------------------------------------------------- primitive parts
@@ -196,14 +204,23 @@ class SafetyFunction(Strict):
 
 
 class ExplicitRoA(Strict):
-    """E = {x : ||W^(1/2) (x - x*(t))|| < radius}; weights give a diagonal W, matrix a full one."""
+    """E = {x : ||W^(1/2) (x - x*(t))|| < radius}; weights give a diagonal W, matrix a full one.
 
-    radius: float = Field(gt=0)
+    method 'given' takes the radius as written; lyapunov, sos, sampling (fixed primitives) and
+    floquet (periodic) compute it, and `require` demands a level of evidence for it.
+    """
+
+    radius: float | None = Field(default=None, gt=0)
     weights: list[float] | None = None
     matrix: list[list[float]] | None = None
+    method: str = Field(default="given", description="given | lyapunov | sos | sampling | floquet | a plug-in")
+    options: dict[str, Any] = Field(default_factory=dict, description="options of the RoA verifier")
+    require: Literal["certified", "empirical", "given"] | None = None
 
     @model_validator(mode="after")
     def _one_metric(self):
+        if self.method == "given" and self.radius is None:
+            raise ValueError("give 'radius', or a 'method' that computes it")
         if self.weights is not None and self.matrix is not None:
             raise ValueError("give at most one of 'weights' or 'matrix'")
         if self.weights is not None and any(w < 0 for w in self.weights):

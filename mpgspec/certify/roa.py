@@ -1,0 +1,89 @@
+"""Give every primitive its E: the spec's radius, or one a verifier certified or estimated.
+
+A radius from a verifier replaces the spec's; when the spec also gives a radius and it is larger
+than the verified one, the smaller one is used and the record says so. A verifier that fails
+leaves the spec's radius (labelled 'given') or, without one, an empty E (radius 0): no flow can
+enter it, so no transition into the primitive is claimed.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..compile.primitive import CompiledPrimitive, compile_primitive
+from ..spec.loader import ProjectSpec
+from .registry import roa_verifiers
+
+RANK = {"certified": 3, "empirical": 2, "given": 1, "failed": 0}
+
+
+@dataclass
+class RoARecord:
+    """How one primitive's radius was obtained."""
+
+    primitive: str
+    method: str
+    level: str
+    radius: float
+    spec_radius: float | None = None
+    message: str = ""
+    evidence: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def _estimate(method: str, prim: CompiledPrimitive, options: dict):
+    from verifiers.roa_common import from_primitive
+
+    verifiers = roa_verifiers()
+    if method not in verifiers:
+        raise KeyError(f"no RoA verifier {method!r}; installed: {', '.join(sorted(verifiers))}")
+    W = np.asarray(prim.info.get("roa_W", np.eye(prim.system.nx)))
+    return verifiers[method].estimate(from_primitive(prim, weights=W), dict(options))
+
+
+def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive]) -> dict[str, RoARecord]:
+    """Run each primitive's RoA method; recompile primitives whose radius changed (in place)."""
+    records = {}
+    for inst in spec.primitives:
+        roa = inst.spec.roa
+        prim = prims[inst.name]
+        if roa.method == "given":
+            records[inst.name] = RoARecord(inst.name, "given", "given", float(roa.radius), roa.radius,
+                                           "radius chosen by the spec author")
+            continue
+        t0 = time.perf_counter()
+        try:
+            res = _estimate(roa.method, prim, roa.options)
+            level, r, msg, ev = res.level, float(res.radius), res.message, res.evidence
+        except Exception as err:  # a verifier crash is this primitive's evidence
+            level, r, msg, ev = "failed", 0.0, f"{type(err).__name__}: {err}", {}
+        rec = RoARecord(inst.name, roa.method, level, r, roa.radius, msg, ev, time.perf_counter() - t0)
+        if level == "failed" or r <= 0:
+            rec.radius = float(roa.radius or 0.0)
+            rec.level = "given" if roa.radius else "failed"
+            rec.message = f"{roa.method} failed ({msg}); " + ("using the spec's radius" if roa.radius else "E is empty")
+        elif roa.radius is not None and roa.radius > r:
+            rec.message = f"the spec's radius {roa.radius:g} exceeds the {level} radius {r:.4g}; using {r:.4g}. " + msg
+        elif roa.radius is not None:
+            rec.radius = float(roa.radius)
+            rec.message = f"the spec's radius {roa.radius:g} lies within the {level} radius {r:.4g}. " + msg
+            rec.level = level
+        records[inst.name] = rec
+    apply_radii(spec, prims, {n: r.radius for n, r in records.items()})
+    return records
+
+
+def apply_radii(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], radii: dict[str, float]) -> None:
+    """Recompile, in place, the primitives whose E radius differs from `radii`."""
+    for inst in spec.primitives:
+        prim = prims[inst.name]
+        r = radii.get(inst.name, prim.radius)
+        if r != prim.radius:
+            new = inst.spec.model_copy(update={"roa": inst.spec.roa.model_copy(update={"radius": r})})
+            prims[inst.name] = compile_primitive(dataclasses.replace(inst, spec=new), prim.system)
