@@ -19,6 +19,7 @@ from .compile.system import compile_system
 from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, UsageError  # noqa: F401
 from .execute.sequence import simulate_sequence
 from .graph.build import build_graph
+from .oracle.registry import get_backend
 from .graph.transition import MotionPrimitiveGraph
 from .plan.planner import lookup_table, shortest_plan
 from .report.build import build_report, failure_traces
@@ -56,7 +57,9 @@ def settings_for(spec: ProjectSpec, overrides: dict | None = None) -> OracleSett
     o = spec.project.oracle
     s = OracleSettings.with_accuracy(o.accuracy, horizon=o.horizon, dt=o.dt, method=o.method,
                                      h_tolerance=o.h_tolerance)
-    return s.replace(**(overrides or {}))
+    s = s.replace(**(overrides or {}))
+    get_backend(s.method)  # an unknown method is a usage error, not evidence
+    return s
 
 
 def compile_project(spec: ProjectSpec) -> dict[str, CompiledPrimitive]:

@@ -50,8 +50,11 @@ class ScipyRunner:
             sol = solve_ivp(rhs, (0.0, T), x0, method="LSODA", events=events, rtol=self.rtol, atol=self.atol)
         except Exception as err:
             return OracleEvidence(0, Reason.ERROR, 0.0, message=str(err)[:500])
-        if sol.status == -1:
-            return OracleEvidence(0, Reason.INTEGRATION_FAILED, float(sol.t[-1]), message=sol.message)
+        if sol.status == -1 or not np.isfinite(sol.y).all():
+            bad = np.flatnonzero(~np.isfinite(sol.y).all(axis=0))
+            t_bad = float(sol.t[bad[0]]) if bad.size else float(sol.t[-1])
+            return OracleEvidence(0, Reason.INTEGRATION_FAILED, t_bad, message=sol.message if sol.status == -1
+                                  else "non-finite state")
         hits = [(float(te[0]), i) for i, te in enumerate(sol.t_events) if len(te)]
         mins = np.min([np.where(np.abs(hv(s, x)) < INACTIVE / 2, hv(s, x), np.inf) for s, x in zip(sol.t, sol.y.T)],
                       axis=0) if nh else []

@@ -148,7 +148,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     ctx = ControlContext(sys, t, s, x_sw, x_star, x_star_dot, setpoint, env, ec,
                          fixed=p.class_ is PrimitiveClass.FIXED, xdot=loop.xdot, contacts=loop.contacts)
     u_raw = LAWS[p.controller.type](p.controller, ctx)
-    sat_u = ca.fmin(ca.fmax(sys.u, ca.DM(sys.u_lo)), ca.DM(sys.u_hi)) if sys.nu else sys.u
+    sat_u = saturate(sys.u, sys.u_lo, sys.u_hi)
     args = [x, t, s, x_sw]
     ident = _ident(inst.name)
     f_u = ca.Function("f_u", args + [sys.u], [ca.substitute(loop.xdot, sys.u, sat_u) if sys.nu else loop.xdot])
@@ -205,6 +205,14 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     )
 
 
+def saturate(u, lo: np.ndarray, hi: np.ndarray):
+    """Clip u to [lo, hi] in a form that lets NaN through (fmin/fmax would replace it by a bound)."""
+    if u.shape[0] == 0:
+        return u
+    lo_, hi_ = ca.DM(np.where(np.isfinite(lo), lo, -1e300)), ca.DM(np.where(np.isfinite(hi), hi, 1e300))
+    return u + ca.fmax(lo_ - u, 0) - ca.fmax(u - hi_, 0)
+
+
 def _close_loop(ident: str, args: list, u_raw, f_u: ca.Function, h_u: ca.Function, sys: CompiledSystem):
     """Compose the open loop and the safety functions with the control law.
 
@@ -215,7 +223,7 @@ def _close_loop(ident: str, args: list, u_raw, f_u: ca.Function, h_u: ca.Functio
     sym = ca.SX.sym if k.is_a("SXFunction") else ca.MX.sym
     a = [sym(n, *arg.shape) for n, arg in zip(("x", "t", "s", "x_sw"), args)]
     ur = k(*a)
-    us = ca.fmin(ca.fmax(ur, ca.DM(sys.u_lo)), ca.DM(sys.u_hi)) if sys.nu else ur
+    us = saturate(ur, sys.u_lo, sys.u_hi)
     names = ["x", "t", "s", "x_sw"]
     f_cl = ca.Function(f"f_cl_{ident}", a, [f_u(*a, ur)], names, ["xdot"])
     control = ca.Function(f"k_{ident}", a, [ur, us], names, ["u_raw", "u"])

@@ -109,7 +109,7 @@ def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiv
                 tr = graph.edge(cur, p.next) if graph is not None else None
                 event = (i, "transient_end", (p.next, tr.switch_clock(p.domain[1]) if tr and mode == "graph" else None))
                 break
-            if mode == "graph" and goal != cur and converged:
+            if mode == "graph" and goal != cur and converged and p.cls is not PrimitiveClass.TRANSIENT:
                 nxt = table[cur].get(goal)
                 tr = graph.edge(cur, nxt) if nxt and nxt != cur else None
                 if tr is not None:

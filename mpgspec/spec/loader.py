@@ -103,6 +103,8 @@ def _validation_errors(err: ValidationError, positions: PositionMap, prefix: tup
                        data=None) -> list[SpecError]:
     out = []
     for e in err.errors():
+        if e["type"] == "string_type" and isinstance(e.get("input"), (dict, list)):
+            continue  # the file-name branch of an inline part: the model branch explains the error
         loc = prefix + tuple(e["loc"])
         data_loc = _data_path(data, loc)
         key = ".".join(str(x) for x in data_loc) or "<root>"

@@ -232,8 +232,6 @@ def test_nan_gives_integration_failed_and_the_batch_goes_on(tmp_path):
     assert ev[3].verdict == 1 and ev[3].t_enter == 0.0
 
 
-@pytest.mark.xfail(strict=True, reason="compile/primitive.py saturates with fmin(fmax(u, lo), hi), which maps a "
-                                       "NaN input to the lower bound, so the rollout goes on with u = lo")
 def test_nan_in_the_control_law_gives_integration_failed(tmp_path):
     """Same band in u instead of f: the raw input is NaN for 0.4 < x < 0.5."""
     prim = one(tmp_path, GOAL.replace("-2*(x - 1)", "-(x - 1) + " + NAN_BAND), bounds=(-1e6, 1e6))
@@ -250,8 +248,6 @@ def test_entry_before_a_later_nan_counts(tmp_path):
     assert e.verdict == 1 and in_step_after(e.t_enter, math.log(10))
 
 
-@pytest.mark.xfail(strict=True, reason="scipy_ref: a NaN right-hand side is integrated silently and "
-                                       "reported as horizon_reached")
 def test_scipy_backend_reports_nan_as_integration_failed(tmp_path):
     oracle = SafetyOracle(one(tmp_path, GOAL_1, f=NAN_BAND), FAST.replace(method="scipy"))
     assert oracle(np.array([0.45]), 0.0).reason is Reason.INTEGRATION_FAILED

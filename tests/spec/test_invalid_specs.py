@@ -4,15 +4,13 @@ Each case is a whole single-file project (inline system and primitives). It is w
 tmp_path/project.yaml and run through the real CLI entry (`mpgspec.cli.main`); the run must exit
 with 2, print `project.yaml:LINE:COLUMN CODE ... message` on stderr and never a traceback.
 
-Cases with `location_bug` currently point at the wrong line. Package bug (mpgspec/spec/loader.py,
-`_validation_errors`): pydantic error locations contain union-branch and validator entries such
-as 'str', 'function-after[_class_fields(), Primitive]', 'tagged-union[...]' and discriminator tags
-('analytic', 'pd', 'edge'); only names starting with a capital letter are filtered out, so the
-position lookup stops at the nearest ancestor (the `- name:` line of the primitive, the `system:`
-line, the assertion's first key) instead of the offending key, the printed key shows pydantic
-internals, and every error in an inline system/primitive comes with a spurious
-"Input should be a valid string" MPG104 from the `str` (include-file) branch. The location tests of
-those cases are strict xfails so they start failing, as a reminder to drop the mark, once fixed.
+A case may carry `location_bug: <reason>`: its location test is then a strict xfail, for a known
+package bug that puts the error on the wrong line (none at the moment).
+
+Known package bug (mpgspec/spec/loader.py, `_validation_errors`): for an inline system or primitive
+(the `Union[str, Model]` fields of Project), pydantic also reports the failed `str` branch, so every
+mistake in them comes with a spurious `MPG104 system.str: Input should be a valid string`
+(test_one_clean_error_for_one_mistake).
 """
 from __future__ import annotations
 
@@ -94,7 +92,6 @@ def test_invalid_spec_location(located_case, tmp_path, capsys):
     assert any(ln.startswith(">") and ln[1:].split("|")[0].strip() == str(case["line"]) for ln in err.splitlines())
 
 
-@pytest.mark.xfail(strict=True, reason="loader: spurious union-branch error and pydantic names in keys")
 def test_one_clean_error_for_one_mistake(tmp_path, capsys):
     case = next(c for c in CASES if c["id"] == "pd_gain_sizes")
     rc, path, _, err = run_verify(case["text"], tmp_path, capsys)
