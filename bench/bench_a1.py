@@ -580,7 +580,7 @@ def _run(args, R, T0, mach, tmp) -> int:
         i = text.find(HEADING)
         if i >= 0:  # replace our previous section only
             j = text.find("\n## ", i + len(HEADING))
-            text = text[:i] + section + (text[j + 1:] if j >= 0 else "")
+            text = text[:i] + section + ("\n" + text[j + 1:] if j >= 0 else "")
         else:
             text = text.rstrip("\n") + "\n\n" + section
         out.write_text(text)

@@ -84,7 +84,9 @@ def pd_law(c: PDController, ctx: ControlContext) -> ca.SX:
         for i, j in enumerate(out_states)
     ])
     v = -ca.mtimes(ca.diag(ca.DM(c.kp)), e) - ca.mtimes(ca.diag(ca.DM(c.kd)), ydot - yd_dot)
-    if c.input_map is not None:
+    if c.input_map == "jacobian_transpose":
+        By = _task_jacobian(sys, ydot, xdot).T
+    elif c.input_map is not None:
         By = ca.DM(c.input_map)
         if By.shape != (sys.nu, ny):
             raise SpecError("input_map must be inputs x outputs", location=ctx.ec.locate(("controller", "input_map")),
@@ -107,6 +109,16 @@ def pd_law(c: PDController, ctx: ControlContext) -> ca.SX:
                             found="an analytic system", code="MPG108")
         u = u + sys.static_torque(ctx.contacts)
     return u
+
+
+def _task_jacobian(sys: CompiledSystem, ydot: ca.SX, xdot: ca.SX) -> ca.SX:
+    """J_y: how the inputs' own coordinates move the outputs (rigid bodies: d ydot / d(actuated joint rates));
+    for other systems d ydot / dx times d xdot / du."""
+    if hasattr(sys, "model"):
+        m = sys.model
+        v_act = sys.x[m.nq + m.n_base:]
+        return ca.jacobian(ydot, v_act)
+    return ca.mtimes(ca.jacobian(ydot, sys.x), ca.jacobian(xdot, sys.u))
 
 
 def lqr_law(c: LQRController, ctx: ControlContext) -> ca.SX:

@@ -137,8 +137,10 @@ class PDController(Strict):
     outputs: list[ExprText] = Field(min_length=1, description="y(x); a state name or an expression")
     kp: list[float]
     kd: list[float]
-    input_map: list[list[float]] | None = Field(
-        default=None, description="inputs x outputs matrix B_y; identity when omitted"
+    input_map: list[list[float]] | Literal["jacobian_transpose"] | None = Field(
+        default=None,
+        description="inputs x outputs matrix B_y, identity when omitted, or 'jacobian_transpose' for the "
+                    "task-space law u = J_y^T (-Kp y - Kd ydot) (J_y: d ydot / d(actuated velocities))",
     )
     feedforward: list[ExprText] | None = None
     gravity_compensation: bool = Field(
