@@ -53,6 +53,7 @@ from __future__ import annotations
 import argparse
 import copy
 import datetime as _dt
+import gc
 import os
 import platform
 import re
@@ -385,7 +386,11 @@ def main(argv=None) -> int:
         return _run(args, R, T0, mach, tmp)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-        shutil.rmtree(_JIT_DIR, ignore_errors=True)
+        gc.collect()  # compiled Functions delete their own JIT files when freed; then the empty folder goes
+        try:
+            os.rmdir(_JIT_DIR)
+        except OSError:
+            pass
 
 
 def _run(args, R, T0, mach, tmp) -> int:
@@ -428,7 +433,8 @@ def _run(args, R, T0, mach, tmp) -> int:
             f"({ev.reason.value}); smallest margins over the rollout: "
             + ", ".join(f"{k} {v:.3g}" for v, k in worst))
         log(f"  with the real safe set (h_tolerance {base.h_tolerance:g}): verdict {ev_real.verdict}, "
-            f"{ev_real.reason.value} at {ev_real.t_stop:.3f} s" + (f" ({ev_real.violated})" if ev_real.violated else ""))
+            f"{ev_real.reason.value} at {ev_real.t_stop:.3f} s"
+            + (f" ({ev_real.violated})" if ev_real.violated else ""))
         t = time.perf_counter()
         f = jit_rhs(prim, st.jit_flags)
         d["jit_rhs"] = time.perf_counter() - t
@@ -485,7 +491,8 @@ def _run(args, R, T0, mach, tmp) -> int:
             "r_pin": med_ratio(T[f"pin {name}"], T[f"oracle {name}"]),
         }
         log(f"  {name}: oracle / (RHS x {n_eval}) = {r['r_rhs']:.2f} (its compiled chunks alone: "
-            f"{r['r_chunks_rhs']:.2f}; oracle / its chunks {r['r_chunks']:.2f}); pinocchio / oracle = {r['r_pin']:.1f}x; "
+            f"{r['r_chunks_rhs']:.2f}; oracle / its chunks {r['r_chunks']:.2f}); "
+            f"pinocchio / oracle = {r['r_pin']:.1f}x; "
             f"{r['rhs'] / n_eval * 1e6:.2f} us per compiled RHS, {r['pin'] / n_eval * 1e6:.0f} us per pinocchio RHS")
     triv_ns = md["trivial"] / n_eval * 1e9
     log(f"  a FunctionBuffer call from the Python loop costs {triv_ns:.0f} ns (trivial function), "
@@ -535,7 +542,8 @@ def _run(args, R, T0, mach, tmp) -> int:
         ("**(c) / (a)** (target >= 8)", f"**{A['r_pin']:.1f}x**", f"**{B['r_pin']:.1f}x**"),
         ("\\|x_pin(T) - x_compiled(T)\\|_inf (max over trajectory)",
          f"{dA['final_diff']:.1e} ({dA['traj_diff']:.1e})", f"{dB['final_diff']:.1e} ({dB['traj_diff']:.1e})"),
-        ("verdict with the real safe set (h_tolerance 0; E radius 1e-9)", verdict(dA["ev_real"]), verdict(dB["ev_real"])),
+        ("verdict with the real safe set (h_tolerance 0; E radius 1e-9)",
+         verdict(dA["ev_real"]), verdict(dB["ev_real"])),
     ]
     w = max(len(r[0]) for r in rows)
     table = [f"| {'measure':{w}s} | {VARIANTS[0][0]} (plain joint PD) | {VARIANTS[1][0]} (joint PD + gravity comp.) |",
