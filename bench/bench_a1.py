@@ -1,7 +1,8 @@
 """Benchmark of the safety oracle (Definition 4) on the Unitree A1 (rigid body, paper Section IV).
 
-    python bench/bench_a1.py            # about 1.5 minutes on 2 cores
-    python bench/bench_a1.py --quick    # about 1 minute: 3 rounds, one ID-QP call
+    python bench/bench_a1.py            # about 1 minute on 2 cores
+    python bench/bench_a1.py --quick    # about 40 s: 3 rounds, one ID-QP call
+    options: --repeats R, --no-shipped (skip specs/a1's build and the ID-QP), --no-write
 
 The target (issue): "The compiled A1 oracle (2 s horizon, 1 ms step, four feet in contact, joint
 PD): within 1.5x of the compiled right-hand side's own cost times the number of evaluations, and

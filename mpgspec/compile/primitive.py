@@ -113,7 +113,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
             raise SpecError("setpoint names an unknown state", location=inst.locate(("setpoint", "named", unknown[0])),
                             key=f"primitive '{inst.name}': setpoint.named", expected="state names of the system",
                             found=repr(unknown[0]), code="MPG106")
-        base = sys.default_state()
+        base = sys.default_state(loop.contacts)
         x_star_t = ca.vertcat(*[ec.sx(sp.named[n], ("setpoint", "named", n), {**consts, "t": t}) if n in sp.named
                                 else ca.SX(base[i]) for i, n in enumerate(sys.state_names)])
         if sp.feet_on_ground:

@@ -55,7 +55,7 @@ class CompiledSystem:
         env.update(self.extra_env)
         return env
 
-    def default_state(self) -> np.ndarray:
+    def default_state(self, contacts: tuple[str, ...] | None = None) -> np.ndarray:
         """Value of states a setpoint leaves unnamed."""
         return np.zeros(self.nx)
 
@@ -63,8 +63,8 @@ class CompiledSystem:
         """The open-loop dynamics a primitive runs on; analytic systems have one mode."""
         return OpenLoop(self.xdot, dict(self.extra_env))
 
-    def project(self, x: ca.SX) -> ca.SX:
-        """Map a state back onto the state manifold after a step (identity here)."""
+    def project(self, x: ca.SX, u: ca.SX | None = None) -> ca.SX:
+        """The discrete part of a step: back onto the state manifold, events (identity here)."""
         return x
 
     def builtin_safe_set(self, name: str, contacts: tuple[str, ...]) -> list[tuple[str, ca.SX]]:

@@ -36,24 +36,9 @@ def _sym(f: ca.Function):
     return ca.SX.sym if f.is_a("SXFunction") and f.n_nodes() <= INLINE_NODES else ca.MX.sym
 
 
-def rk4_step(f: ca.Function, nx: int, dt: float, project=lambda x: x) -> ca.Function:
-    """z -> z_next, one classical RK4 step of f(x, t, s, x_sw) with the clocks advanced.
-
-    `project` maps the new state back onto the state manifold (unit base quaternion).
-    """
-    z = _sym(f)("z", 2 * nx + 2)
-    x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
-    k1 = f(x, t, s, xs)
-    k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2, xs)
-    k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2, xs)
-    k4 = f(x + dt * k3, t + dt, s + dt, xs)
-    x_next = project(x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4))
-    return ca.Function("rk4", [z], [ca.vertcat(x_next, t + dt, s + dt, xs)])
-
-
-def _project_fn(system, nx: int):
-    xs = ca.SX.sym("x", nx)
-    return ca.Function("project", [xs], [system.project(xs)])
+def _project_fn(system):
+    u = ca.SX.sym("u", system.nu)
+    return ca.Function("project", [system.x, u], [system.project(system.x, u)])
 
 
 @dataclass
@@ -67,6 +52,7 @@ class Chunk:
     nh: int
     nu: int
     _maps: dict = field(default_factory=dict)
+    _buffers: dict = field(default_factory=dict)
 
     def mapped(self, n: int) -> ca.Function:
         if n not in self._maps:
@@ -74,11 +60,27 @@ class Chunk:
         return self._maps[n]
 
     def run(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Advance the columns of Z (nz x n) by K steps; out has shape (nh + 1 + nu, n, K)."""
+        """Advance the columns of Z (nz x n) by K steps; out has shape (nh + 1 + nu, n, K).
+
+        Calls go through a FunctionBuffer bound once per batch size to numpy arrays (no copies
+        through CasADi's DM type).
+        """
         n = Z.shape[1]
-        zf, out = self.mapped(n)(Z)
-        out = np.asarray(out).reshape(-1, n, self.K)
-        return np.asarray(zf), out
+        if n not in self._buffers:
+            F = self.mapped(n)
+            buf, ev = F.buffer()
+            zin, zf, out = np.zeros(F.nnz_in(0)), np.zeros(F.nnz_out(0)), np.zeros(F.nnz_out(1))
+            buf.set_arg(0, memoryview(zin))
+            buf.set_res(0, memoryview(zf))
+            buf.set_res(1, memoryview(out))
+            self._buffers[n] = (buf, ev, zin, zf, out)
+        _, ev, zin, zf, out = self._buffers[n]
+        nz = zin.size // n
+        zin.reshape(nz, n, order="F")[:] = Z
+        ev()
+        rows = out.size // (n * self.K)
+        return (zf.reshape(nz, n, order="F").copy(),
+                out.reshape(rows, n * self.K, order="F").reshape(rows, n, self.K))
 
 
 def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
@@ -93,19 +95,47 @@ def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
     return prim.cache[key]
 
 
+def _with_cse(f: ca.Function) -> ca.Function:
+    a = f.sx_in()
+    return ca.Function(f.name(), a, f.call(a), f.name_in(), f.name_out(), {"cse": True})
+
+
+def _stage1(prim: CompiledPrimitive, with_state: bool) -> tuple[ca.Function, ca.Function]:
+    """(x, t, s, x_sw) -> (k1, outputs, u) from one Function, and f_cl for the other stages.
+
+    For SX loops the first stage, h, the RoA margin and the control law share one expression
+    graph with common subexpressions eliminated, so the dynamics at a step's start state (which h
+    needs for contact forces) are computed once.
+    """
+    f = prim.f_cl
+    sx = all(g.is_a("SXFunction") for g in (f, prim.h, prim.control))
+    a = f.sx_in() if sx else [ca.MX.sym(n, f.size_in(i)) for i, n in enumerate(("x", "t", "s", "x_sw"))]
+    x = a[0]
+    u_raw, u_sat = prim.control.call(a)
+    out = ca.vertcat(prim.h.call(a)[0], prim.roa_margin(x, a[1]), u_raw, *([x] if with_state else []))
+    big = sx and f.n_nodes() > INLINE_NODES
+    opts = {"cse": True} if big else {}
+    stage1 = ca.Function("stage1", a, [f.call(a)[0], out, u_sat], opts)
+    return stage1, (_with_cse(f) if big else f)
+
+
 def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: tuple[str, ...],
                  with_state: bool) -> Chunk:
     nx = prim.system.nx
+    stage1, f = _stage1(prim, with_state)
+    project = _project_fn(prim.system)
     z = _sym(prim.f_cl)("z", 2 * nx + 2)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
-    u_raw, _ = prim.control(x, t, s, xs)
-    out = ca.vertcat(prim.h(x, t, s, xs), prim.roa_margin(x, t), u_raw, *([x] if with_state else []))
-    step = rk4_step(prim.f_cl, nx, dt, _project_fn(prim.system, nx))
-    body = ca.Function("body", [z], [step(z), out])
+    k1, out, u = stage1(x, t, s, xs)
+    k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2, xs)
+    k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2, xs)
+    k4 = f(x + dt * k3, t + dt, s + dt, xs)
+    x_next = project(x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), u)
+    body = ca.Function("body", [z], [ca.vertcat(x_next, t + dt, s + dt, xs), out])
     acc = body.mapaccum("acc", K)
     Z = ca.MX.sym("Z", 2 * nx + 2)
     zs, outs = acc(Z)
-    name = "chunk_" + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}".encode()).hexdigest()[:10]
+    name = "chunk_" + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}{os.getpid()}".encode()).hexdigest()[:10]
     fn = ca.Function(name, [Z], [zs[:, -1], outs], _jit_opts(flags) if jit else {})
     return Chunk(prim, dt, K, fn, len(prim.h_names), prim.system.nu)
 

@@ -71,6 +71,8 @@ class RigidBodySystem(Strict):
     torque_limit: float | list[float] | None = Field(default=None, description="U = [-l, l]^m; URDF efforts if omitted")
     friction: float = Field(default=0.7, gt=0)
     baumgarte: BaumgarteGains = BaumgarteGains()
+    contact_events: bool = Field(default=False, description="contact flags in the state: touchdown (with "
+                                 "a plastic impact) and lift-off as events; a primitive's contacts are its initial set")
     parameters: dict[str, float] = Field(default_factory=dict)
 
 

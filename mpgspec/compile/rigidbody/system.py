@@ -33,15 +33,21 @@ class RigidBodyCompiledSystem(CompiledSystem):
     dyn: RigidBodyDynamics | None = None
     friction: float = 0.7
     baumgarte: Baumgarte | None = None
+    events: bool = False  # contact flags in the state, touchdown / lift-off / impact (hybrid.py)
     _loops: dict = field(default_factory=dict)
 
     @property
     def model(self) -> RigidBodyModel:
         return self.dyn.model
 
-    def default_state(self) -> np.ndarray:
+    def default_state(self, contacts: tuple[str, ...] | None = None) -> np.ndarray:
+        """Zero, with a unit quaternion and (with contact events) the flags of `contacts` set."""
         x = np.zeros(self.nx)
         x[self.state_names.index("base_qw")] = 1.0
+        if self.events:
+            on = self.model.contact_frames if contacts is None else contacts
+            for f in on:
+                x[self.state_names.index(f"contact_{f}")] = 1.0
         return x
 
     def open_loop(self, contacts: list[str] | None) -> OpenLoop:
@@ -49,6 +55,10 @@ class RigidBodyCompiledSystem(CompiledSystem):
         key = tuple(self.model.contact_frames if contacts is None else contacts)
         if key in self._loops:
             return self._loops[key]
+        if self.events:
+            loop = self._hybrid_loop(key)
+            self._loops[key] = loop
+            return loop
         cd = ContactDynamics(self.dyn, key, self.baumgarte)
         a, lam = cd.solution
         sub_in = [self.dyn.q, self.dyn.v, cd.u]
@@ -63,6 +73,23 @@ class RigidBodyCompiledSystem(CompiledSystem):
         loop = OpenLoop(xdot, env, contacts=key)
         self._loops[key] = loop
         return loop
+
+    def _hybrid_loop(self, key: tuple[str, ...]) -> OpenLoop:
+        """The contact set follows the flags in the state; `key` only names the initial set."""
+        from .hybrid import masked_contact_dynamics
+
+        m = self.model
+        xq, xv, xc = self.x[:m.nq], self.x[m.nq:m.nq + m.nv], self.x[m.nq + m.nv:]
+        a, lam = masked_contact_dynamics(self, xq, xv, self.u, xc)
+        xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(len(m.contact_frames)))
+        env = dict(self.extra_env)
+        for k, f in enumerate(m.contact_frames):
+            for j, ax in enumerate("xyz"):
+                env[f"{f}_f{ax}"] = lam[3 * k + j]
+        return OpenLoop(xdot, env, contacts=key)
+
+    def contact_flag(self, frame: str) -> ca.SX | None:
+        return self.x[self.state_names.index(f"contact_{frame}")] if self.events else None
 
     def static_torque(self, contacts: tuple[str, ...]) -> ca.SX:
         """Joint torques that hold the current pose against gravity with the feet in `contacts`.
@@ -86,10 +113,20 @@ class RigidBodyCompiledSystem(CompiledSystem):
         y = dense_ldl_solve(ca.mtimes(AW, A.T) + 1e-9 * ca.DM.eye(A.shape[0]), g)
         return ca.mtimes(AW.T, y)[: m.nu]
 
-    def project(self, x: ca.SX) -> ca.SX:
-        """Renormalise the base quaternion after each integration step."""
+    def project(self, x: ca.SX, u: ca.SX | None = None) -> ca.SX:
+        """After each step: renormalise the base quaternion; with contact events, run them."""
         nq = self.model.nq
-        return ca.vertcat(normalize_quaternion(self.model, x[:nq]), x[nq:])
+        x = ca.vertcat(normalize_quaternion(self.model, x[:nq]), x[nq:])
+        if self.events and u is not None:
+            from .hybrid import contact_events
+
+            x = contact_events(self, x, u)
+        return x
+
+    def _when_in_contact(self, frame: str, h: ca.SX) -> ca.SX:
+        """With contact events, a contact condition binds only while the foot's flag is set."""
+        c = self.contact_flag(frame)
+        return h if c is None else ca.if_else(c > 0.5, h, 1e3)
 
     def builtin_safe_set(self, name: str, contacts: tuple[str, ...], tol: float = 1e-3) -> list[tuple[str, ca.SX]]:
         """The paper's common safe sets as lists of (name, h) with h >= 0 safe."""
@@ -106,16 +143,18 @@ class RigidBodyCompiledSystem(CompiledSystem):
                         (f"qdot_max[{j}]", vmax[i] - ca.fabs(v))]
         elif name == "ground_contact":  # C_ground: feet on the ground and not moving
             for f in contacts:
-                out += [(f"on_ground[{f}]", tol - ca.fabs(env[f"{f}_z"])),
-                        (f"foot_still[{f}]", tol - ca.norm_2(ca.vertcat(*[env[f"{f}_v{a}"] for a in "xyz"])))]
+                out += [(f"on_ground[{f}]", self._when_in_contact(f, tol - ca.fabs(env[f"{f}_z"]))),
+                        (f"foot_still[{f}]", self._when_in_contact(
+                            f, tol - ca.norm_2(ca.vertcat(*[env[f"{f}_v{a}"] for a in "xyz"]))))]
         elif name == "no_slip":  # lambda in the friction cone, lambda_z >= 0
             loop = self.open_loop(list(contacts))
             for f in contacts:
                 fx, fy, fz = (loop.env[f"{f}_f{a}"] for a in "xyz")
-                out += [(f"normal_force[{f}]", fz), (f"friction_cone[{f}]", self.friction * fz - ca.sqrt(fx**2 + fy**2 + 1e-12))]
+                out += [(f"normal_force[{f}]", self._when_in_contact(f, fz)),
+                        (f"friction_cone[{f}]", self._when_in_contact(f, self.friction * fz - ca.sqrt(fx**2 + fy**2 + 1e-12)))]
         elif name == "aerial":  # C_aerial: no foot below the ground
-            for f in m.contact_frames:
-                out.append((f"above_ground[{f}]", env[f"{f}_z"]))
+            for f in m.contact_frames:  # a foot resting on the ground sits at 0 up to the contact drift
+                out.append((f"above_ground[{f}]", env[f"{f}_z"] + tol))
         else:
             raise KeyError(name)
         return out
@@ -140,15 +179,16 @@ def compile_rigid_body(spec) -> RigidBodyCompiledSystem:
     dyn = RigidBodyDynamics(model)
     qn = (BASE_Q if model.n_base else []) + list(model.joint_names)
     vn = (BASE_V if model.n_base else []) + [f"{j}_dot" for j in model.joint_names]
-    x = ca.SX.sym("x", model.nq + model.nv)
+    cn = [f"contact_{f}" for f in model.contact_frames] if s.contact_events else []
+    x = ca.SX.sym("x", model.nq + model.nv + len(cn))
     u = ca.SX.sym("u", model.nu)
-    xq, xv = x[:model.nq], x[model.nq:]
+    xq, xv = x[:model.nq], x[model.nq:model.nq + model.nv]
     tree = dyn.state(xq, xv)
     env: dict[str, object] = {"mass": float(model.total_mass)}
     for f in model.contact_frames:
         p = tree.frame_position(f)
         vel = dyn.contact_velocity_expr([f])
-        vel = ca.substitute(vel, ca.vertcat(dyn.q, dyn.v), x)
+        vel = ca.substitute(vel, ca.vertcat(dyn.q, dyn.v), ca.vertcat(xq, xv))
         for j, ax in enumerate("xyz"):
             env[f"{f}_{ax}"] = p[j]
             env[f"{f}_v{ax}"] = vel[j]
@@ -158,10 +198,10 @@ def compile_rigid_body(spec) -> RigidBodyCompiledSystem:
     lim = s.torque_limit
     hi = model.effort_limits if lim is None else np.broadcast_to(np.asarray(lim, float), (model.nu,)).copy()
     sysc = RigidBodyCompiledSystem(
-        name=s.name, state_names=qn + vn, input_names=[f"tau_{j}" for j in model.joint_names],
+        name=s.name, state_names=qn + vn + cn, input_names=[f"tau_{j}" for j in model.joint_names],
         parameters=dict(s.parameters), x=x, u=u, xdot=ca.SX(0, 1), u_lo=-hi, u_hi=hi,
-        wrap=np.zeros(model.nq + model.nv), extra_env=env, dyn=dyn, friction=s.friction,
-        baumgarte=Baumgarte(s.baumgarte.alpha, s.baumgarte.beta),
+        wrap=np.zeros(x.shape[0]), extra_env=env, dyn=dyn, friction=s.friction,
+        baumgarte=Baumgarte(s.baumgarte.alpha, s.baumgarte.beta), events=s.contact_events,
     )
     sysc.xdot = sysc.open_loop(None).xdot
     return sysc

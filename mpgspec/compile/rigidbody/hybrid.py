@@ -1,0 +1,81 @@
+"""Contact events: the contact set as part of the state, with touchdown, lift-off and impacts.
+
+With `contact_events: true` the state gains one flag per contact frame, c_i in {0, 1}, constant
+in continuous time. The dynamics enforce the contact rows of feet with c_i = 1 only: inactive
+rows are masked out of J and given a unit diagonal in the Schur complement, so their force is
+zero. After every integration step the discrete part of the hybrid system runs:
+
+- touchdown: a foot with c_i = 0 whose height reaches 0 while moving down gets c_i = 1, and the
+  plastic impact map v+ = v- - D^-1 Jn^T (Jn D^-1 Jn^T)^-1 Jn v- of the new contact set applies;
+- lift-off: a foot with c_i = 1 whose normal force under the step's input is below 0 gets c_i = 0.
+
+Events are detected at step boundaries (no event localisation): their time is known to one step.
+"""
+from __future__ import annotations
+
+import casadi as ca
+
+from .linalg import dense_ldl_solve, dof_parents, scale_rows, tree_ldl, tree_solve_l, tree_solve_lt
+
+
+def _mask(c: ca.SX) -> ca.SX:
+    return ca.vertcat(*[ca.vertcat(c[i], c[i], c[i]) for i in range(c.shape[0])])
+
+
+def masked_contact_dynamics(sys, q: ca.SX, v: ca.SX, u: ca.SX, c: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """(a, lam) with the contact rows of feet whose flag is 0 switched off (their lam is 0)."""
+    dyn, m = sys.dyn, sys.model
+    sub = lambda e: ca.substitute(e, ca.vertcat(dyn.q, dyn.v), ca.vertcat(q, v))  # noqa: E731
+    parents = dof_parents(m)
+    M, H = sub(dyn.M_expr), sub(dyn.nle_expr)
+    J = sub(dyn.contact_jacobian_expr(m.contact_frames))
+    drift = sub(dyn.contact_drift_expr(m.contact_frames))
+    mask = _mask(c)
+    heights = ca.vertcat(*[ca.vertcat(0, 0, sys.extra_env[f"{f}_z"]) for f in m.contact_frames])
+    heights = ca.substitute(heights, sys.x[:m.nq], q)
+    b = sys.baumgarte
+    gamma = -2 * b.alpha * ca.mtimes(J, v) - b.beta**2 * heights
+    Jm = ca.diag(mask) @ J
+    L, D = tree_ldl(M, parents)
+    z = tree_solve_lt(L, parents, ca.mtimes(ca.DM(m.actuation_matrix), u) - H)
+    Y = tree_solve_lt(L, parents, Jm.T)
+    DY = scale_rows(D, Y)
+    K = ca.mtimes(Y.T, DY) + ca.diag(1 - mask)
+    lam = dense_ldl_solve(K, mask * (gamma - drift) - ca.mtimes(DY.T, z))
+    a = tree_solve_l(L, parents, scale_rows(D, z + ca.mtimes(Y, lam)))
+    return a, lam
+
+
+def masked_impact(sys, q: ca.SX, v: ca.SX, c: ca.SX) -> ca.SX:
+    """v+ of a plastic impact with the feet whose flag is 1."""
+    dyn, m = sys.dyn, sys.model
+    parents = dof_parents(m)
+    M = ca.substitute(dyn.M_expr, dyn.q, q)
+    J = ca.substitute(dyn.contact_jacobian_expr(m.contact_frames), dyn.q, q)
+    mask = _mask(c)
+    Jm = ca.diag(mask) @ J
+    L, D = tree_ldl(M, parents)
+    Y = tree_solve_lt(L, parents, Jm.T)
+    DY = scale_rows(D, Y)
+    P = -dense_ldl_solve(ca.mtimes(Y.T, DY) + ca.diag(1 - mask), ca.mtimes(Jm, v))
+    return v + tree_solve_l(L, parents, ca.mtimes(DY, P))
+
+
+def contact_events(sys, x_new: ca.SX, u: ca.SX) -> ca.SX:
+    """The discrete update after a step: touchdowns (with impact) and lift-offs."""
+    m = sys.model
+    nq, nv, nf = m.nq, m.nv, len(m.contact_frames)
+    q, v, c = x_new[:nq], x_new[nq:nq + nv], x_new[nq + nv:]
+    keys = [f"{f}_{k}" for f in m.contact_frames for k in ("z", "vz")]
+    env = dict(zip(keys, ca.vertsplit(ca.substitute(ca.vertcat(*[sys.extra_env[k] for k in keys]), sys.x, x_new))))
+    _, lam = masked_contact_dynamics(sys, q, v, u, c)
+    c_new = []
+    for i, f in enumerate(m.contact_frames):
+        z, vz = env[f"{f}_z"], env[f"{f}_vz"]
+        touch = ca.logic_and(c[i] < 0.5, ca.logic_and(z <= 0, vz < 0))
+        lift = ca.logic_and(c[i] > 0.5, lam[3 * i + 2] < 0)
+        c_new.append(ca.if_else(touch, 1, ca.if_else(lift, 0, c[i])))
+    c_new = ca.vertcat(*c_new)
+    touched = sum(ca.logic_and(c_new[i] > 0.5, c[i] < 0.5) for i in range(nf))
+    v_new = ca.if_else(touched > 0, masked_impact(sys, q, v, c_new), v)
+    return ca.vertcat(q, v_new, c_new)
