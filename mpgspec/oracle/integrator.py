@@ -80,7 +80,7 @@ class Chunk:
         ev()
         rows = out.size // (n * self.K)
         return (zf.reshape(nz, n, order="F").copy(),
-                out.reshape(rows, n * self.K, order="F").reshape(rows, n, self.K))
+                np.array(out.reshape(rows, n * self.K, order="F")).reshape(rows, n, self.K))
 
 
 def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,

@@ -1,0 +1,65 @@
+"""Contact events on the A1: a drop from the air touches down (plastic impact), then stands."""
+import shutil
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mpgspec.api import compile_project, settings_for
+from mpgspec.oracle.trace import trace
+from mpgspec.spec.loader import load_project
+
+SPEC = Path(__file__).parents[2] / "specs" / "a1"
+
+
+@pytest.fixture(scope="module")
+def drop(tmp_path_factory):
+    d = tmp_path_factory.mktemp("drop") / "a1"
+    shutil.copytree(SPEC, d)
+    p = (d / "project.yaml").read_text()
+    p = p.replace("  friction: 0.6\n", "  friction: 0.6\n  contact_events: true\n")
+    p = p.replace("  - primitives/stand.yaml\n", "")
+    p = p[: p.index("assertions:")]
+    (d / "project.yaml").write_text(p)
+    lie = (d / "primitives" / "lie.yaml").read_text()
+    lie = lie.replace("name: Lie", "name: Fall").replace("  feet_on_ground: true\n", "")
+    lie = lie.replace("  named: &lie\n", "  named: &lie\n    base_z: 0.16\n")
+    lie = lie.replace("  profile: {duration: 1.0}\n", "")
+    lie = lie.replace("roa:\n", "contacts: []\nroa:\n")
+    lie = lie.replace("0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1]",
+                      "0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0,0,0,0]")
+    lie = lie.replace("  - use: quadruped_ground\n", "  - use: joint_limits\n  - use: aerial\n")
+    (d / "primitives" / "lie.yaml").write_text(lie)
+    spec = load_project(d / "project.yaml")
+    return compile_project(spec)["Fall"], settings_for(spec)
+
+
+def test_drop_touches_down_with_an_impact(drop):
+    fall, settings = drop
+    sys = fall.system
+    m = sys.model
+    x0 = fall.x_star(0.0)
+    flags = [sys.state_names.index(f"contact_{f}") for f in m.contact_frames]
+    assert np.all(x0[flags] == 0) and x0[2] == pytest.approx(0.16)
+    out = trace(fall, x0, 0.0, 1.0, settings, max_points=100000)
+    X = np.array(out["x"], dtype=float)
+    t = np.array(out["t"])
+    c = X[flags]
+    assert np.all(c[:, -1] == 1), "all four feet end in contact"
+    feet = ca.Function("feet", [sys.x], [ca.vertcat(*[sys.extra_env[f"{f}_{k}"] for f in m.contact_frames
+                                                       for k in ("z", "vz")])])
+    F = np.array(feet.map(X.shape[1])(X))
+    k = int(np.argmax(c[0] > 0.5))  # first touchdown of FL
+    # free fall until then: z0 - g t^2 / 2 reaches the foot height at about sqrt(2 h / g)
+    assert 0.05 < t[k] < 0.3
+    assert F[1, k - 1] < -0.3  # falling fast just before
+    assert abs(F[1, k]) < 1e-6  # the plastic impact stops the foot
+    assert np.all(np.abs(F[0::2, -1]) < 1e-4)  # resting on the ground
+    M = sys.dyn.M
+    nq, nv = m.nq, m.nv
+    ke = lambda j: 0.5 * X[nq:nq + nv, j] @ np.array(M(X[:nq, j])) @ X[nq:nq + nv, j]  # noqa: E731
+    assert ke(k) < ke(k - 1)  # the impact dissipates energy
+    aerial = [i for i, n in enumerate(fall.h_names) if n.startswith("above_ground")]
+    H = np.array([out["h"][fall.h_names[i]] for i in aerial], dtype=float)
+    assert np.nanmin(H) > -2e-3
