@@ -7,36 +7,18 @@ theirs by declaring an entry point in their own package.
 from __future__ import annotations
 
 from functools import lru_cache
-from importlib.metadata import entry_points
 
 from ..errors import UsageError
+from ..plugins import load_plugins
 
 GROUP = "mpgspec.verifiers"
-_BUILTIN = {"rk4": "verifiers.rk4:backend", "scipy": "verifiers.scipy_ref:backend",
-            "cvodes": "verifiers.cvodes:backend"}
-
-
-def _load(target: str):
-    mod, _, attr = target.partition(":")
-    module = __import__(mod, fromlist=[attr])
-    return getattr(module, attr)
+_BUILTIN = {"rk4": "verifiers.rk4:backend", "scipy": "verifiers.scipy_ref:backend"}
 
 
 @lru_cache(maxsize=None)
 def backends() -> dict[str, object]:
     """All installed backends by name (entry points override the built-in table)."""
-    found = {name: target for name, target in _BUILTIN.items()}
-    for ep in entry_points(group=GROUP):
-        found[ep.name] = ep.value
-    out = {}
-    for name, target in found.items():
-        try:
-            b = _load(target)
-        except ImportError:
-            continue
-        if b.is_installed():
-            out[name] = b
-    return out
+    return load_plugins(GROUP, _BUILTIN)
 
 
 def get_backend(name: str):
