@@ -44,6 +44,7 @@ class CompiledPrimitive:
     roa_margin: ca.Function  # (x, t) -> r - ||x - x*(t)||_W ; > 0 is inside E
     setpoint: ca.Function  # t -> x*(t)
     info: dict = field(default_factory=dict)
+    jump: ca.Function | None = None  # (x, u, t) -> x: the discrete part of a step (quaternion, contacts)
     cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
 
     @property
@@ -177,6 +178,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
             hs.append(hv)
             names.append(name or f"h{j}")
     h_u = ca.Function("h_u", args + [sys.u], [ca.vertcat(*hs) if hs else ca.SX(0, 1)])
+    jump = _jump(inst, sys, tc, t)
     f_cl, control, h = _close_loop(ident, args, u_raw, f_u, h_u, sys)
     roa = p.roa
     dx = sys.wrapped_error(x - x_star)
@@ -201,8 +203,38 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     return CompiledPrimitive(
         name=inst.name, cls=p.class_, system=sys, period=period, domain=domain, next=p.next, horizon=p.horizon,
         grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=radius,
-        f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info,
+        f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info, jump=jump,
     )
+
+
+def _jump(inst: PrimitiveInstance, sys: CompiledSystem, tc: ca.SX, t: ca.SX) -> ca.Function:
+    """The discrete update after each step, given the step's input and the clock after it."""
+    u = ca.SX.sym("u", sys.nu)
+    x = sys.x
+    sched = inst.spec.contact_schedule
+    if sched is None:
+        return ca.Function("jump", [x, u, t], [sys.project(x, u)])
+    if not getattr(sys, "events", False):
+        raise SpecError("a contact schedule needs contact flags in the state", location=inst.locate(("contact_schedule",)),
+                        key=f"primitive '{inst.name}': contact_schedule", expected="system.contact_events: true",
+                        found="a system without contact events", code="MPG108")
+    feet = sys.model.contact_frames
+    for k, ph in enumerate(sched):
+        bad = [f for f in ph.feet if f not in feet]
+        if bad:
+            raise SpecError("unknown contact frame", location=inst.locate(("contact_schedule", k, "feet")),
+                            key=f"primitive '{inst.name}': contact_schedule.{k}.feet",
+                            expected="one of " + ", ".join(feet), found=repr(bad[0]), code="MPG106")
+    flags = []
+    for f in feet:
+        val = ca.SX(1.0 if f in sched[-1].feet else 0.0)
+        for ph in reversed(sched[:-1]):
+            val = ca.if_else(tc < ph.until, 1.0 if f in ph.feet else 0.0, val)
+        flags.append(val)
+    from .rigidbody.hybrid import scheduled_contacts
+
+    x_unit = ca.vertcat(sys.project(x)[: sys.model.nq], x[sys.model.nq:])
+    return ca.Function("jump", [x, u, t], [scheduled_contacts(sys, x_unit, ca.vertcat(*flags))])
 
 
 def saturate(u, lo: np.ndarray, hi: np.ndarray):

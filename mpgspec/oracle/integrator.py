@@ -36,9 +36,11 @@ def _sym(f: ca.Function):
     return ca.SX.sym if f.is_a("SXFunction") and f.n_nodes() <= INLINE_NODES else ca.MX.sym
 
 
-def _project_fn(system):
-    u = ca.SX.sym("u", system.nu)
-    return ca.Function("project", [system.x, u], [system.project(system.x, u)])
+def _jump_fn(prim: CompiledPrimitive) -> ca.Function:
+    if prim.jump is not None:
+        return prim.jump
+    u, t = ca.SX.sym("u", prim.system.nu), ca.SX.sym("t")
+    return ca.Function("jump", [prim.system.x, u, t], [prim.system.project(prim.system.x, u)])
 
 
 @dataclass
@@ -123,14 +125,14 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
                  with_state: bool) -> Chunk:
     nx = prim.system.nx
     stage1, f = _stage1(prim, with_state)
-    project = _project_fn(prim.system)
+    jump = _jump_fn(prim)
     z = _sym(prim.f_cl)("z", 2 * nx + 2)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
     k1, out, u = stage1(x, t, s, xs)
     k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2, xs)
     k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2, xs)
     k4 = f(x + dt * k3, t + dt, s + dt, xs)
-    x_next = project(x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), u)
+    x_next = jump(x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), u, t + dt)
     body = ca.Function("body", [z], [ca.vertcat(x_next, t + dt, s + dt, xs), out])
     acc = body.mapaccum("acc", K)
     Z = ca.MX.sym("Z", 2 * nx + 2)

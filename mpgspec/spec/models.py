@@ -232,6 +232,13 @@ class ExplicitRoA(Strict):
         return self
 
 
+class ContactPhase(Strict):
+    """Feet in contact from the previous phase's end (or 0) until `until` on the primitive's clock."""
+
+    until: float = Field(gt=0)
+    feet: list[str]
+
+
 class Grid(Strict):
     """Number of clock samples used for this primitive as t_A (source) and t_B (target)."""
 
@@ -257,6 +264,9 @@ class Primitive(Strict):
     safe_set: list[SafetyFunction] = Field(default_factory=list)
     roa: ExplicitRoA
     contacts: list[str] | None = Field(default=None, description="rigid bodies: feet in contact (default: all)")
+    contact_schedule: list[ContactPhase] | None = Field(
+        default=None, description="rigid bodies with contact_events: the contact set by the clock (gaits); "
+                                  "feet joining a phase touch down with a plastic impact")
     horizon: float | None = Field(default=None, gt=0)
     grid: Grid | None = None
     description: str = ""

@@ -63,3 +63,41 @@ def test_drop_touches_down_with_an_impact(drop):
     aerial = [i for i, n in enumerate(fall.h_names) if n.startswith("above_ground")]
     H = np.array([out["h"][fall.h_names[i]] for i in aerial], dtype=float)
     assert np.nanmin(H) > -2e-3
+
+
+def test_contact_schedule_sets_the_flags_by_the_clock(tmp_path):
+    """Diagonal pair lifted on [0.2, 0.4): the flags follow the clock, and rejoining feet are stopped."""
+    d = tmp_path / "a1"
+    shutil.copytree(SPEC, d)
+    p = (d / "project.yaml").read_text()
+    p = p.replace("  friction: 0.6\n", "  friction: 0.6\n  contact_events: true\n")
+    p = p.replace("  - primitives/stand.yaml\n", "")
+    (d / "project.yaml").write_text(p[: p.index("assertions:")])
+    lie = (d / "primitives" / "lie.yaml").read_text()
+    lie = lie.replace("roa:\n", "contact_schedule:\n  - {until: 0.2, feet: [FL_foot, FR_foot, RL_foot, RR_foot]}\n"
+                      "  - {until: 0.4, feet: [FL_foot, RR_foot]}\n"
+                      "  - {until: 9.0, feet: [FL_foot, FR_foot, RL_foot, RR_foot]}\nroa:\n")
+    lie = lie.replace("0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1]",
+                      "0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0,0,0,0]")
+    (d / "primitives" / "lie.yaml").write_text(lie)
+    spec = load_project(d / "project.yaml")
+    lie_p = compile_project(spec)["Lie"]
+    sys = lie_p.system
+    m = sys.model
+    flags = [sys.state_names.index(f"contact_{f}") for f in m.contact_frames]
+    x0 = lie_p.x_star(0.0)
+    assert np.all(x0[flags] == 1)
+    out = trace(lie_p, x0, 0.0, 0.6, settings_for(spec), max_points=100000)
+    X = np.array(out["x"], dtype=float)
+    t = np.array(out["t"])
+    c = X[flags]
+    lifted = (t > 0.2 + 1e-6) & (t < 0.4 - 1e-6)
+    assert np.all(c[[0, 3]] == 1)
+    assert np.all(c[[1, 2]][:, lifted] == 0) and np.all(c[[1, 2]][:, t < 0.2 - 1e-6] == 1)
+    assert np.all(c[[1, 2]][:, t > 0.4 + 1e-6] == 1)
+    feet_v = ca.Function("v", [sys.x], [ca.vertcat(*[sys.extra_env[f"{f}_v{a}"] for f in ("FR_foot", "RL_foot")
+                                                     for a in "xyz"])])
+    k = int(np.argmax((t > 0.3) & (c[1] == 1)))  # the first state after the feet rejoined
+    assert t[k] == pytest.approx(0.4, abs=1.5e-3)
+    assert np.abs(np.array(feet_v(X[:, k]))).max() < 1e-6  # the impact stopped the rejoining feet
+    assert np.abs(np.array(feet_v(X[:, k - 1]))).max() > 1e-3  # they were moving just before

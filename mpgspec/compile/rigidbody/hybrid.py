@@ -61,6 +61,16 @@ def masked_impact(sys, q: ca.SX, v: ca.SX, c: ca.SX) -> ca.SX:
     return v + tree_solve_l(L, parents, ca.mtimes(DY, P))
 
 
+def scheduled_contacts(sys, x_new: ca.SX, c_sched: ca.SX) -> ca.SX:
+    """Set the flags to the scheduled set; feet that join it touch down with a plastic impact."""
+    m = sys.model
+    nq, nv = m.nq, m.nv
+    q, v, c = x_new[:nq], x_new[nq:nq + nv], x_new[nq + nv:]
+    joined = sum(ca.logic_and(c_sched[i] > 0.5, c[i] < 0.5) for i in range(c.shape[0]))
+    v_new = ca.if_else(joined > 0, masked_impact(sys, q, v, c_sched), v)
+    return ca.vertcat(q, v_new, c_sched)
+
+
 def contact_events(sys, x_new: ca.SX, u: ca.SX) -> ca.SX:
     """The discrete update after a step: touchdowns (with impact) and lift-offs."""
     m = sys.model
