@@ -238,11 +238,19 @@ def _jump(inst: PrimitiveInstance, sys: CompiledSystem, tc: ca.SX, t: ca.SX) -> 
 
 
 def saturate(u, lo: np.ndarray, hi: np.ndarray):
-    """Clip u to [lo, hi] in a form that lets NaN through (fmin/fmax would replace it by a bound)."""
-    if u.shape[0] == 0:
-        return u
-    lo_, hi_ = ca.DM(np.where(np.isfinite(lo), lo, -1e300)), ca.DM(np.where(np.isfinite(hi), hi, 1e300))
-    return u + ca.fmax(lo_ - u, 0) - ca.fmax(u - hi_, 0)
+    """Clip u to [lo, hi] in a form that lets NaN through (fmin/fmax would replace it by a bound).
+
+    Unbounded inputs are left as they are, so polynomial closed loops stay polynomial.
+    """
+    parts = []
+    for i in range(u.shape[0]):
+        ui = u[i]
+        if np.isfinite(lo[i]):
+            ui = ui + ca.fmax(lo[i] - ui, 0)
+        if np.isfinite(hi[i]):
+            ui = ui - ca.fmax(ui - hi[i], 0)
+        parts.append(ui)
+    return ca.vertcat(*parts) if parts else u
 
 
 def _close_loop(ident: str, args: list, u_raw, f_u: ca.Function, h_u: ca.Function, sys: CompiledSystem):

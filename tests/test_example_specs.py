@@ -1,0 +1,24 @@
+"""The example projects of specs/ that run in seconds pass their own assertions."""
+from pathlib import Path
+
+import pytest
+
+from mpgspec import api
+
+SPECS = Path(__file__).parents[1] / "specs"
+
+
+@pytest.mark.parametrize("name", ["pendulum", "cart"])
+def test_example_project_passes(name):
+    res = api.verify([SPECS / name], out_dir=None)
+    p = res.projects[0]
+    assert p.status == "pass", [a for a in p.report["assertions"] if a["status"] != "pass"]
+    assert res.exit_code == 0
+
+
+def test_cart_radii_are_certified():
+    p = api.verify([SPECS / "cart"], out_dir=None).projects[0]
+    levels = {q["name"]: (q["roa_level"], q["roa_radius"]) for q in p.report["primitives"]}
+    assert levels["ParkA"][0] == levels["ParkB"][0] == "certified"
+    assert levels["ParkA"][1] > 0.3
+    assert levels["Shuttle"][0] == "empirical"
