@@ -45,6 +45,7 @@ class CompiledPrimitive:
     setpoint: ca.Function  # t -> x*(t)
     info: dict = field(default_factory=dict)
     jump: ca.Function | None = None  # (x, u, t) -> x: the discrete part of a step (quaternion, contacts)
+    loop: ca.Function | None = None  # (x, t, s, x_sw) -> (xdot, h, u_raw, u) with one control evaluation
     cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
 
     @property
@@ -179,7 +180,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
             names.append(name or f"h{j}")
     h_u = ca.Function("h_u", args + [sys.u], [ca.vertcat(*hs) if hs else ca.SX(0, 1)])
     jump = _jump(inst, sys, tc, t)
-    f_cl, control, h = _close_loop(ident, args, u_raw, f_u, h_u, sys)
+    f_cl, control, h, loop_fn = _close_loop(ident, args, u_raw, f_u, h_u, sys)
     roa = p.roa
     dx = sys.wrapped_error(x - x_star)
     if roa.matrix is not None:
@@ -204,6 +205,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         name=inst.name, cls=p.class_, system=sys, period=period, domain=domain, next=p.next, horizon=p.horizon,
         grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=radius,
         f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info, jump=jump,
+        loop=loop_fn,
     )
 
 
@@ -268,7 +270,8 @@ def _close_loop(ident: str, args: list, u_raw, f_u: ca.Function, h_u: ca.Functio
     f_cl = ca.Function(f"f_cl_{ident}", a, [f_u(*a, ur)], names, ["xdot"])
     control = ca.Function(f"k_{ident}", a, [ur, us], names, ["u_raw", "u"])
     h = ca.Function(f"h_{ident}", a, [h_u(*a, ur)], names, ["h"])
-    return f_cl, control, h
+    loop = ca.Function(f"loop_{ident}", a, [f_u(*a, ur), h_u(*a, ur), ur, us], names, ["xdot", "h", "u_raw", "u"])
+    return f_cl, control, h, loop
 
 
 def _ident(name: str) -> str:

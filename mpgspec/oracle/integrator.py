@@ -109,15 +109,15 @@ def _stage1(prim: CompiledPrimitive, with_state: bool) -> tuple[ca.Function, ca.
     graph with common subexpressions eliminated, so the dynamics at a step's start state (which h
     needs for contact forces) are computed once.
     """
-    f = prim.f_cl
-    sx = all(g.is_a("SXFunction") for g in (f, prim.h, prim.control))
-    a = f.sx_in() if sx else [ca.MX.sym(n, f.size_in(i)) for i, n in enumerate(("x", "t", "s", "x_sw"))]
+    f, loop = prim.f_cl, prim.loop
+    sx = loop.is_a("SXFunction")
+    a = loop.sx_in() if sx else loop.mx_in()
     x = a[0]
-    u_raw, u_sat = prim.control.call(a)
-    out = ca.vertcat(prim.h.call(a)[0], prim.roa_margin(x, a[1]), u_raw, *([x] if with_state else []))
+    xdot, hv, u_raw, u_sat = loop.call(a)  # one evaluation of the control law (one QP for an ID-QP)
+    out = ca.vertcat(hv, prim.roa_margin(x, a[1]), u_raw, *([x] if with_state else []))
     big = sx and f.n_nodes() > INLINE_NODES
     opts = {"cse": True} if big else {}
-    stage1 = ca.Function("stage1", a, [f.call(a)[0], out, u_sat], opts)
+    stage1 = ca.Function("stage1", a, [xdot, out, u_sat], opts)
     return stage1, (_with_cse(f) if big else f)
 
 
