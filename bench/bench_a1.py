@@ -73,6 +73,7 @@ sys.path.insert(0, str(ROOT))
 # a private JIT directory: concurrent processes never race on the same file names
 _JIT_DIR = tempfile.mkdtemp(prefix="bench-a1-jit-")
 os.environ["MPGSPEC_JIT_DIR"] = _JIT_DIR
+os.environ["MPGSPEC_CACHE"] = _JIT_DIR  # a cold compiled-chunk cache, so JIT times are measured
 
 import casadi as ca  # noqa: E402
 import pinocchio as pin  # noqa: E402

@@ -20,6 +20,10 @@ writes it to bench/RESULTS.md. See bench/README.md for what every number means.
 """
 from __future__ import annotations
 
+import os as _os
+import tempfile as _tempfile
+
+_os.environ.setdefault("MPGSPEC_CACHE", _tempfile.mkdtemp(prefix="mpgspec-bench-"))  # cold cache: JIT is measured
 import argparse
 import dataclasses
 import datetime as _dt

@@ -192,6 +192,9 @@ def main(argv=None) -> int:
     except MpgError as e:
         print(f"mpgspec: {e.code} {e}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:  # the reader went away (e.g. `| head`): stop quietly
+        sys.stdout = open(os.devnull, "w")
+        return EXIT_OK
     except KeyboardInterrupt:
         print("mpgspec: interrupted", file=sys.stderr)
         return EXIT_USAGE

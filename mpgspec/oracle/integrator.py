@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import hashlib
 import os
+import subprocess
 import tempfile
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -137,9 +139,41 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
     acc = body.mapaccum("acc", K)
     Z = ca.MX.sym("Z", 2 * nx + 2)
     zs, outs = acc(Z)
-    name = "chunk_" + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}{os.getpid()}".encode()).hexdigest()[:10]
-    fn = ca.Function(name, [Z], [zs[:, -1], outs], _jit_opts(flags) if jit else {})
-    return Chunk(prim, dt, K, fn, len(prim.h_names), prim.system.nu)
+    name = "chunk_" + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}".encode()).hexdigest()[:10]
+    fn = ca.Function(name, [Z], [zs[:, -1], outs])
+    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, len(prim.h_names), prim.system.nu)
+
+
+def cache_dir() -> Path:
+    """Where compiled chunks are kept between runs (MPGSPEC_CACHE, else ~/.cache/mpgspec)."""
+    return Path(os.environ.get("MPGSPEC_CACHE", Path.home() / ".cache" / "mpgspec")) / "jit"
+
+
+def compile_cached(fn: ca.Function, flags: tuple[str, ...]) -> ca.Function:
+    """fn compiled to a shared library with the system C compiler, reused when the generated C
+    code and the flags are unchanged (the library's name is the hash of both)."""
+    cg = ca.CodeGenerator(f"{fn.name()}.c", {"with_header": False})
+    cg.add(fn)
+    code = cg.dump()
+    key = hashlib.sha256((code + " ".join(flags) + ca.__version__).encode()).hexdigest()[:24]
+    folder = cache_dir()
+    lib = folder / f"{fn.name()}_{key}.so"
+    if not lib.exists():
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(dir=folder) as tmp:
+            src = Path(tmp) / f"{fn.name()}.c"
+            src.write_text(code)
+            out = Path(tmp) / lib.name
+            cc = os.environ.get("CC", "gcc")
+            try:
+                subprocess.run([cc, *flags, "-fPIC", "-shared", str(src), "-o", str(out), "-lm"], check=True,
+                               capture_output=True, text=True)
+            except (OSError, subprocess.CalledProcessError) as err:  # no compiler: CasADi's virtual machine
+                detail = getattr(err, "stderr", "") or str(err)
+                warnings.warn(f"compiling {fn.name()} failed, running it uncompiled: {detail[:300]}")
+                return fn
+            os.replace(out, lib)  # atomic: concurrent processes never load a half-written library
+    return ca.external(fn.name(), str(lib))
 
 
 def initial_state(prim: CompiledPrimitive, x0: np.ndarray, t0: float) -> np.ndarray:
