@@ -13,22 +13,10 @@ import numpy as np
 
 from mpgspec.compile.primitive import INACTIVE, CompiledPrimitive
 from mpgspec.oracle.evidence import OracleEvidence, Reason
-from mpgspec.oracle.integrator import Chunk, build_chunk, initial_state
+from mpgspec.oracle.integrator import Chunk, build_chunk
 from mpgspec.settings import OracleSettings
 
 SIZES = (1, 4, 16, 64, 256)
-
-
-class _Job:
-    __slots__ = ("i", "steps", "min_h", "best_m", "peak", "sat")
-
-    def __init__(self, i: int, nh: int, nu: int):
-        self.i = i
-        self.steps = 0
-        self.min_h = np.full(nh, np.inf)
-        self.best_m = -np.inf
-        self.peak = np.zeros(nu)
-        self.sat = False
 
 
 class RK4Runner:
@@ -67,94 +55,108 @@ class RK4Runner:
         return ev
 
     def _run(self, x0s: np.ndarray, t0s: np.ndarray, horizons: np.ndarray) -> list[OracleEvidence]:
+        """Rollouts in slots of one batch; the bookkeeping of every chunk is vectorised over slots."""
         prim, ch, dt = self.prim, self.chunk, self.dt
         nh, nu, K = ch.nh, ch.nu, ch.K
         tol = self.s.h_tolerance
         lo, hi = prim.system.u_lo, prim.system.u_hi
         n = len(x0s)
-        nsteps = [self.horizon_steps(h) for h in horizons]
+        nsteps = np.ceil(np.asarray(horizons, float) / dt - 1e-9).astype(int)
         results: list[OracleEvidence | None] = [None] * n
-        queue = list(range(n - 1, -1, -1))
-        active: list[_Job] = []
-        Z = np.zeros((ch.fn.size1_in(0), 0))
+        Zall = np.vstack([x0s.T, np.asarray(t0s, float)[None, :], np.zeros((1, n)), x0s.T])
         cap = min(self.s.batch, SIZES[-1])
-        while queue or active:
-            new = []
-            while queue and len(active) + len(new) < cap:
-                j = _Job(queue.pop(), nh, nu)
-                new.append(j)
-            if new:
-                Zn = np.stack([initial_state(prim, x0s[j.i], t0s[j.i]) for j in new], axis=1)
-                Z = np.concatenate([Z, Zn], axis=1)
-                active.extend(new)
-            m = len(active)
-            size = next(s for s in SIZES if s >= m)
-            Zp = Z if size == m else np.concatenate([Z, np.repeat(Z[:, :1], size - m, axis=1)], axis=1)
+        slots = _Slots(Zall.shape[0], nh, nu)
+        qpos, ar = 0, np.arange(K)
+        while qpos < n or slots.ids.size:
+            if qpos < n and slots.ids.size < cap:
+                take = np.arange(qpos, min(n, qpos + cap - slots.ids.size))
+                qpos += take.size
+                slots.add(Zall[:, take], take)
+            m = slots.ids.size
+            size = next(sz for sz in SIZES if sz >= m)
+            Z = slots.Z if size == m else np.concatenate([slots.Z, np.repeat(slots.Z[:, :1], size - m, axis=1)], axis=1)
             try:
-                Zf, out = ch.run(Zp)
+                Zf, out = ch.run(Z)
             except Exception as err:  # a crash is the evidence of the calls in this batch
-                for j in active:
-                    results[j.i] = OracleEvidence(0, Reason.ERROR, j.steps * dt, message=str(err)[:500])
-                active, Z = [], Z[:, :0]
+                for b in range(m):
+                    results[slots.ids[b]] = OracleEvidence(0, Reason.ERROR, slots.steps[b] * dt, message=str(err)[:500])
+                slots.keep(np.zeros(m, bool), slots.Z)
                 continue
             Zf, out = Zf[:, :m], out[:, :m, :]
             H, M, U = out[:nh], out[nh], out[nh + 1:]
             # a step is judged on its own outputs; a non-finite end state fails the chunk's last step
             finite = np.isfinite(out).all(axis=0)
             finite[:, -1] &= np.isfinite(Zf).all(axis=0)
-            bad = (H < -tol).any(axis=0) | ~finite
-            enter = M > 0
-            keep = []
-            for b, j in enumerate(active):
-                limit = min(K, nsteps[j.i] - j.steps + 1)  # evaluations left, including s = T
-                kb = _first(bad[b, :limit])
-                ke = _first(enter[b, :limit])
-                stop = min(kb if kb is not None else K, ke if ke is not None else K)
-                upto = min(stop + 1, limit)
-                hb = H[:, b, :upto]
-                act = hb < INACTIVE / 2
-                if nh:
-                    j.min_h = np.minimum(j.min_h, np.where(act, hb, np.inf).min(axis=1))
-                if upto:
-                    mb = M[b, :upto]
-                    j.best_m = max(j.best_m, float(np.nanmax(mb)) if np.isfinite(mb).any() else -np.inf)
-                    ub = U[:, b, :upto]
-                    if nu:
-                        j.peak = np.maximum(j.peak, np.nanmax(np.abs(ub), axis=1))
-                        j.sat = j.sat or bool(((ub < lo[:, None]) | (ub > hi[:, None])).any())
-                done = None
-                if kb is not None and (ke is None or kb <= ke):
-                    k = j.steps + kb
-                    if not finite[b, kb]:
-                        done = OracleEvidence(0, Reason.INTEGRATION_FAILED, k * dt, message="non-finite state")
-                    else:
-                        viol = int(np.argmin(H[:, b, kb]))
-                        done = OracleEvidence(0, Reason.LEFT_C, k * dt, violated=prim.h_names[viol])
-                elif ke is not None:
-                    k = j.steps + ke
-                    done = OracleEvidence(1, Reason.ENTERED_E, k * dt, t_enter=k * dt)
-                elif j.steps + K > nsteps[j.i]:
-                    k = nsteps[j.i]
-                    done = OracleEvidence(0, Reason.HORIZON, k * dt)
-                if done is None:
-                    j.steps += K
-                    keep.append(b)
-                    continue
-                done.steps = k
-                done.min_margins = {nm: (float(v) if np.isfinite(v) else None)
-                                    for nm, v in zip(prim.h_names, j.min_h)}
-                done.best_roa_margin = float(j.best_m)
-                done.peak_input = [float(p) for p in j.peak]
-                done.saturated = j.sat
-                results[j.i] = done
-            active = [active[b] for b in keep]
-            Z = Zf[:, keep]
+            limit = np.minimum(K, nsteps[slots.ids] - slots.steps + 1)  # evaluations left, s = T included
+            valid = ar[None, :] < limit[:, None]
+            bad = ((H < -tol).any(axis=0) | ~finite) & valid
+            enter = (M > 0) & valid
+            has_b, has_e = bad.any(axis=1), enter.any(axis=1)
+            kb = np.where(has_b, bad.argmax(axis=1), K)
+            ke = np.where(has_e, enter.argmax(axis=1), K)
+            upto = ar[None, :] < np.minimum(np.minimum(kb, ke) + 1, limit)[:, None]  # steps before the decision
+            if nh:
+                slots.min_h = np.minimum(slots.min_h, np.where(upto[None] & (H < INACTIVE / 2), H, np.inf).min(axis=2))
+            slots.best_m = np.maximum(slots.best_m, np.where(upto & ~np.isnan(M), M, -np.inf).max(axis=1))
+            if nu:
+                A = np.abs(U)
+                slots.peak = np.maximum(slots.peak, np.where(upto[None] & ~np.isnan(A), A, 0.0).max(axis=2))
+                slots.sat |= (((U < lo[:, None, None]) | (U > hi[:, None, None])) & upto[None]).any(axis=(0, 2))
+            left = has_b & (~has_e | (kb <= ke))  # C is checked before E at the same sample
+            entered = ~left & has_e
+            horizon = ~left & ~has_e & (slots.steps + K > nsteps[slots.ids])
+            done = left | entered | horizon
+            for b in np.flatnonzero(done):
+                i = slots.ids[b]
+                if left[b]:
+                    k = slots.steps[b] + kb[b]
+                    ev = (OracleEvidence(0, Reason.INTEGRATION_FAILED, k * dt, message="non-finite state")
+                          if not finite[b, kb[b]] else
+                          OracleEvidence(0, Reason.LEFT_C, k * dt, violated=prim.h_names[int(np.argmin(H[:, b, kb[b]]))]))
+                elif entered[b]:
+                    k = slots.steps[b] + ke[b]
+                    ev = OracleEvidence(1, Reason.ENTERED_E, k * dt, t_enter=k * dt)
+                else:
+                    k = nsteps[i]
+                    ev = OracleEvidence(0, Reason.HORIZON, k * dt)
+                ev.steps = int(k)
+                ev.min_margins = {nm: (float(v) if np.isfinite(v) else None) for nm, v in zip(prim.h_names, slots.min_h[:, b])}
+                ev.best_roa_margin = float(slots.best_m[b])
+                ev.peak_input = [float(v) for v in slots.peak[:, b]]
+                ev.saturated = bool(slots.sat[b])
+                results[i] = ev
+            slots.keep(~done, Zf, K)
         return results  # type: ignore[return-value]
 
 
-def _first(mask: np.ndarray):
-    idx = np.flatnonzero(mask)
-    return int(idx[0]) if idx.size else None
+class _Slots:
+    """Per-slot state of the rollouts in flight: augmented state, job index, steps done, evidence so far."""
+
+    def __init__(self, nz: int, nh: int, nu: int):
+        self.Z = np.zeros((nz, 0))
+        self.ids = np.zeros(0, int)
+        self.steps = np.zeros(0, int)
+        self.min_h = np.zeros((nh, 0))
+        self.best_m = np.zeros(0)
+        self.peak = np.zeros((nu, 0))
+        self.sat = np.zeros(0, bool)
+
+    def add(self, Z: np.ndarray, ids: np.ndarray) -> None:
+        k = ids.size
+        self.Z = np.concatenate([self.Z, Z], axis=1)
+        self.ids = np.concatenate([self.ids, ids])
+        self.steps = np.concatenate([self.steps, np.zeros(k, int)])
+        self.min_h = np.concatenate([self.min_h, np.full((self.min_h.shape[0], k), np.inf)], axis=1)
+        self.best_m = np.concatenate([self.best_m, np.full(k, -np.inf)])
+        self.peak = np.concatenate([self.peak, np.zeros((self.peak.shape[0], k))], axis=1)
+        self.sat = np.concatenate([self.sat, np.zeros(k, bool)])
+
+    def keep(self, mask: np.ndarray, Z_next: np.ndarray, advance: int = 0) -> None:
+        """Retire the slots not in mask; the kept ones move on to Z_next, `advance` steps later."""
+        self.Z = Z_next[:, mask]
+        self.ids, self.steps = self.ids[mask], self.steps[mask] + advance
+        self.min_h, self.best_m = self.min_h[:, mask], self.best_m[mask]
+        self.peak, self.sat = self.peak[:, mask], self.sat[mask]
 
 
 class RK4Backend:
