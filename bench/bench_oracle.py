@@ -502,15 +502,18 @@ def main(argv=None) -> int:
     table += [f"| {a:{w}s} | {b} |" for a, b in rows]
     table = "\n".join(table)
     when = _dt.datetime.now().strftime("%Y-%m-%d %H:%M")
-    head = (f"Pendulum example, {when}; {mach['nproc']} CPU ({mach['cpu']}), Python {mach['python']}, "
+    head = (f"Pendulum example (compile cache warm after the first measurement), {when}; {mach['nproc']} CPU ({mach['cpu']}), Python {mach['python']}, "
             f"CasADi {mach['casadi']}, NumPy {mach['numpy']}, SciPy {mach['scipy']};{load}; "
             f"`python bench/bench_oracle.py{' --quick' if args.quick else ''}` "
             f"(medians of {R} interleaved rounds, builds median of {BR}; {time.perf_counter() - T0:.0f} s wall).")
     log("\n" + head + "\n\n" + table)
     if not args.no_write:
         out = ROOT / "bench" / "RESULTS.md"
+        rest = ""  # keep the sections other benchmarks wrote (e.g. "## A1 (rigid body)")
+        if out.exists() and "\n## " in out.read_text():
+            rest = "\n## " + out.read_text().split("\n## ", 1)[1]
         out.write_text("# Oracle benchmark results\n\n" + head + "\n\n" + table + "\n\n"
-                       "See bench/README.md for the meaning of each row.\n")
+                       "See bench/README.md for the meaning of each row.\n" + rest)
         log(f"\nwrote {out.relative_to(ROOT)}")
     ok = ratio_sp >= 30 and r_floor <= 2 and rk_safe_sp_unsafe == 0
     log(f"targets: LSODA speed-up >= 30x {'met' if ratio_sp >= 30 else 'MISSED'}; "
