@@ -152,13 +152,13 @@ def make_variant(tmp: Path) -> Path:
     lie = yaml.safe_load((prim_dir / "lie.yaml").read_text())
     stand = yaml.safe_load((prim_dir / "stand.yaml").read_text())
     files = ["primitives/lie.yaml"]
-    for name, gc in VARIANTS:
+    for name, grav in VARIANTS:
         p = copy.deepcopy(lie)
         p["name"] = name
         p["description"] = (f"Benchmark: Stand pose held by Lie's joint PD "
-                            f"({'with' if gc else 'without'} gravity compensation); E never entered.")
+                            f"({'with' if grav else 'without'} gravity compensation); E never entered.")
         p["setpoint"]["named"] = dict(stand["setpoint"]["named"])
-        p["controller"]["gravity_compensation"] = gc
+        p["controller"]["gravity_compensation"] = grav
         p["roa"]["radius"] = 1e-9
         (prim_dir / f"{name.lower()}.yaml").write_text(yaml.safe_dump(p, sort_keys=False))
         files.append(f"primitives/{name.lower()}.yaml")
