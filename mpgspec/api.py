@@ -143,6 +143,16 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
                       {"code": e.code, "message": str(e), "text": f"{path}: {e.code} {e}"}]
         return res
     res.graph = g
+    try:
+        return _finish_project(res, spec, settings, prims, g, oracles, timing, roa, out_dir, formats)
+    except Exception as err:  # a bug after the graph was built: this project's error, not the end of the run
+        res.errors = [{"code": "MPG900", "message": f"internal error: {type(err).__name__}: {err}",
+                       "text": f"{path}: MPG900 internal error: {type(err).__name__}: {err}"}]
+        return res
+
+
+def _finish_project(res: ProjectResult, spec, settings, prims, g, oracles, timing, roa, out_dir, formats):
+    """Plans, sequences, checks and reports of a project whose graph is built."""
     t0 = time.perf_counter()
     names = list(prims)
     plans = [shortest_plan(g, a, b, "duration") for a in names for b in names if a != b]
