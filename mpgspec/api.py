@@ -144,14 +144,15 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
         return res
     res.graph = g
     try:
-        return _finish_project(res, spec, settings, prims, g, oracles, timing, roa, out_dir, formats)
+        return _finish_project(res, spec, settings, prims, g, oracles, timing, roa, out_dir, formats, progress)
     except Exception as err:  # a bug after the graph was built: this project's error, not the end of the run
         res.errors = [{"code": "MPG900", "message": f"internal error: {type(err).__name__}: {err}",
                        "text": f"{path}: MPG900 internal error: {type(err).__name__}: {err}"}]
         return res
 
 
-def _finish_project(res: ProjectResult, spec, settings, prims, g, oracles, timing, roa, out_dir, formats):
+def _finish_project(res: ProjectResult, spec, settings, prims, g, oracles, timing, roa, out_dir, formats,
+                    progress: Progress | None):
     """Plans, sequences, checks and reports of a project whose graph is built."""
     t0 = time.perf_counter()
     names = list(prims)
