@@ -1,0 +1,111 @@
+"""Spec model of a project: system, primitives, oracle settings, assumptions, assertions, sequence."""
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+from pydantic import Discriminator, Field, Tag, field_validator
+
+from .base import Strict
+from .primitive import Grid, Primitive, SafetyFunction
+from .system import System
+
+
+class OracleConfig(Strict):
+    """Safety oracle settings (Definition 4) for all primitives of a project."""
+
+    horizon: float = Field(default=5.0, gt=0, description="T, seconds")
+    dt: float = Field(default=0.01, gt=0, description="fixed integration step, seconds")
+    method: str = Field(default="rk4", description="verifier backend name")
+    accuracy: Literal["low", "medium", "high", "very_high"] = "medium"
+    h_tolerance: float = Field(default=0.0, ge=0, description="h >= -tol counts as safe")
+    grid: Grid = Grid()
+
+
+class EdgeRef(Strict):
+    from_: str = Field(alias="from")
+    to: str
+
+
+class EdgeWithClass(EdgeRef):
+    class_: Literal[1, 2] | None = Field(default=None, alias="class")
+
+
+class RequireEdge(Strict):
+    edge: EdgeWithClass
+
+
+class ForbidEdge(Strict):
+    no_edge: EdgeRef
+
+
+class PlanRef(Strict):
+    from_: str = Field(alias="from")
+    to: str
+    max_cost: float | None = None
+    weight: Literal["duration", "peak_input", "hops"] = "duration"
+
+
+class RequirePlan(Strict):
+    plan: PlanRef
+
+
+class RequireReachable(Strict):
+    reachable_from: str
+
+
+class RequireSimulation(Strict):
+    simulation_safe: Literal["graph", "naive"]
+    expect: bool = True
+
+
+ASSERTION_KEYS = {"edge": RequireEdge, "no_edge": ForbidEdge, "plan": RequirePlan,
+                  "reachable_from": RequireReachable, "simulation_safe": RequireSimulation}
+
+
+def _assertion_kind(v):
+    keys = v.keys() if isinstance(v, dict) else [k for k in ASSERTION_KEYS if getattr(v, k, None) is not None]
+    return next((k for k in ASSERTION_KEYS if k in keys), None)
+
+
+Assertion = Annotated[
+    Union[tuple(Annotated[m, Tag(k)] for k, m in ASSERTION_KEYS.items())],
+    Discriminator(_assertion_kind, custom_error_type="assertion_kind",
+                  custom_error_message="an assertion needs one of the keys " + ", ".join(ASSERTION_KEYS)),
+]
+
+
+class GoalCommand(Strict):
+    t: float = Field(ge=0)
+    goal: str
+
+
+class Sequence(Strict):
+    """A timed sequence of goal primitives (the paper's Table II), run naive and via the graph."""
+
+    start: str
+    commands: list[GoalCommand] = Field(min_length=1)
+    duration: float = Field(gt=0)
+
+    @field_validator("commands")
+    @classmethod
+    def _sorted(cls, v):
+        if any(b.t < a.t for a, b in zip(v, v[1:])):
+            raise ValueError("commands must be in time order")
+        return v
+
+
+class Project(Strict):
+    """A system, its primitives, oracle settings and the CI assertions over the resulting graph."""
+
+    project: str
+    description: str = ""
+    system: Union[str, System]
+    primitives: list[Union[str, Primitive]] = Field(min_length=1)
+    safe_sets: dict[str, list[SafetyFunction]] = Field(default_factory=dict)
+    oracle: OracleConfig = OracleConfig()
+    assumptions: dict[
+        Literal["setpoint_dynamics", "setpoint_safe", "roa_in_safe_set", "local_stability"],
+        Literal["fail", "warn", "off"],
+    ] = Field(default_factory=dict, description="what a failed assumption check does (default: fail)")
+    assertions: list[Assertion] = Field(default_factory=list)
+    sequence: Sequence | None = None
