@@ -110,7 +110,9 @@ class RK4Runner:
                 i = slots.ids[b]
                 if left[b]:
                     k = slots.steps[b] + kb[b]
-                    ev = (OracleEvidence(0, Reason.INTEGRATION_FAILED, k * dt, message="non-finite state")
+                    ev = (OracleEvidence(0, Reason.INTEGRATION_FAILED, k * dt,
+                                         message=_non_finite(out[:, b, kb[b]], nh, kb[b] == K - 1 and
+                                                             not np.isfinite(Zf[:, b]).all()))
                           if not finite[b, kb[b]] else
                           OracleEvidence(0, Reason.LEFT_C, k * dt, violated=prim.h_names[int(np.argmin(H[:, b, kb[b]]))]))
                 elif entered[b]:
@@ -127,6 +129,15 @@ class RK4Runner:
                 results[i] = ev
             slots.keep(~done, Zf, K)
         return results  # type: ignore[return-value]
+
+
+def _non_finite(out: np.ndarray, nh: int, end_state: bool) -> str:
+    """Which output of a step was NaN or infinite."""
+    if np.isfinite(out).all():
+        return "non-finite state" if end_state else "non-finite output"
+    parts = [name for name, part in (("safety function", out[:nh]), ("RoA margin", out[nh:nh + 1]),
+                                     ("input or state", out[nh + 1:])) if not np.isfinite(part).all()]
+    return "non-finite " + " and ".join(parts)
 
 
 class _Slots:

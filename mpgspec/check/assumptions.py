@@ -153,9 +153,11 @@ def floquet_stability(p: CompiledPrimitive, tol: float = 1e-6) -> AssumptionChec
 
     m = monodromy(from_primitive(p))
     mu = np.linalg.eigvals(m["Phi"])
-    mags = np.sort(np.abs(mu))[::-1]
-    if m["autonomous"] and mags.size:  # the multiplier along the orbit is 1 by construction
-        mags = mags[1:]
+    if m["autonomous"] and mu.size:  # the multiplier along the orbit is 1 by construction
+        mu_rest = np.delete(mu, int(np.argmin(np.abs(mu - 1))))
+    else:
+        mu_rest = mu
+    mags = np.abs(mu_rest)
     worst = float(mags.max()) if mags.size else 0.0
     status = "pass" if worst < 1 - tol else "fail"
     return AssumptionCheck(p.name, "local_stability", status, "computed",

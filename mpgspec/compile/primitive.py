@@ -106,7 +106,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     x = sys.x
     # clock seen by setpoint and windows: wrapped into one period for periodic primitives
     tc = t - period * ca.floor(t / period) if period is not None else t
-    env: dict[str, object] = {**sys.env(), **consts, "t": t, "s": s}
+    env: dict[str, object] = {**sys.env(), **consts, "t": tc, "s": s}  # t: the clock, within one period
     sp = p.setpoint
     loop = sys.open_loop(p.contacts)
     if sp.named is not None:

@@ -81,15 +81,17 @@ def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiv
             xi = X[:, i]
             clk = z[nx] + i * dt
             if not np.isfinite(xi).all():
+                run.safe = False
                 run.failed = f"non-finite state at t = {t_now:.3f} s in {cur}"
                 event = (i, "end", None)
                 break
             hv = H[:, i]
-            if nh and (hv < -tol).any():
+            if nh and ((hv < -tol) | ~np.isfinite(hv)).any():
                 run.safe = False
                 if len(run.violations) < 50:
-                    j = int(np.argmin(hv))
-                    run.violations.append({"t": t_now, "primitive": cur, "h": p.h_names[j], "value": float(hv[j])})
+                    j = int(np.argmin(np.where(np.isfinite(hv), hv, -np.inf)))
+                    v = float(hv[j]) if np.isfinite(hv[j]) else None
+                    run.violations.append({"t": t_now, "primitive": cur, "h": p.h_names[j], "value": v})
             if (k + i) % stride == 0:
                 run.t.append(t_now)
                 run.x.append([float(v) for v in xi])
@@ -107,7 +109,11 @@ def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiv
                 break
             if p.cls is PrimitiveClass.TRANSIENT and clk >= p.domain[1] - 1e-9:
                 tr = graph.edge(cur, p.next) if graph is not None else None
-                event = (i, "transient_end", (p.next, tr.switch_clock(p.domain[1]) if tr and mode == "graph" else None))
+                t_B = tr.switch_clock(p.domain[1]) if tr is not None else None
+                if mode == "graph" and t_B is None:  # the primitive ends regardless; nothing vouches for it
+                    run.safe = False
+                    run.failed = run.failed or f"unverified hand-over {cur} -> {p.next} at t = {t_now:.3f} s"
+                event = (i, "transient_end", (p.next, t_B if mode == "graph" else None))
                 break
             if mode == "graph" and goal != cur and converged and p.cls is not PrimitiveClass.TRANSIENT:
                 nxt = table[cur].get(goal)

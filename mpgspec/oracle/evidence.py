@@ -29,7 +29,7 @@ class OracleEvidence:
     violated: str | None = None
     min_margins: dict[str, float] = field(default_factory=dict)
     best_roa_margin: float | None = None  # max of r - ||x - x*||: how close the flow came to E
-    peak_input: list[float] = field(default_factory=list)
+    peak_input: list[float] = field(default_factory=list)  # largest |u| the law asked for, before saturation
     saturated: bool = False
     steps: int = 0
     checked: bool = False

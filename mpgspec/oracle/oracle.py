@@ -25,8 +25,9 @@ class SafetyOracle:
 
     def horizons(self, t0s: np.ndarray) -> np.ndarray:
         h = np.full(len(t0s), self.horizon)
-        if self.prim.cls is PrimitiveClass.TRANSIENT:
-            h = np.minimum(h, self.prim.domain[1] - np.asarray(t0s))
+        if self.prim.cls is PrimitiveClass.TRANSIENT:  # whole steps that end at or before t_f
+            dt = self.settings.dt
+            h = np.minimum(h, np.floor((self.prim.domain[1] - np.asarray(t0s)) / dt + 1e-9) * dt)
         return np.maximum(h, 0.0)
 
     def evaluate(self, x0s: np.ndarray, t0s: np.ndarray) -> list[OracleEvidence]:

@@ -33,12 +33,17 @@ class Plan:
 
 
 def plan_graph(g: MotionPrimitiveGraph) -> nx.DiGraph:
-    """The graph restricted to executable moves: transients only continue to their `next`."""
+    """The graph restricted to executable moves.
+
+    A transient hands over to its `next` at the end of its domain, so its only usable out-edge is
+    the one to `next`, and only when the oracle verified it from t_A = t_f.
+    """
     G = g.G.copy()
     for n, d in g.G.nodes(data=True):
         if d.get("cls") == "transient":
             for _, b in list(G.out_edges(n)):
-                if b != d.get("next"):
+                tr = g.edge(n, b)
+                if b != d.get("next") or tr is None or tr.switch_clock(d["domain"][1]) is None:
                     G.remove_edge(n, b)
     return G
 

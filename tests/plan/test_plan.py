@@ -39,12 +39,25 @@ def g() -> MotionPrimitiveGraph:
     """Stand -> Walk -> Run costs 1 + 1, Stand -> Run costs 5 (but a low input peak);
     Jump is transient and must hand over to Land, though an edge Jump -> Stand was verified."""
     nodes = {"Stand": FIXED, "Walk": FIXED, "Run": FIXED, "Land": FIXED, "Lie": FIXED,
-             "Jump": {"cls": "transient", "next": "Land"}}
+             "Jump": {"cls": "transient", "next": "Land", "domain": (-1.0, 0.0)}}
     return graph(nodes, [
         ("Stand", "Walk", 1.0, 4.0), ("Walk", "Run", 1.0, 4.0), ("Stand", "Run", 5.0, 1.0),
         ("Run", "Jump", 0.5, 2.0), ("Jump", "Stand", 0.1, 1.0), ("Jump", "Land", 0.2, 1.0),
         ("Land", "Stand", 0.3, 1.0), ("Walk", "Stand", 1.0, 1.0), ("Run", "Walk", 1.0, 1.0),
     ])
+
+
+def test_a_transient_hand_over_needs_a_verified_end(g):
+    """Jump -> Land verified only from interior clock times: the hand-over at t_f is not, so no plan uses it."""
+    ok = OracleEvidence(1, Reason.ENTERED_E, 0.2, t_enter=0.2, peak_input=[1.0])
+    bad = OracleEvidence(0, Reason.LEFT_C, 0.0, violated="floor")
+    tr = Transition("Jump", "Land", np.array([-1.0, -0.5, 0.0]), np.zeros(1), [[ok], [ok], [bad]])
+    tr.classify(0.0)
+    g.transitions[("Jump", "Land")] = tr
+    assert tr.cls == 2 and tr.switch_clock(0.0) is None
+    G = plan_graph(g)
+    assert list(G.successors("Jump")) == []
+    assert not shortest_plan(g, "Run", "Land").found or "Jump" not in shortest_plan(g, "Run", "Land").path
 
 
 def test_transients_only_leave_to_next(g):
