@@ -35,16 +35,22 @@ def primitive_entry(p: CompiledPrimitive, spec, roa=None) -> dict:
     }
 
 
-def transition_entry(tr) -> dict:
+def _round(v, digits: int = 6):
+    v = _f(v)
+    return None if v is None else float(f"{v:.{digits}g}")
+
+
+def transition_entry(tr, h_names: list[str]) -> dict:
+    """One ordered pair's grid; each cell's least margins are listed in the order of h_names."""
     ev = tr.evidence
-    cells = [[{"verdict": e.verdict, "reason": e.reason.value, "t_stop": _f(e.t_stop), "t_enter": _f(e.t_enter),
+    cells = [[{"verdict": e.verdict, "reason": e.reason.value, "t_stop": _round(e.t_stop), "t_enter": _round(e.t_enter),
                "violated": e.violated, "checked": e.checked, "refined": e.refined,
-               "peak_input": [_f(v) for v in e.peak_input], "saturated": e.saturated,
-               "min_margins": {k: _f(v) for k, v in e.min_margins.items()},
-               "best_roa_margin": _f(e.best_roa_margin), "message": e.message} for e in row] for row in ev]
+               "peak_input": [_round(v) for v in e.peak_input], "saturated": e.saturated,
+               "min_margins": [_round(e.min_margins.get(k)) for k in h_names],
+               "best_roa_margin": _round(e.best_roa_margin), "message": e.message} for e in row] for row in ev]
     flat = [e for row in ev for e in row]
     return {
-        "from": tr.source, "to": tr.target, "class": int(tr.cls), "method": "simulated",
+        "from": tr.source, "to": tr.target, "class": int(tr.cls), "method": "simulated", "h_names": h_names,
         "t_A": [float(t) for t in tr.t_A], "t_B": [float(t) for t in tr.t_B],
         "verdicts": tr.verdicts.tolist(), "cells": cells,
         "windows": [list(w) for w in tr.windows], "best_t_B": tr.best_t_B, "weights": tr.weights,
@@ -97,7 +103,7 @@ def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs
         "system": {"name": sysm.name, "kind": sysm.kind, "states": list(csys.state_names),
                    "inputs": list(csys.input_names), "input_bounds": bounds},
         "primitives": [primitive_entry(prims[i.name], i.spec, (roa or {}).get(i.name)) for i in spec.primitives],
-        "transitions": [transition_entry(tr) for tr in graph.transitions.values()],
+        "transitions": [transition_entry(tr, prims[tr.target].h_names) for tr in graph.transitions.values()],
         "edges": [{"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in ("duration", "peak_input", "hops") if k in d}}
                   for a, b, d in graph.G.edges(data=True)],
         "failures": failures,

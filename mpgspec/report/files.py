@@ -14,7 +14,7 @@ def write_reports(report: dict, graph: MotionPrimitiveGraph, folder: Path, forma
     folder = Path(folder)
     files = {}
     if "json" in formats:
-        files["json"] = str(write_json(folder / "report.json", report))
+        files["json"] = str(write_json(folder / "report.json", report, compact=True))
         files["lookup_table"] = str(write_json(folder / "lookup_table.json", report["lookup_table"]))
     if "html" in formats:
         files["html"] = str(write_atomic(folder / "report.html", render_html(report)))

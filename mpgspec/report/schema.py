@@ -77,7 +77,7 @@ class Cell(_Strict):
     refined: bool
     peak_input: list[Num]
     saturated: bool
-    min_margins: dict[str, Num]
+    min_margins: list[Num] = Field(description="least value of each safety function, in the order of h_names")
     best_roa_margin: Num
     message: str
 
@@ -96,6 +96,7 @@ class Transition(_Strict):
     to: str
     cls: Literal[0, 1, 2] = Field(alias="class")
     method: Method
+    h_names: list[str] = Field(description="safety functions of the target, the order of each cell's min_margins")
     t_A: list[float]
     t_B: list[float]
     verdicts: list[list[Literal[0, 1]]]

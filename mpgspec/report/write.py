@@ -25,5 +25,7 @@ def write_atomic(path: Path, text: str) -> Path:
     return path
 
 
-def write_json(path: Path, data) -> Path:
-    return write_atomic(path, json.dumps(data, indent=1, allow_nan=False) + "\n")
+def write_json(path: Path, data, compact: bool = False) -> Path:
+    """JSON with no NaN; compact (no whitespace) for large machine-read files."""
+    text = json.dumps(data, separators=(",", ":"), allow_nan=False) if compact else json.dumps(data, indent=1, allow_nan=False)
+    return write_atomic(path, text + "\n")
