@@ -56,7 +56,6 @@ import copy
 import datetime as _dt
 import gc
 import os
-import platform
 import re
 import shutil
 import statistics
@@ -75,7 +74,9 @@ _JIT_DIR = tempfile.mkdtemp(prefix="bench-a1-jit-")
 os.environ["MPGSPEC_JIT_DIR"] = _JIT_DIR
 os.environ["MPGSPEC_CACHE"] = _JIT_DIR  # a cold compiled-chunk cache, so JIT times are measured
 
-import casadi as ca  # noqa: E402
+import casadi as ca
+import common  # noqa: E402  (bench/common.py)
+from common import med_ratio, rounds  # noqa: E402
 import pinocchio as pin  # noqa: E402
 import yaml  # noqa: E402
 
@@ -98,38 +99,8 @@ def log(msg: str) -> None:
     print(msg, flush=True)
 
 
-def rounds(fns: dict, repeats: int) -> dict[str, list[float]]:
-    """Wall times of every fn, interleaved: `repeats` rounds that each run all of them once."""
-    out = {k: [] for k in fns}
-    for _ in range(repeats):
-        for k, fn in fns.items():
-            t = time.perf_counter()
-            fn()
-            out[k].append(time.perf_counter() - t)
-    return out
-
-
-def med_ratio(a: list[float], b: list[float]) -> float:
-    """Median over rounds of a/b."""
-    return statistics.median(x / y for x, y in zip(a, b))
-
-
 def machine() -> dict:
-    cpu = ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        avail = len(os.sched_getaffinity(0))
-    except AttributeError:
-        avail = os.cpu_count()
-    return {"nproc": avail, "cpu": cpu or platform.processor() or platform.machine(),
-            "python": platform.python_version(), "casadi": ca.__version__, "numpy": np.__version__,
-            "pinocchio": pin.__version__, "platform": platform.platform()}
+    return common.machine(casadi=ca.__version__, numpy=np.__version__, pinocchio=pin.__version__)
 
 
 def loadavg() -> str:

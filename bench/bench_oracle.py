@@ -29,7 +29,6 @@ import dataclasses
 import datetime as _dt
 import math
 import os
-import platform
 import statistics
 import sys
 import time
@@ -40,7 +39,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import casadi as ca  # noqa: E402
+import casadi as ca
+import common  # noqa: E402  (bench/common.py)
+from common import med_ratio, rounds  # noqa: E402
 import scipy  # noqa: E402
 
 from mpgspec.api import build, compile_project, settings_for  # noqa: E402
@@ -74,39 +75,8 @@ def timed(fn, repeats: int) -> tuple[float, float, list[float]]:
     return statistics.median(ts), min(ts), ts
 
 
-def rounds(fns: dict, repeats: int) -> dict[str, list[float]]:
-    """Wall times of every fn, interleaved: `repeats` rounds that each run all of them once, so
-    that load from other processes hits all measurements alike and per-round ratios stay fair."""
-    out = {k: [] for k in fns}
-    for _ in range(repeats):
-        for k, fn in fns.items():
-            t = time.perf_counter()
-            fn()
-            out[k].append(time.perf_counter() - t)
-    return out
-
-
-def med_ratio(a: list[float], b: list[float]) -> float:
-    """Median over rounds of a/b."""
-    return statistics.median(x / y for x, y in zip(a, b))
-
-
 def machine() -> dict:
-    cpu = ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        avail = len(os.sched_getaffinity(0))
-    except AttributeError:
-        avail = os.cpu_count()
-    return {"nproc": avail, "cpu": cpu or platform.processor() or platform.machine(),
-            "python": platform.python_version(), "casadi": ca.__version__, "numpy": np.__version__,
-            "scipy": scipy.__version__, "platform": platform.platform()}
+    return common.machine(casadi=ca.__version__, numpy=np.__version__, scipy=scipy.__version__)
 
 
 def all_points(prims, gA, gB) -> dict[str, tuple[np.ndarray, np.ndarray]]:
