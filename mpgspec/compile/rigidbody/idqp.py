@@ -1,9 +1,10 @@
 """The inverse-dynamics QP of the paper's Stand primitive, as a control law k(x, t).
 
-Decision variables X_ext = [qddot (nv), u (nu), lam (3 per foot)]. Objective: track a CoM
-acceleration a_d = yddot_d - Kp (com - y_d) - Kd (comdot - ydot_d), where y_d is the cubic motion
-profile (eq. 7) from the CoM at switch-in to the CoM of the setpoint, plus a light joint-posture
-task and a regulariser sigma ||X_ext||^2. Constraints: D qddot + H = B u + J^T lam,
+Decision variables X_ext = [qddot (nv), u (nu), lam (3 per foot)]; qddot is eliminated with the
+dynamics, qddot = D^-1 (B u + J^T lam - H), so the QP runs over [u; lam] alone. Objective: track
+a CoM acceleration a_d = yddot_d - Kp (com - y_d) - Kd (comdot - ydot_d), where y_d is the cubic
+motion profile (eq. 7) from the CoM at switch-in to the CoM of the setpoint, plus a light
+joint-posture task and a regulariser sigma (||qddot||^2 + ||u||^2 + ||lam||^2). Constraints:
 J qddot + Jdot v = gamma (the same Baumgarte target as the plant), u in U, and lam in an inner
 friction pyramid |lam_x|, |lam_y| <= mu / sqrt(2) lam_z, lam_z >= 0.
 
@@ -18,6 +19,7 @@ import numpy as np
 
 from ...errors import SpecError
 from ..controllers import ControlContext, cubic_profile
+from .linalg import dof_parents, scale_rows, tree_ldl, tree_solve_l, tree_solve_lt
 
 
 def _profile_acc(s, duration, p0, v0, pf, vf):
@@ -42,7 +44,7 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
     x, contacts = sys.x, ctx.contacts
     q, v = x[:nq], x[nq:]
     sub = lambda e: ca.substitute(e, ca.vertcat(dyn.q, dyn.v), ca.vertcat(q, v))  # noqa: E731
-    M, H = sub(dyn.M_expr), sub(dyn.nle_expr)
+    M, H = sub(dyn.M_expr), sub(dyn.nle_expr)  # D(q), H(q, v)
     J, drift = sub(dyn.contact_jacobian_expr(contacts)), sub(dyn.contact_drift_expr(contacts))
     nc = J.shape[0]
     gamma = -2 * sys.baumgarte.alpha * ca.mtimes(J, v)
@@ -63,32 +65,39 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
     S = ca.DM(np.hstack([np.zeros((nu, nv - nu)), np.eye(nu)]))
     qj, qj_star = x[nq - nu:nq], ctx.x_star[nq - nu:nq]
     a_post = -c.posture_kp * (qj - qj_star) - c.posture_kd * ca.mtimes(S, v)
-    nw = nv + nu + nc
-    Sa = ca.horzcat(ca.DM.eye(nv), ca.DM.zeros(nv, nu + nc))
-    Ja = ca.mtimes(Jc, Sa)
-    Pa = ca.mtimes(S, Sa)
-    Hqp = 2 * (ca.mtimes(Ja.T, Ja) + c.posture_weight * ca.mtimes(Pa.T, Pa) + c.regularization * ca.DM.eye(nw))
-    gqp = -2 * ca.mtimes(Ja.T, a_d - drift_c) - 2 * c.posture_weight * ca.mtimes(Pa.T, a_post)
+    # qddot is eliminated with the dynamics: qddot = D^-1 (B u + J^T lam - H) = Aq w + bq, w = [u; lam]
     B = ca.DM(m.actuation_matrix)
-    A_dyn = ca.horzcat(M, -B, -J.T)
-    A_con = ca.horzcat(J, ca.DM.zeros(nc, nu + nc))
+    parents = dof_parents(m)
+    L, Dg = tree_ldl(M, parents)
+
+    def solve_D(rhs):
+        return tree_solve_l(L, parents, scale_rows(Dg, tree_solve_lt(L, parents, rhs)))
+
+    Aq = solve_D(ca.horzcat(B, J.T))
+    bq = -solve_D(H)
+    nw = nu + nc
+    Q = ca.mtimes(Jc.T, Jc) + c.posture_weight * ca.mtimes(S.T, S) + c.regularization * ca.DM.eye(nv)
+    Hqp = 2 * (ca.mtimes([Aq.T, Q, Aq]) + c.regularization * ca.DM.eye(nw))
+    gqp = 2 * ca.mtimes(Aq.T, ca.mtimes(Q, bq) - ca.mtimes(Jc.T, a_d - drift_c) - c.posture_weight * ca.mtimes(S.T, a_post))
+    A_con = ca.mtimes(J, Aq)
+    con = gamma - drift - ca.mtimes(J, bq)
     mu = sys.friction / np.sqrt(2.0)
     rows = []
     for k in range(nc // 3):
         for ax in (0, 1):
             for sign in (1, -1):
                 r = np.zeros(nw)
-                r[nv + nu + 3 * k + ax] = sign
-                r[nv + nu + 3 * k + 2] = -mu
+                r[nu + 3 * k + ax] = sign
+                r[nu + 3 * k + 2] = -mu
                 rows.append(r)
     A_fc = ca.DM(np.array(rows)) if rows else ca.DM(0, nw)
-    A = ca.vertcat(A_dyn, A_con, A_fc)
-    lba = ca.vertcat(-H, gamma - drift, -np.inf * ca.DM.ones(A_fc.shape[0]))
-    uba = ca.vertcat(-H, gamma - drift, ca.DM.zeros(A_fc.shape[0]))
+    A = ca.vertcat(A_con, A_fc)
+    lba = ca.vertcat(con, -np.inf * ca.DM.ones(A_fc.shape[0]))
+    uba = ca.vertcat(con, ca.DM.zeros(A_fc.shape[0]))
     lbx = np.full(nw, -np.inf)
     ubx = np.full(nw, np.inf)
-    lbx[nv:nv + nu], ubx[nv:nv + nu] = sys.u_lo, sys.u_hi
-    lbx[nv + nu + 2::3] = 0.0
+    lbx[:nu], ubx[:nu] = sys.u_lo, sys.u_hi
+    lbx[nu + 2::3] = 0.0
     args = [x, ctx.t, ctx.s, ctx.x_sw]
     data = ca.Function("idqp_data", args, [ca.densify(Hqp), gqp, ca.densify(A), lba, uba])
     solver = ca.conic("idqp", "qrqp", {"h": ca.Sparsity.dense(nw, nw), "a": ca.Sparsity.dense(A.shape[0], nw)},
@@ -99,4 +108,4 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
     sol = solver(h=Hm, g=gm, a=Am, lba=lbam, uba=ubam, lbx=lbx, ubx=ubx)
     ctx.info["id_qp"] = {"solver": "qrqp", "variables": nw, "constraints": int(A.shape[0]),
                          "control_rate": "every Runge-Kutta stage"}
-    return ca.Function("k_idqp", X, [sol["x"][nv:nv + nu]])
+    return ca.Function("k_idqp", X, [sol["x"][:nu]])
