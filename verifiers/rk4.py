@@ -7,8 +7,6 @@ answer is kept wherever the two disagree.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from mpgspec.compile.primitive import INACTIVE, CompiledPrimitive
@@ -28,9 +26,6 @@ class RK4Runner:
         self.dt = dt or settings.dt
         self.chunk: Chunk = build_chunk(prim, self.dt, settings.chunk, settings.jit, settings.jit_flags)
         self._fine: RK4Runner | None = None
-
-    def horizon_steps(self, horizon: float) -> int:
-        return int(math.ceil(horizon / self.dt - 1e-9))
 
     def evaluate(self, x0s: np.ndarray, t0s: np.ndarray, horizon: np.ndarray | float) -> list[OracleEvidence]:
         """Verdicts and evidence for each row of x0s started at clock t0s."""
