@@ -143,6 +143,15 @@ def _read(path: Path) -> tuple[Any, PositionMap]:
     return load_yaml(path)
 
 
+def _within(item: SafetyFunction, when: tuple[float, float] | None) -> SafetyFunction:
+    """A block's safety function restricted to the `when` window of the `use` that includes it."""
+    if when is None:
+        return item
+    if item.when is not None:
+        when = (max(when[0], item.when[0]), min(when[1], item.when[1]))
+    return item.model_copy(update={"when": when})
+
+
 def _format_arg(v: float) -> str:
     return f"{v:g}"
 
@@ -231,7 +240,7 @@ def load_project(path: str | Path) -> ProjectSpec:
                                             expected="one of " + ", ".join(sorted(project.safe_sets) + list(BUILTIN_BLOCKS)),
                                             found=repr(sf.use), code="MPG302"))
                 else:
-                    resolved.extend(project.safe_sets[sf.use])
+                    resolved.extend(_within(item, sf.when) for item in project.safe_sets[sf.use])
             else:
                 resolved.append(sf)
         for name, arg in _expand(p):
