@@ -130,6 +130,10 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
                             key=f"primitive '{inst.name}': setpoint.expr", expected=f"{sys.nx}", found=f"{len(sp.expr)}",
                             code="MPG106")
         x_star_t = ec.vector(sp.expr, ("setpoint", "expr"), {**consts, "t": t})
+    elif sp.file is not None:
+        ts, ys = _samples_from_csv(inst, sys, loop.contacts)
+        interp = interp_cubic if sp.interpolation == "cubic" else interp_linear
+        x_star_t = ca.vertcat(*[interp(t, ts, ys[:, i]) for i in range(sys.nx)])
     else:
         if any(len(r) != sys.nx for r in sp.samples):
             raise SpecError("each sample needs one value per state", location=inst.locate(("setpoint", "samples")),
@@ -237,6 +241,46 @@ def _jump(inst: PrimitiveInstance, sys: CompiledSystem, tc: ca.SX, t: ca.SX) -> 
 
     x_unit = ca.vertcat(sys.project(x)[: sys.model.nq], x[sys.model.nq:])
     return ca.Function("jump", [x, u, t], [scheduled_contacts(sys, x_unit, ca.vertcat(*flags))])
+
+
+def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) -> tuple[np.ndarray, np.ndarray]:
+    """Times and full-state samples of a setpoint table; states without a column take their default."""
+    path = (inst.source.parent / inst.spec.setpoint.file).resolve()
+    where = inst.locate(("setpoint", "file"))
+    key = f"primitive '{inst.name}': setpoint.file"
+
+    def fail(msg, expected, found, line=0):
+        loc = where if not line else type(where)(str(path), line, 1)
+        raise SpecError(msg, location=loc, key=key, expected=expected, found=found, code="MPG110")
+
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as err:
+        fail("cannot read the setpoint table", "a CSV file relative to the spec", f"{path} ({err.strerror})")
+    header = [h.strip() for h in lines[0].split(",")] if lines else []
+    if not header or header[0] != "t":
+        fail("the first column must be the time", "a header 't,<state>,...'", repr(lines[0] if lines else ""), 1)
+    unknown = [h for h in header[1:] if h not in sys.state_names]
+    if unknown:
+        fail("unknown state in the header", "state names of the system", repr(unknown[0]), 1)
+    rows = []
+    for n, text in enumerate(lines[1:], start=2):
+        if not text.strip():
+            continue
+        try:
+            vals = [float(v) for v in text.split(",")]
+        except ValueError:
+            fail("not a number", "numbers separated by commas", repr(text[:60]), n)
+        if len(vals) != len(header):
+            fail("wrong number of columns", f"{len(header)}", f"{len(vals)}", n)
+        rows.append(vals)
+    data = np.asarray(rows, float).reshape(-1, len(header))
+    if data.shape[0] < 2 or np.any(np.diff(data[:, 0]) <= 0):
+        fail("times must be strictly increasing, with at least two rows", "increasing t", f"{data.shape[0]} rows")
+    ys = np.tile(sys.default_state(contacts), (data.shape[0], 1))
+    for j, name in enumerate(header[1:], start=1):
+        ys[:, sys.state_names.index(name)] = data[:, j]
+    return data[:, 0], ys
 
 
 def saturate(u, lo: np.ndarray, hi: np.ndarray):

@@ -41,6 +41,7 @@ class PrimitiveInstance:
     argument: dict[str, float]
     safe_set: tuple[SafetyFunction, ...]
     locate: Locator = field(compare=False, repr=False)
+    source: Path = field(default=Path("."), compare=False)  # the YAML file the primitive is written in
 
     @property
     def cls(self) -> PrimitiveClass:
@@ -187,6 +188,7 @@ def load_project(path: str | Path) -> ProjectSpec:
             data = {**data, "system": sd}
             system_locate = lambda loc, offset=None, spos=spos: _at(spos, tuple(loc), offset)
     prim_locates: list[Locator] = []
+    prim_sources: list[Path] = []
     prims_in: list = []
     for i, item in enumerate(data.get("primitives") or []):
         if isinstance(item, str):
@@ -202,9 +204,11 @@ def load_project(path: str | Path) -> ProjectSpec:
                 prims_in.append(it)
                 pre = (j,) if isinstance(pd_, list) else ()
                 prim_locates.append(lambda loc, offset=None, ppos=ppos, pre=pre: _at(ppos, pre + tuple(loc), offset))
+                prim_sources.append(ppath)
         else:
             prims_in.append(item)
             prim_locates.append(lambda loc, offset=None, i=i: _at(pos, ("primitives", i) + tuple(loc), offset))
+            prim_sources.append(path)
     if errors:
         raise SpecErrors(errors)
     data = {**data, "primitives": prims_in}
@@ -249,7 +253,7 @@ def load_project(path: str | Path) -> ProjectSpec:
                                         key="name", expected="unique names",
                                         found=f"{name!r} also defined at {names[name]}", code="MPG303"))
             names[name] = loc_fn(("name",))
-            instances.append(PrimitiveInstance(name, p.name, p, arg, tuple(resolved), loc_fn))
+            instances.append(PrimitiveInstance(name, p.name, p, arg, tuple(resolved), loc_fn, prim_sources[i]))
     node_names = {p.name for p in instances}
 
     def check_name(n: str, loc: tuple, key: str):

@@ -26,12 +26,14 @@ class Setpoint(Strict):
     feet_on_ground: bool = Field(default=False, description="rigid bodies: set base_z so the lowest foot is at z = 0")
     times: list[float] | None = None
     samples: list[list[float]] | None = None
+    file: str | None = Field(default=None, description="CSV next to the spec: a header 't,<state>,...' then one "
+                                                        "row per sample; unnamed states take the system's default")
     interpolation: Literal["linear", "cubic"] = "linear"
 
     @model_validator(mode="after")
     def _one_form(self):
-        if sum(v is not None for v in (self.expr, self.named, self.samples)) != 1:
-            raise ValueError("give exactly one of 'expr', 'named' or 'samples' (with 'times')")
+        if sum(v is not None for v in (self.expr, self.named, self.samples, self.file)) != 1:
+            raise ValueError("give exactly one of 'expr', 'named', 'samples' (with 'times') or 'file'")
         if self.samples is not None:
             if self.times is None or len(self.times) != len(self.samples):
                 raise ValueError("'times' must list one time per row of 'samples'")
