@@ -22,7 +22,7 @@ from .graph.build import build_graph
 from .oracle.registry import get_backend
 from .graph.transition import MotionPrimitiveGraph
 from .plan.planner import lookup_table, shortest_plan
-from .report.build import build_report, failure_traces
+from .report.build import build_report, edge_traces, failure_traces
 from .settings import OracleSettings
 from .spec.loader import ProjectSpec, discover, load_project
 
@@ -174,9 +174,10 @@ def _finish_project(res: ProjectResult, spec, settings, prims, g, oracles, timin
     status = "error" if "error" in st else "fail" if "fail" in st else "pass"
     pairs = [(a, b) for a in names for b in names if a != b]
     failures = failure_traces(g, prims, settings, oracles, pairs)
+    edge_series = edge_traces(g, prims, settings, oracles)
     report = build_report(spec=spec, prims=prims, graph=g, settings=settings, plans=plans, table=table,
                           assertions=checks, runs=runs, failures=failures, timing=timing, status=status,
-                          assumptions=assumed, roa=roa)
+                          assumptions=assumed, roa=roa, edge_series=edge_series)
     res.status, res.report = status, report
     if out_dir is not None:
         from .report.files import write_reports

@@ -59,6 +59,20 @@ def transition_entry(tr, h_names: list[str]) -> dict:
     }
 
 
+def _trace_entry(g, prims, settings, oracles, a: str, b: str, i: int, j: int) -> dict:
+    """Dense series of B's closed loop from x_A*(t_A[i]) at clock t_B[j], a little past the decision."""
+    tr = g.transitions[(a, b)]
+    e = tr.evidence[i][j]
+    horizon = float(oracles[b].horizons(np.array([tr.t_B[j]]))[0]) if b in oracles else settings.horizon
+    horizon = min(horizon, max(e.t_stop * 1.2 + 0.2, 0.5))
+    try:
+        series = trace(prims[b], prims[a].x_star(float(tr.t_A[i])), float(tr.t_B[j]), horizon, settings)
+    except Exception as err:
+        series = {"error": str(err)[:300]}
+    return {"from": a, "to": b, "t_A": float(tr.t_A[i]), "t_B": float(tr.t_B[j]), "reason": e.reason.value,
+            "violated": e.violated, "t_stop": _f(e.t_stop), "series": series}
+
+
 def failure_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
                    oracles: dict, pairs: list[tuple[str, str]]) -> list[dict]:
     """For pairs without an edge: h over time from the start point whose flow came closest to E."""
@@ -67,27 +81,28 @@ def failure_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive],
         tr = g.transitions.get((a, b))
         if tr is None or tr.cls is not TransitionClass.NONE:
             continue
-        best, where = None, None
-        for i, row in enumerate(tr.evidence):
-            for j, e in enumerate(row):
-                score = (e.t_stop, e.best_roa_margin or -np.inf)
-                if best is None or score > best:
-                    best, where = score, (i, j)
-        i, j = where
-        e = tr.evidence[i][j]
-        horizon = float(oracles[b].horizons(np.array([tr.t_B[j]]))[0]) if b in oracles else settings.horizon
-        horizon = min(horizon, max(e.t_stop * 1.2 + 0.2, 0.5))
-        try:
-            series = trace(prims[b], prims[a].x_star(float(tr.t_A[i])), float(tr.t_B[j]), horizon, settings)
-        except Exception as err:
-            series = {"error": str(err)[:300]}
-        out.append({"from": a, "to": b, "t_A": float(tr.t_A[i]), "t_B": float(tr.t_B[j]), "reason": e.reason.value,
-                    "violated": e.violated, "t_stop": _f(e.t_stop), "series": series})
+        cells = [(i, j) for i in range(len(tr.t_A)) for j in range(len(tr.t_B))]
+        i, j = max(cells, key=lambda c: (tr.evidence[c[0]][c[1]].t_stop,
+                                         tr.evidence[c[0]][c[1]].best_roa_margin or -np.inf))
+        out.append(_trace_entry(g, prims, settings, oracles, a, b, i, j))
+    return out
+
+
+def edge_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
+                oracles: dict) -> list[dict]:
+    """For every edge: h and the E margin over time of the verified switch from the first available t_A."""
+    out = []
+    for (a, b), tr in g.transitions.items():
+        if tr.cls is TransitionClass.NONE:
+            continue
+        i = next(k for k, t_b in enumerate(tr.best_t_B) if t_b is not None)
+        j = int(np.argmin(np.abs(tr.t_B - tr.best_t_B[i])))
+        out.append(_trace_entry(g, prims, settings, oracles, a, b, i, j))
     return out
 
 
 def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs, failures, timing,
-                 status: str, assumptions=(), roa=None) -> dict:
+                 status: str, assumptions=(), roa=None, edge_series=()) -> dict:
     """The report dict; see mpgspec/report/schema/report-v1.json."""
     sysm = spec.system
     csys = next(iter(prims.values())).system
@@ -107,6 +122,7 @@ def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs
         "edges": [{"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in ("duration", "peak_input", "hops") if k in d}}
                   for a, b, d in graph.G.edges(data=True)],
         "failures": failures,
+        "edge_traces": list(edge_series),
         "plans": [p.to_dict() for p in plans],
         "lookup_table": table,
         "assertions": [a.to_dict() for a in assertions],

@@ -51,12 +51,19 @@ def _transitions(report: dict) -> list[dict]:
     return [{"tr": t, "has_edge": t["class"] in (1, 2), "svg": Markup(svg.grid_svg(t))} for t in trs]
 
 
-def _failures(report: dict) -> list[dict]:
+def _failures(report: dict, key: str = "failures") -> list[dict]:
     out = []
-    for f in report["failures"]:
+    for f in report.get(key, []):
         s = f["series"]
         title = f"h of {f['to']} after switching from {f['from']} at t_A = {_num(f['t_A'], 3)} s"
-        pic = Markup(svg.series_svg(s["t"], s["h"], title=title)) if "t" in s else None
+        series, shade = (dict(s["h"]) if "t" in s else {}), True
+        if key == "edge_traces" and "t" in s:  # the safety margin and the approach to E, not every h
+            rows = list(s["h"].values())
+            least = [min((r[k] for r in rows if r[k] is not None), default=None) for k in range(len(s["t"]))]
+            series = {"least h (safety margin)": least, "E margin r - ||x - x*||": s["roa_margin"]}
+            shade, title = "least h (safety margin)", f"{f['to']} after switching from {f['from']} at t_A = {_num(f['t_A'], 3)} s"
+        pic = Markup(svg.series_svg(s["t"], series, title=title, shade_negative=shade, ylabel="margin"
+                                    if key == "edge_traces" else "h")) if "t" in s else None
         out.append({"f": f, "svg": pic, "error": s.get("error")})
     return out
 
@@ -87,6 +94,7 @@ def view(report: dict) -> dict:
         "edges": edges,
         "transitions": _transitions(report),
         "failures": _failures(report),
+        "edge_traces": _failures(report, "edge_traces"),
         "names": names,
         "sequence": _sequence(report),
         "assert_counts": dict(Counter(a["status"] for a in report["assertions"])),

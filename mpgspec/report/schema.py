@@ -239,6 +239,7 @@ class Report(_Strict):
     transitions: list[Transition]
     edges: list[Edge]
     failures: list[Failure]
+    edge_traces: list[Failure] = Field(default_factory=list, description="the verified switch of every edge over time")
     plans: list[Plan]
     lookup_table: LookupTable
     assertions: list[Assertion]

@@ -165,8 +165,9 @@ def _band(p: _Panel, a: float, b: float) -> str:
 
 
 def series_svg(t, series: dict, *, title: str = "", ylabel: str = "h", zero_line: bool = True,
-               shade_negative: bool = True, width: int = 560, height: int = 220, max_points: int = 400) -> str:
-    """Line plot of named series over t; None breaks a line, times where any value < 0 are shaded."""
+               shade_negative: bool | str = True, width: int = 560, height: int = 220, max_points: int = 400) -> str:
+    """Line plot of named series over t; None breaks a line, times where any value < 0 are shaded
+    (or, when shade_negative names a series, where that one is < 0)."""
     t = [_num(v) for v in t]
     data = {str(k): [_num(v) for v in vs] + [None] * (len(t) - len(vs)) for k, vs in series.items()}
     ts = [v for v in t if v is not None]
@@ -176,7 +177,8 @@ def series_svg(t, series: dict, *, title: str = "", ylabel: str = "h", zero_line
                _limits([v for vs in data.values() for v in vs], zero_line))
     body = [_text(48, 15, title, 12, "start", font_weight="bold")] if title else []
     if shade_negative:
-        neg = [x is not None and any(vs[i] is not None and vs[i] < 0 for vs in data.values()) for i, x in enumerate(t)]
+        watch = [data[shade_negative]] if isinstance(shade_negative, str) and shade_negative in data else data.values()
+        neg = [x is not None and any(vs[i] is not None and vs[i] < 0 for vs in watch) for i, x in enumerate(t)]
         body += [_band(p, a, b) for a, b in _intervals(t, neg)]
     body += p.axes("t (s)", ylabel) + ([p.hline(0.0)] if zero_line else [])
     idx = _decimate(len(t), max_points)
