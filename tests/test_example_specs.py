@@ -22,3 +22,14 @@ def test_cart_radii_are_certified():
     assert levels["ParkA"][0] == levels["ParkB"][0] == "certified"
     assert levels["ParkA"][1] > 0.3
     assert levels["Shuttle"][0] == "empirical"
+
+
+def test_every_edge_has_its_verified_switch_over_time():
+    r = api.verify([SPECS / "pendulum"], out_dir=None).projects[0].report
+    assert len(r["edge_traces"]) == len(r["edges"])
+    for e in r["edge_traces"]:
+        s = e["series"]
+        assert e["reason"] == "entered_E"
+        k = next(i for i, t in enumerate(s["t"]) if t >= e["t_stop"] - 1e-9)
+        assert s["roa_margin"][k] > 0  # inside E at the reported time
+        assert all(v is None or v >= 0 for vs in s["h"].values() for v in vs[:k + 1])  # safe until then
