@@ -31,7 +31,7 @@ over rounds, a ratio is the median of the per-round ratios), JIT compilation tim
       and, for information, its compiled chunks alone: the same 32 chunk calls of K = 64 steps
       through a zero-copy FunctionBuffer (the oracle's compiled work without its Python side);
   (b) the compiled closed-loop right-hand side alone: prim.f_cl jit-compiled with the oracle's
-      flags (integrator._jit_opts), called 8000 times through Function.buffer() with numpy
+      flags (integrator.compile_cached), called 8000 times through Function.buffer() with numpy
       memoryviews bound once; the ratio (a) / (b) is the first target (<= 1.5);
   (c) the same rollout written with pinocchio from Python: pin.crba, pin.nonLinearEffects, foot
       Jacobians (LOCAL_WORLD_ALIGNED) and classical foot accelerations, the same saturated PD
@@ -69,10 +69,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-# a private JIT directory: concurrent processes never race on the same file names
+# a private, cold compile cache, so JIT times are measured
 _JIT_DIR = tempfile.mkdtemp(prefix="bench-a1-jit-")
-os.environ["MPGSPEC_JIT_DIR"] = _JIT_DIR
-os.environ["MPGSPEC_CACHE"] = _JIT_DIR  # a cold compiled-chunk cache, so JIT times are measured
+os.environ["MPGSPEC_CACHE"] = _JIT_DIR
 
 import casadi as ca
 import common  # noqa: E402  (bench/common.py)
@@ -81,7 +80,7 @@ import pinocchio as pin  # noqa: E402
 import yaml  # noqa: E402
 
 from mpgspec.api import build, compile_project, settings_for  # noqa: E402
-from mpgspec.oracle.integrator import _jit_opts, build_chunk, initial_state  # noqa: E402
+from mpgspec.oracle.integrator import build_chunk, compile_cached, initial_state  # noqa: E402
 from mpgspec.oracle.oracle import SafetyOracle  # noqa: E402
 from mpgspec.oracle.trace import trace  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402
@@ -170,7 +169,7 @@ def jit_rhs(prim, flags) -> ca.Function:
     f = prim.f_cl
     a = f.sx_in() if f.is_a("SXFunction") else f.mx_in()
     name = f"rhs_{re.sub(r'[^A-Za-z0-9]', '_', prim.name)}_{os.getpid()}"
-    return ca.Function(name, a, f.call(a), f.name_in(), f.name_out(), _jit_opts(flags))
+    return compile_cached(ca.Function(name, a, f.call(a), f.name_in(), f.name_out()), flags)
 
 
 class ChunkLoop:
@@ -444,7 +443,7 @@ def _run(args, R, T0, mach, tmp) -> int:
 
     # Python-side cost of one buffer call, on a trivial compiled function
     a = ca.SX.sym("a")
-    triv = BufferCall(ca.Function(f"triv_{os.getpid()}", [a], [2 * a], _jit_opts(st.jit_flags)), [1.0])
+    triv = BufferCall(compile_cached(ca.Function(f"triv_{os.getpid()}", [a], [2 * a]), st.jit_flags), [1.0])
     fns["trivial"] = lambda: triv.repeat(n_eval)
 
     log(f"\n{R} interleaved rounds")

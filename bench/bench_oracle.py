@@ -152,19 +152,10 @@ class RawChunk:
     def __init__(self, ch: Chunk):
         self.ch, self.K, self.prim, self.dt = ch, ch.K, ch.prim, ch.dt
         self.nz = ch.fn.size1_in(0)
-        self._b = {}
 
     def run(self, Z: np.ndarray) -> tuple[np.ndarray, None]:
         n = Z.shape[1]
-        if n not in self._b:
-            F = self.ch.mapped(n)
-            buf, ev = F.buffer()
-            zin, zf, out = np.zeros(F.nnz_in(0)), np.zeros(F.nnz_out(0)), np.zeros(F.nnz_out(1))
-            buf.set_arg(0, memoryview(zin))
-            buf.set_res(0, memoryview(zf))
-            buf.set_res(1, memoryview(out))
-            self._b[n] = (buf, ev, zin, zf, out)
-        buf, ev, zin, zf, _out = self._b[n]
+        ev, zin, zf, _out = self.ch.bound(n)
         zin.reshape(self.nz, n, order="F")[:] = Z
         ev()
         return zf.reshape(self.nz, n, order="F"), None

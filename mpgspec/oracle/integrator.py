@@ -21,14 +21,6 @@ import numpy as np
 from ..compile.primitive import CompiledPrimitive
 
 
-def _jit_opts(flags: tuple[str, ...]) -> dict:
-    """Compile with the system C compiler; -O1 builds fast and runs about as fast as -O3 here."""
-    folder = Path(os.environ.get("MPGSPEC_JIT_DIR", Path(tempfile.gettempdir()) / "mpgspec-jit"))
-    folder.mkdir(parents=True, exist_ok=True)
-    return {"jit": True, "compiler": "shell", "jit_cleanup": True,
-            "jit_options": {"flags": list(flags), "verbose": False, "directory": str(folder) + os.sep}}
-
-
 INLINE_NODES = 4000
 """Closed loops up to this many SX nodes are inlined (fastest code); larger ones become calls
 in an MX graph, so each Function is generated once and jit compilation stays quick."""
@@ -63,13 +55,8 @@ class Chunk:
             self._maps[n] = self.fn.map(n, "serial")
         return self._maps[n]
 
-    def run(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Advance the columns of Z (nz x n) by K steps; out has shape (nh + 1 + nu, n, K).
-
-        Calls go through a FunctionBuffer bound once per batch size to numpy arrays (no copies
-        through CasADi's DM type).
-        """
-        n = Z.shape[1]
+    def bound(self, n: int) -> tuple:
+        """(evaluate, z_in, z_final, out): the batch-of-n function bound once to numpy arrays, column-major."""
         if n not in self._buffers:
             F = self.mapped(n)
             buf, ev = F.buffer()
@@ -77,8 +64,17 @@ class Chunk:
             buf.set_arg(0, memoryview(zin))
             buf.set_res(0, memoryview(zf))
             buf.set_res(1, memoryview(out))
-            self._buffers[n] = (buf, ev, zin, zf, out)
-        _, ev, zin, zf, out = self._buffers[n]
+            self._buffers[n] = (buf, ev, zin, zf, out)  # buf keeps the bindings alive
+        return self._buffers[n][1:]
+
+    def run(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Advance the columns of Z (nz x n) by K steps; out has shape (nh + 1 + nu, n, K).
+
+        Calls go through a FunctionBuffer bound once per batch size to numpy arrays (no copies
+        through CasADi's DM type).
+        """
+        n = Z.shape[1]
+        ev, zin, zf, out = self.bound(n)
         nz = zin.size // n
         zin.reshape(nz, n, order="F")[:] = Z
         ev()

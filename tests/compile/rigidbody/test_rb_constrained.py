@@ -5,8 +5,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from mpgspec.compile.rigidbody import (A1_FEET, Baumgarte, ContactDynamics, RigidBodyDynamics,
-                                       RigidBodyModel)
+from mpgspec.compile.rigidbody import A1_FEET, Baumgarte, ContactDynamics
 
 TOL = 1e-8
 CONTACT_SETS = [A1_FEET, ("FL_foot", "RR_foot"), ("RL_foot",), ("FL_foot", "FR_foot", "RR_foot")]
@@ -19,16 +18,6 @@ def close(actual, expected, tol: float = TOL) -> None:
     scale = max(1.0, float(np.abs(expected).max(initial=0.0)))
     assert actual.shape == expected.shape
     assert np.abs(actual - expected).max(initial=0.0) <= tol * scale
-
-
-@pytest.fixture(scope="module")
-def model() -> RigidBodyModel:
-    return RigidBodyModel.a1()
-
-
-@pytest.fixture(scope="module")
-def dyn(model) -> RigidBodyDynamics:
-    return RigidBodyDynamics(model)
 
 
 @pytest.fixture(scope="module")

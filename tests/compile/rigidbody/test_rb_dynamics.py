@@ -6,7 +6,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from mpgspec.compile.rigidbody import A1_FEET, RigidBodyDynamics, RigidBodyModel, find_urdf
+from mpgspec.compile.rigidbody import A1_FEET, RigidBodyModel, find_urdf
 from mpgspec.compile.rigidbody.linalg import dense_ldl_solve, dof_parents, tree_solve
 
 TOL = 1e-8
@@ -18,16 +18,6 @@ def close(actual, expected, tol: float = TOL) -> None:
     scale = max(1.0, float(np.abs(expected).max(initial=0.0)))
     assert actual.shape == expected.shape
     assert np.abs(actual - expected).max(initial=0.0) <= tol * scale
-
-
-@pytest.fixture(scope="module")
-def model() -> RigidBodyModel:
-    return RigidBodyModel.a1()
-
-
-@pytest.fixture(scope="module")
-def dyn(model) -> RigidBodyDynamics:
-    return RigidBodyDynamics(model)
 
 
 @pytest.fixture(scope="module")
