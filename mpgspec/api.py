@@ -72,7 +72,7 @@ def compile_path(path: str | Path, radii: dict[str, float] | None = None) -> dic
     """Load and compile a project file with the given E radii (a picklable factory for workers)."""
     spec = load_project(path)
     prims = compile_project(spec)
-    apply_radii(spec, prims, radii or {})
+    apply_radii(prims, radii or {})
     return prims
 
 

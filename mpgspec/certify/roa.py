@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..compile.primitive import CompiledPrimitive, compile_primitive
+from ..compile.primitive import CompiledPrimitive
 from ..spec.loader import ProjectSpec
 from .registry import roa_verifiers
 
@@ -75,15 +75,13 @@ def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive]) -> dict
             rec.message = f"the spec's radius {roa.radius:g} lies within the {level} radius {r:.4g}. " + msg
             rec.level = level
         records[inst.name] = rec
-    apply_radii(spec, prims, {n: r.radius for n, r in records.items()})
+    apply_radii(prims, {n: r.radius for n, r in records.items()})
     return records
 
 
-def apply_radii(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], radii: dict[str, float]) -> None:
-    """Recompile, in place, the primitives whose E radius differs from `radii`."""
-    for inst in spec.primitives:
-        prim = prims[inst.name]
-        r = radii.get(inst.name, prim.radius)
+def apply_radii(prims: dict[str, CompiledPrimitive], radii: dict[str, float]) -> None:
+    """Resize, in place, the E of the primitives whose radius differs from `radii`."""
+    for name, prim in prims.items():
+        r = radii.get(name, prim.radius)
         if r != prim.radius:
-            new = inst.spec.model_copy(update={"roa": inst.spec.roa.model_copy(update={"radius": r})})
-            prims[inst.name] = compile_primitive(dataclasses.replace(inst, spec=new), prim.system)
+            prims[name] = prim.with_radius(r)

@@ -6,6 +6,7 @@ oracle composes them; nothing here integrates.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -74,6 +75,12 @@ class CompiledPrimitive:
 
     def x_star(self, t) -> np.ndarray:
         return np.array(self.setpoint(t)).ravel()
+
+    def with_radius(self, radius: float) -> "CompiledPrimitive":
+        """The same primitive with E resized; only the RoA margin is rebuilt."""
+        W = np.asarray(self.info["roa_W"])
+        margin = _roa_margin(self.system, self.setpoint, W, radius, _ident(self.name))
+        return dataclasses.replace(self, radius=radius, roa_margin=margin, cache={})
 
 
 def _constants(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler) -> dict[str, float]:
@@ -186,7 +193,6 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     jump = _jump(inst, sys, tc, t)
     f_cl, control, h, loop_fn = _close_loop(ident, args, u_raw, f_u, h_u, sys)
     roa = p.roa
-    dx = sys.wrapped_error(x - x_star)
     if roa.matrix is not None:
         W = np.asarray(roa.matrix, float)
         if W.shape != (sys.nx, sys.nx) or not np.allclose(W, W.T) or np.linalg.eigvalsh(W).min() <= 0:
@@ -201,9 +207,8 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
                             code="MPG106")
         W = np.diag(w)
     radius = float(roa.radius) if roa.radius is not None else 0.0  # 0 until a verifier sizes E
-    margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
     ctx.info["roa_W"] = W.tolist()
-    roa_margin = ca.Function(f"roa_{ident}", [x, t], [margin], ["x", "t"], ["margin"])
+    roa_margin = _roa_margin(sys, setpoint, W, radius, ident)
     grid = p.grid
     return CompiledPrimitive(
         name=inst.name, cls=p.class_, system=sys, period=period, domain=domain, next=p.next, horizon=p.horizon,
@@ -316,6 +321,14 @@ def _close_loop(ident: str, args: list, u_raw, f_u: ca.Function, h_u: ca.Functio
     h = ca.Function(f"h_{ident}", a, [h_u(*a, ur)], names, ["h"])
     loop = ca.Function(f"loop_{ident}", a, [f_u(*a, ur), h_u(*a, ur), ur, us], names, ["xdot", "h", "u_raw", "u"])
     return f_cl, control, h, loop
+
+
+def _roa_margin(sys: CompiledSystem, setpoint: ca.Function, W: np.ndarray, radius: float, ident: str) -> ca.Function:
+    """(x, t) -> r - ||x - x*(t)||_W, positive inside E; wrapped states measured the short way round."""
+    t = ca.SX.sym("t")
+    dx = sys.wrapped_error(sys.x - setpoint(t))
+    margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
+    return ca.Function(f"roa_{ident}", [sys.x, t], [margin], ["x", "t"], ["margin"])
 
 
 def _ident(name: str) -> str:
