@@ -82,7 +82,7 @@ def build_graph(prims: dict[str, CompiledPrimitive], settings: OracleSettings, n
         for (a, i, j), e in zip(index, ev):
             transitions[(a, b)].evidence[i][j] = e
         for a in sources:
-            transitions[(a, b)].classify(prims[a].t_range[1])
+            transitions[(a, b)].classify()
     if progress:
         progress("oracle", len(names), len(names))
     nodes = {n: {"cls": p.cls.value, "period": p.period, "domain": p.domain, "next": p.next}

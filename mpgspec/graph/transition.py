@@ -41,7 +41,7 @@ class Transition:
         """Per t_A: does some t_B give O_B = 1."""
         return self.verdicts.any(axis=1)
 
-    def classify(self, t_A_end: float) -> None:
+    def classify(self) -> None:
         """Algorithm 1 lines 9-14, then the switch-in clock, windows and weights."""
         V = self.verdicts
         avail = V.any(axis=1)
@@ -58,7 +58,7 @@ class Transition:
             self.best_t_B.append(float(self.t_B[j]))
             durations.append(e.t_enter)
             peaks.append(max(e.peak_input, default=0.0))
-        self.windows = _windows(self.t_A, avail, t_A_end)
+        self.windows = _windows(self.t_A, avail)
         if durations:
             self.weights = {"duration": float(max(durations)), "peak_input": float(max(peaks)), "hops": 1.0}
 
@@ -68,7 +68,7 @@ class Transition:
         return self.best_t_B[i] if abs(self.t_A[i] - t_A) < 1e-9 else None
 
 
-def _windows(t: np.ndarray, avail: np.ndarray, t_end: float) -> list[tuple[float, float]]:
+def _windows(t: np.ndarray, avail: np.ndarray) -> list[tuple[float, float]]:
     """Maximal runs of available grid points as [first, last] t_A intervals."""
     out, start = [], None
     for i, a in enumerate(avail):

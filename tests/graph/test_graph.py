@@ -182,7 +182,7 @@ def test_classify_hand_made_grid():
              [ev(0), ev(1, 0.9, 1.0)],
              [ev(1, 0.2, 3.0), ev(0)]]
     tr = Transition("A", "B", t_A, t_B, cells)
-    tr.classify(4.0)
+    tr.classify()
     assert tr.cls is TransitionClass.CLASS_2
     assert tr.best_t_B == [0.5, None, 0.5, 0.0]
     assert tr.windows == [(0.0, 0.0), (2.0, 3.0)]
@@ -198,7 +198,7 @@ def test_classify_hand_made_grid():
 def test_algorithm_1_classes(rows, cls):
     cells = [[ev(v, 0.5) for v in row] for row in rows]
     tr = Transition("A", "B", np.array([0.0, 1.0]), np.array([0.0, 1.0]), cells)
-    tr.classify(2.0)
+    tr.classify()
     assert tr.cls is cls
     g = MotionPrimitiveGraph({"A": {"cls": "periodic"}, "B": {"cls": "fixed"}}, {("A", "B"): tr})
     assert g.G.has_edge("A", "B") == (cls is not TransitionClass.NONE)

@@ -23,7 +23,7 @@ def edge(a: str, b: str, duration: float, peak: float = 1.0) -> Transition:
     """A Class 1 transition whose single cell enters E after `duration` with input peak `peak`."""
     e = OracleEvidence(1, Reason.ENTERED_E, duration, t_enter=duration, peak_input=[peak])
     tr = Transition(a, b, np.zeros(1), np.zeros(1), [[e]])
-    tr.classify(0.0)
+    tr.classify()
     return tr
 
 
@@ -52,7 +52,7 @@ def test_a_transient_hand_over_needs_a_verified_end(g):
     ok = OracleEvidence(1, Reason.ENTERED_E, 0.2, t_enter=0.2, peak_input=[1.0])
     bad = OracleEvidence(0, Reason.LEFT_C, 0.0, violated="floor")
     tr = Transition("Jump", "Land", np.array([-1.0, -0.5, 0.0]), np.zeros(1), [[ok], [ok], [bad]])
-    tr.classify(0.0)
+    tr.classify()
     g.transitions[("Jump", "Land")] = tr
     assert tr.cls == 2 and tr.switch_clock(0.0) is None
     G = plan_graph(g)
