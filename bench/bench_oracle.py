@@ -255,7 +255,7 @@ def main(argv=None) -> int:
     # set-up: oracles (JIT), the bare chunks, recordings of the oracle's chunk calls ---------------
     log("\nset-up (JIT compiles, first calls)")
     oracles, run_rk, c_rk, f_rk = setup_oracles(prims, settings, pts)
-    s_low = settings.replace(check="none")
+    s_low = settings.replace(refinements=0)
     _, run_low, c_low, f_low = setup_oracles(prims, s_low, pts)
     log(f"  rk4 oracles, check={settings.check!r}: construct {c_rk:.2f} s, first calls {f_rk:.2f} s; "
         f"check='none': construct {c_low:.2f} s, first calls {f_low:.2f} s")

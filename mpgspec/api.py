@@ -19,6 +19,7 @@ from .compile.system import compile_system
 from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, UsageError  # noqa: F401
 from .execute.sequence import simulate_sequence
 from .graph.build import build_graph
+from .oracle.oracle import CapabilityError, needs, require_capabilities
 from .oracle.registry import get_backend
 from .graph.transition import MotionPrimitiveGraph
 from .plan.planner import lookup_table, shortest_plan
@@ -80,6 +81,7 @@ def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None
     """Compile and run Algorithm 1; returns (primitives, graph, oracles, timing)."""
     t0 = time.perf_counter()
     prims = compile_project(spec)
+    _check_capabilities(spec, settings, prims)
     t1 = time.perf_counter()
     if progress:
         progress(spec.name, "regions of attraction", 0, len(prims))
@@ -95,6 +97,18 @@ def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None
     timing = {"compile_s": t1 - t0, "roa_s": t2 - t1, "graph_s": t3 - t2, "oracle_calls": calls,
               "oracle_calls_per_s": calls / max(t3 - t2, 1e-9)}
     return prims, g, oracles, timing, roa
+
+
+def _check_capabilities(spec: ProjectSpec, settings: OracleSettings, prims: dict[str, CompiledPrimitive]) -> None:
+    """A backend that cannot run a primitive is the project's error, located at oracle.method."""
+    backend = get_backend(settings.method)
+    for p in prims.values():
+        try:
+            require_capabilities(backend, p)
+        except CapabilityError as err:
+            raise SpecError(str(err), location=spec.locate(("oracle", "method")), key="oracle.method",
+                            expected="a backend with the capabilities " + ", ".join(sorted(needs(p))),
+                            found=repr(settings.method), code="MPG120") from None
 
 
 def roa_requirements(spec: ProjectSpec, roa: dict, start: int) -> list[AssertionResult]:

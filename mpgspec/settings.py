@@ -8,18 +8,17 @@ from dataclasses import dataclass, replace
 class OracleSettings:
     """How the safety oracle integrates and decides.
 
-    dt: fixed step of the integrator; horizon: T of Definition 4; h_tolerance: h >= -tol is safe;
-    check: re-run 'safe' verdicts ('safe') or all verdicts ('all') with step dt / refine and keep the
-    finer answer, or skip ('none'); chunk: steps per compiled call between early-termination
-    checks; batch: start points integrated side by side in one call; jit: compile with gcc.
+    dt: integration step (shortened where the safe set switches); horizon: T of Definition 4;
+    h_tolerance: h >= -tol is safe; refinements: how many times an inconclusive rollout is run
+    again with the step halved; chunk: steps per compiled call between early-termination checks;
+    batch: start points integrated side by side in one call; jit: compile with gcc.
     """
 
     horizon: float = 5.0
     dt: float = 0.01
     method: str = "rk4"
     h_tolerance: float = 0.0
-    check: str = "safe"
-    refine: int = 2
+    refinements: int = 1
     chunk: int = 64
     batch: int = 64
     jit: bool = True
@@ -27,16 +26,17 @@ class OracleSettings:
 
     @classmethod
     def with_accuracy(cls, level: str, **kw) -> "OracleSettings":
-        """Presets: low (no check), medium (check safe verdicts), high (dt/2, check all), very_high (dt/4)."""
+        """Presets: low (dt, no refinement), medium (dt, inconclusive rollouts refined once to dt/2),
+        high (dt/2, refined twice), very_high (dt/4, refined twice). Every preset is error-aware."""
         base = cls(**kw)
         if level == "low":
-            return replace(base, check="none")
+            return replace(base, refinements=0)
         if level == "medium":
-            return replace(base, check="safe")
+            return replace(base, refinements=1)
         if level == "high":
-            return replace(base, dt=base.dt / 2, check="all")
+            return replace(base, dt=base.dt / 2, refinements=2)
         if level == "very_high":
-            return replace(base, dt=base.dt / 4, check="all")
+            return replace(base, dt=base.dt / 4, refinements=2)
         raise ValueError(f"unknown accuracy level {level!r}; expected low, medium, high or very_high")
 
     def replace(self, **kw) -> "OracleSettings":

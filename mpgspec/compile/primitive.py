@@ -47,6 +47,10 @@ class CompiledPrimitive:
     info: dict = field(default_factory=dict)
     jump: ca.Function | None = None  # (x, u, t) -> x: the discrete part of a step (quaternion, contacts)
     loop: ca.Function | None = None  # (x, t, s, x_sw) -> (xdot, h, u_raw, u) with one control evaluation
+    loop_raw: ca.Function | None = None  # the same with every safety function active (no `when` windows)
+    windows: list[tuple[float, float] | None] = field(default_factory=list)  # per safety function, on the clock
+    boundaries: tuple[float, ...] = ()  # clock times where C or the contact schedule switches
+    hybrid: bool = False  # the state jumps (contact events or a contact schedule), not only renormalised
     cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
 
     @property
@@ -167,7 +171,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     f_u = ca.Function("f_u", args + [sys.u], [ca.substitute(loop.xdot, sys.u, sat_u) if sys.nu else loop.xdot])
     # safety functions may name inputs (the saturated control)
     henv = {**env, **loop.env, **{n: sat_u[i] for i, n in enumerate(sys.input_names)}}
-    hs, names = [], []
+    hs, hs_raw, names, windows = [], [], [], []
     for j, sf in enumerate(inst.safe_set):
         path = ("safe_set", j)
         if sf.use is not None:
@@ -184,6 +188,8 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
             items = [(sf.name, sf.tol - ca.fabs(ec.sx(sf.eq, path + ("eq",), henv)))]
         for name, hv in items:
             hv = ca.substitute(hv, sys.u, sat_u) if sys.nu else hv
+            hs_raw.append(hv)
+            windows.append(None if sf.when is None else (float(sf.when[0]), float(sf.when[1])))
             if sf.when is not None:
                 a, b = sf.when
                 hv = ca.if_else(ca.logic_and(tc >= a, tc < b), hv, INACTIVE)
@@ -192,6 +198,11 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     h_u = ca.Function("h_u", args + [sys.u], [ca.vertcat(*hs) if hs else ca.SX(0, 1)])
     jump = _jump(inst, sys, tc, t)
     f_cl, control, h, loop_fn = _close_loop(ident, args, u_raw, f_u, h_u, sys)
+    if any(w is not None for w in windows):
+        h_raw = ca.Function("h_raw", args + [sys.u], [ca.vertcat(*hs_raw)])
+        loop_raw = _close_loop(ident + "_raw", args, u_raw, f_u, h_raw, sys)[3]
+    else:
+        loop_raw = loop_fn
     roa = p.roa
     if roa.matrix is not None:
         W = np.asarray(roa.matrix, float)
@@ -214,8 +225,24 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         name=inst.name, cls=p.class_, system=sys, period=period, domain=domain, next=p.next, horizon=p.horizon,
         grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=radius,
         f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info, jump=jump,
-        loop=loop_fn,
+        loop=loop_fn, loop_raw=loop_raw, windows=windows, boundaries=_boundaries(windows, p, period, domain),
+        hybrid=bool(getattr(sys, "events", False)) or p.contact_schedule is not None,
     )
+
+
+def _boundaries(windows, p, period, domain) -> tuple[float, ...]:
+    """Clock times at which the safe set or the contact mode switches: the oracle steps onto each.
+
+    For a periodic primitive they are taken within one period (the clock wraps); a transient's end
+    t_f is one, so its rollouts stop exactly at t_f.
+    """
+    times = {v for w in windows if w is not None for v in w}
+    times |= {float(ph.until) for ph in (p.contact_schedule or [])}
+    if domain is not None:
+        times.add(float(domain[1]))
+    if period is not None:
+        times = {v % period for v in times}
+    return tuple(sorted(times))
 
 
 def _jump(inst: PrimitiveInstance, sys: CompiledSystem, tc: ca.SX, t: ca.SX) -> ca.Function:

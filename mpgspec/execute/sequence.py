@@ -68,10 +68,11 @@ def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiv
 
     while k < nsteps:
         p = prims[cur]
-        ch = build_chunk(p, dt, 64, settings.jit, settings.jit_flags, with_state=True)
+        ch = build_chunk(p, dt, 64, settings.jit, settings.jit_flags, with_state=True, boundaries=False)
         zf, out = ch.run(z[:, None])
-        nh, nu, nx = ch.nh, ch.nu, p.system.nx
-        H, M, X = out[:nh, 0], out[nh, 0], out[nh + 1 + nu:, 0]
+        r, nx = ch.rows, p.system.nx
+        nh = r.nh
+        H, M, X = out[r.h, 0], out[r.margin, 0], out[r.x, 0]
         event = None
         for i in range(ch.K):
             if k + i >= nsteps:

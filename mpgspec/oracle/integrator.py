@@ -18,7 +18,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..compile.primitive import CompiledPrimitive
+from ..compile.primitive import INACTIVE, CompiledPrimitive
 
 
 INLINE_NODES = 4000
@@ -37,9 +37,66 @@ def _jump_fn(prim: CompiledPrimitive) -> ca.Function:
     return ca.Function("jump", [prim.system.x, u, t], [prim.system.project(prim.system.x, u)])
 
 
+@dataclass(frozen=True)
+class Rows:
+    """Row layout of a chunk's per-step output (one column per step, started at sample k).
+
+    h: safety functions at sample k (INACTIVE outside their window); lb: a lower bound of each h
+    over the step [s_k, s_k+1] from its values and rates at both ends; dh: |grad h . e_k|, the
+    local integration error e_k mapped onto h; margin: RoA margin at sample k; err: ||e_k||;
+    s, dt: time since switch-in at sample k and the step's length; u_raw, u: the input before and
+    after saturation; x: the state (traces only).
+    """
+
+    nh: int
+    nu: int
+    nx: int = 0
+
+    @property
+    def h(self):
+        return slice(0, self.nh)
+
+    @property
+    def lb(self):
+        return slice(self.nh, 2 * self.nh)
+
+    @property
+    def dh(self):
+        return slice(2 * self.nh, 3 * self.nh)
+
+    @property
+    def margin(self):
+        return 3 * self.nh
+
+    @property
+    def err(self):
+        return 3 * self.nh + 1
+
+    @property
+    def s(self):
+        return 3 * self.nh + 2
+
+    @property
+    def dt(self):
+        return 3 * self.nh + 3
+
+    @property
+    def u_raw(self):
+        return slice(3 * self.nh + 4, 3 * self.nh + 4 + self.nu)
+
+    @property
+    def u(self):
+        return slice(3 * self.nh + 4 + self.nu, 3 * self.nh + 4 + 2 * self.nu)
+
+    @property
+    def x(self):
+        o = 3 * self.nh + 4 + 2 * self.nu
+        return slice(o, o + self.nx)
+
+
 @dataclass
 class Chunk:
-    """K compiled steps of one primitive's closed loop; rows of `out` are [h; roa_margin; u_raw]."""
+    """K compiled steps of one primitive's closed loop; `rows` names the rows of `out`."""
 
     prim: CompiledPrimitive
     dt: float
@@ -47,6 +104,7 @@ class Chunk:
     fn: ca.Function
     nh: int
     nu: int
+    rows: Rows = None  # type: ignore[assignment]
     _maps: dict = field(default_factory=dict)
     _buffers: dict = field(default_factory=dict)
 
@@ -68,7 +126,7 @@ class Chunk:
         return self._buffers[n][1:]
 
     def run(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Advance the columns of Z (nz x n) by K steps; out has shape (nh + 1 + nu, n, K).
+        """Advance the columns of Z (nz x n) by K steps; out has shape (rows, n, K).
 
         Calls go through a FunctionBuffer bound once per batch size to numpy arrays (no copies
         through CasADi's DM type).
@@ -84,14 +142,16 @@ class Chunk:
 
 
 def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
-                flags: tuple[str, ...] = ("-O1",), with_state: bool = False) -> Chunk:
+                flags: tuple[str, ...] = ("-O1",), with_state: bool = False, boundaries: bool = True) -> Chunk:
     """Compile K steps of RK4 with per-step outputs for one primitive (and the states, if asked).
 
-    Compiled chunks are remembered on the primitive, so oracles, traces and executions share them.
+    With `boundaries`, a step never crosses a clock time where the safe set or the contact mode
+    switches: it is shortened to end there. Compiled chunks are remembered on the primitive, so
+    oracles, traces and executions share them.
     """
-    key = (dt, K, jit, tuple(flags), with_state)
+    key = (dt, K, jit, tuple(flags), with_state, boundaries)
     if key not in prim.cache:
-        prim.cache[key] = _build_chunk(prim, dt, K, jit, flags, with_state)
+        prim.cache[key] = _build_chunk(prim, dt, K, jit, flags, with_state, boundaries)
     return prim.cache[key]
 
 
@@ -100,44 +160,112 @@ def _with_cse(f: ca.Function) -> ca.Function:
     return ca.Function(f.name(), a, f.call(a), f.name_in(), f.name_out(), {"cse": True})
 
 
-def _stage1(prim: CompiledPrimitive, with_state: bool) -> tuple[ca.Function, ca.Function]:
-    """(x, t, s, x_sw) -> (k1, outputs, u) from one Function, and f_cl for the other stages.
+FD_STEP = 1e-6
+"""Time step of the forward differences that give the rates of h along the flow in large loops."""
 
-    For SX loops the first stage, h, the RoA margin and the control law share one expression
-    graph with common subexpressions eliminated, so the dynamics at a step's start state (which h
-    needs for contact forces) are computed once.
+
+def _ends(prim: CompiledPrimitive) -> tuple[ca.Function, ca.Function, ca.Function]:
+    """Functions for both ends of a step, and f_cl for the inner stages.
+
+    start (x, t, s, x_sw) -> (k1, h, hdot, u_raw, u): the loop at the step's start with the rate
+    of every (unwindowed) safety function along the flow, dh/dt = grad h . f + dh/dt + dh/ds.
+    end (x, t, s, x_sw, k4, dt) -> (k5, h, hdot, |grad h . e|, e): the loop at the step's end
+    (before any jump), with the embedded third-order error estimate e = dt/6 (k4 - k5) of the
+    RK4 step (weights 1/6, 1/3, 1/3, 0, 1/6 on k1..k4 and k5 = f(x_next)).
+    Small SX loops get exact directional derivatives, inlined with common subexpressions
+    eliminated; large loops (called from an MX graph) get forward differences along the flow
+    and h(x_next) - h(x_next - e), which reuse the one compiled loop instead of generating
+    derivative code several times its size.
     """
-    f, loop = prim.f_cl, prim.loop
+    f, loop = prim.f_cl, prim.loop_raw or prim.loop
     sx = loop.is_a("SXFunction")
-    a = loop.sx_in() if sx else loop.mx_in()
-    x = a[0]
-    xdot, hv, u_raw, u_sat = loop.call(a)  # one evaluation of the control law (one QP for an ID-QP)
-    out = ca.vertcat(hv, prim.roa_margin(x, a[1]), u_raw, *([x] if with_state else []))
-    big = sx and f.n_nodes() > INLINE_NODES
-    opts = {"cse": True} if big else {}
-    stage1 = ca.Function("stage1", a, [xdot, out, u_sat], opts)
-    return stage1, (_with_cse(f) if big else f)
+    big = not sx or f.n_nodes() > INLINE_NODES
+    if big:
+        return (*_ends_differences(loop), (_with_cse(f) if sx else f))
+    a = loop.sx_in()
+    x, t, s = a[0], a[1], a[2]
+    xdot, hv, u_raw, u_sat = loop.call(a)
+    arg, one = ca.vertcat(x, t, s), ca.DM([1.0, 1.0])
+    hdot = ca.jtimes(hv, arg, ca.vertcat(xdot, one))
+    start = ca.Function("start", a, [xdot, hv, hdot, u_raw, u_sat])
+    k4, dt = ca.SX.sym("k4", x.shape[0]), ca.SX.sym("dt")
+    e = dt / 6 * (k4 - xdot)
+    D = ca.jtimes(hv, arg, ca.horzcat(ca.vertcat(xdot, one), ca.vertcat(e, ca.DM.zeros(2))))
+    end = ca.Function("end", a + [k4, dt], [xdot, hv, D[:, 0], ca.fabs(D[:, 1]), e])
+    return start, end, f
+
+
+def _ends_differences(loop: ca.Function) -> tuple[ca.Function, ca.Function]:
+    a = loop.mx_in()
+    x, t, s, xs = a
+    eps = FD_STEP
+    xdot, hv, u_raw, u_sat = loop.call(a)
+    h_eps = loop(x + eps * xdot, t + eps, s + eps, xs)[1]
+    start = ca.Function("start", a, [xdot, hv, (h_eps - hv) / eps, u_raw, u_sat])
+    k4, dt = ca.MX.sym("k4", x.shape[0]), ca.MX.sym("dt")
+    e = dt / 6 * (k4 - xdot)
+    h_ahead = loop(x + eps * xdot, t + eps, s + eps, xs)[1]
+    h_lower = loop(x - e, t, s, xs)[1]
+    end = ca.Function("end", a + [k4, dt], [xdot, hv, (h_ahead - hv) / eps, ca.fabs(hv - h_lower), e])
+    return start, end
+
+
+def _wrap(prim: CompiledPrimitive, t):
+    return t - prim.period * ca.floor(t / prim.period) if prim.period is not None else t
+
+
+def _step_length(prim: CompiledPrimitive, dt: float, tc):
+    """dt, shortened so that the step ends on the next switching time of the clock."""
+    B = prim.boundaries
+    if not B:
+        return ca.DM(dt)
+    eps = 1e-9
+    if prim.period is not None:
+        nxt = [ca.if_else(b > tc + eps, b, b + prim.period) for b in (*B, prim.period)]
+    else:
+        nxt = [ca.if_else(b > tc + eps, b, ca.inf) for b in B]
+    gap = nxt[0]
+    for v in nxt[1:]:
+        gap = ca.fmin(gap, v)
+    return ca.fmin(dt, gap - tc)
+
+
+def _active(prim: CompiledPrimitive, tc):
+    """1 for every safety function whose window contains the clock tc, else 0."""
+    return ca.vertcat(*[1 if w is None else ca.logic_and(tc >= w[0], tc < w[1]) for w in prim.windows]) \
+        if prim.windows else ca.DM(0, 1)
 
 
 def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: tuple[str, ...],
-                 with_state: bool) -> Chunk:
-    nx = prim.system.nx
-    stage1, f = _stage1(prim, with_state)
+                 with_state: bool, boundaries: bool) -> Chunk:
+    nx, nh = prim.system.nx, len(prim.h_names)
+    start, end, f = _ends(prim)
     jump = _jump_fn(prim)
     z = _sym(prim.f_cl)("z", 2 * nx + 2)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
-    k1, out, u = stage1(x, t, s, xs)
-    k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2, xs)
-    k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2, xs)
-    k4 = f(x + dt * k3, t + dt, s + dt, xs)
-    x_next = jump(x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), u, t + dt)
-    body = ca.Function("body", [z], [ca.vertcat(x_next, t + dt, s + dt, xs), out])
+    tc = _wrap(prim, t)
+    h = _step_length(prim, dt, tc) if boundaries else ca.DM(dt)
+    k1, h0, d0, u_raw, u = start(x, t, s, xs)
+    k2 = f(x + h / 2 * k1, t + h / 2, s + h / 2, xs)
+    k3 = f(x + h / 2 * k2, t + h / 2, s + h / 2, xs)
+    k4 = f(x + h * k3, t + h, s + h, xs)
+    x_end = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    _k5, h1, d1, dh, e = end(x_end, t + h, s + h, xs, k4, h)
+    act = _active(prim, _wrap(prim, t + h / 2))  # a step lies inside or outside each window: judge at its middle
+    L = ca.fmax(ca.fmax(ca.fabs(d0), ca.fabs(d1)), ca.fabs(h1 - h0) / h)
+    lb = (h0 + h1) / 2 - L * h / 2  # least value of a function with |dh/dt| <= L taking h0 and h1 at the ends
+    masked = (lambda v: ca.if_else(act, v, INACTIVE)) if nh else (lambda v: v)
+    out = ca.vertcat(masked(h0), masked(lb), dh, prim.roa_margin(x, t), ca.norm_2(e), s, h, u_raw, u,
+                     *([x] if with_state else []))
+    x_next = jump(x_end, u, t + h)
+    body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs), out])
     acc = body.mapaccum("acc", K)
     Z = ca.MX.sym("Z", 2 * nx + 2)
     zs, outs = acc(Z)
-    name = "chunk_" + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}".encode()).hexdigest()[:10]
+    name = "chunk_" + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}{boundaries}".encode()).hexdigest()[:10]
     fn = ca.Function(name, [Z], [zs[:, -1], outs])
-    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, len(prim.h_names), prim.system.nu)
+    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
+                 Rows(nh, prim.system.nu, nx if with_state else 0))
 
 
 def cache_dir() -> Path:

@@ -7,7 +7,28 @@ from ..compile.primitive import CompiledPrimitive
 from ..spec.models import PrimitiveClass
 from ..settings import OracleSettings
 from .evidence import OracleEvidence
+from ..errors import UsageError
 from .registry import get_backend
+
+
+class CapabilityError(UsageError):
+    """The chosen backend cannot run a primitive of the project."""
+
+
+
+def needs(prim: CompiledPrimitive) -> set[str]:
+    """Capabilities a backend must have to run this primitive's closed loop."""
+    return {"hybrid"} if prim.hybrid else set()
+
+
+def require_capabilities(backend, prim: CompiledPrimitive) -> None:
+    """Refuse, with a message naming what is missing, a backend that cannot run the primitive."""
+    missing = needs(prim) - set(getattr(backend, "capabilities", ()))
+    if missing:
+        raise CapabilityError(
+            f"oracle method {backend.name!r} cannot run primitive {prim.name!r}: it lacks the capability "
+            f"{', '.join(sorted(missing))} (the state jumps at contact events or a contact schedule); "
+            f"use a backend that has it, e.g. method: rk4")
 
 
 class SafetyOracle:
@@ -21,13 +42,14 @@ class SafetyOracle:
         self.prim = prim
         self.settings = settings
         self.horizon = prim.horizon or settings.horizon
-        self.runner = get_backend(settings.method).runner(prim, settings)
+        backend = get_backend(settings.method)
+        require_capabilities(backend, prim)
+        self.runner = backend.runner(prim, settings)
 
     def horizons(self, t0s: np.ndarray) -> np.ndarray:
         h = np.full(len(t0s), self.horizon)
-        if self.prim.cls is PrimitiveClass.TRANSIENT:  # whole steps that end at or before t_f
-            dt = self.settings.dt
-            h = np.minimum(h, np.floor((self.prim.domain[1] - np.asarray(t0s)) / dt + 1e-9) * dt)
+        if self.prim.cls is PrimitiveClass.TRANSIENT:  # t_f is a step boundary: rollouts end exactly there
+            h = np.minimum(h, self.prim.domain[1] - np.asarray(t0s))
         return np.maximum(h, 0.0)
 
     def evaluate(self, x0s: np.ndarray, t0s: np.ndarray) -> list[OracleEvidence]:

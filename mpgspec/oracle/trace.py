@@ -11,8 +11,8 @@ from .integrator import build_chunk, initial_state
 def trace(prim: CompiledPrimitive, x0: np.ndarray, t0: float, horizon: float, settings: OracleSettings,
           max_points: int = 400) -> dict:
     """Roll B's closed loop from x0 at clock t0 for `horizon` seconds; series decimated to max_points."""
-    ch = build_chunk(prim, settings.dt, 64, settings.jit, settings.jit_flags, with_state=True)
-    n = int(np.ceil(horizon / settings.dt)) + 1
+    ch = build_chunk(prim, settings.dt, 64, settings.jit, settings.jit_flags, with_state=True, boundaries=False)
+    n = int(np.ceil(horizon / settings.dt - 1e-9)) + 1
     z = initial_state(prim, np.asarray(x0, float), t0)
     outs = []
     while sum(o.shape[1] for o in outs) < n:
@@ -22,10 +22,10 @@ def trace(prim: CompiledPrimitive, x0: np.ndarray, t0: float, horizon: float, se
         if not np.isfinite(z).all():
             break
     O = np.concatenate(outs, axis=1)[:, :n]
-    nh, nu = ch.nh, ch.nu
+    r = ch.rows
     stride = max(1, O.shape[1] // max_points)
     sel = slice(0, O.shape[1], stride)
-    t = np.arange(O.shape[1])[sel] * settings.dt
+    t = O[r.s, sel]
 
     def clean(v):
         return [None if (not np.isfinite(a) or abs(a) >= INACTIVE / 2) else float(a) for a in v]
@@ -33,7 +33,7 @@ def trace(prim: CompiledPrimitive, x0: np.ndarray, t0: float, horizon: float, se
     return {
         "t": [float(a) for a in t],
         "h": {name: clean(O[i, sel]) for i, name in enumerate(prim.h_names)},
-        "roa_margin": clean(O[nh, sel]),
-        "u": [clean(O[nh + 1 + i, sel]) for i in range(nu)],
-        "x": [clean(O[nh + 1 + nu + i, sel]) for i in range(prim.system.nx)],
+        "roa_margin": clean(O[r.margin, sel]),
+        "u": [clean(O[r.u.start + i, sel]) for i in range(r.nu)],
+        "x": [clean(O[r.x.start + i, sel]) for i in range(prim.system.nx)],
     }

@@ -26,7 +26,7 @@ def built():
     spec = load_project(FIXTURE)
     prims = compile_project(spec)
     settings = settings_for(spec).replace(jit=False)
-    assert (settings.dt, settings.horizon, settings.check) == (DT, 4.0, "none")
+    assert (settings.dt, settings.horizon, settings.refinements) == (DT, 4.0, 0)
     return prims, build_graph(prims, settings, n_A=12, n_B=12)
 
 
@@ -156,7 +156,7 @@ def test_integration_failures_become_evidence_and_the_build_goes_on(tmp_path):
     path.write_text(textwrap.dedent(NAN_PROJECT))
     spec = load_project(path)
     prims = compile_project(spec)
-    g = build_graph(prims, settings_for(spec).replace(jit=False, check="none", horizon=4.0))
+    g = build_graph(prims, settings_for(spec).replace(jit=False, refinements=0, horizon=4.0))
     crossing = {("Home", "Mid"), ("Home", "Far"), ("Mid", "Home"), ("Far", "Home")}  # pass through the band
     for (a, b), tr in g.transitions.items():
         (e,), = tr.evidence

@@ -1,0 +1,216 @@
+"""Three-valued, error-aware verdicts of the safety oracle from per-step rollout data.
+
+A backend hands over, for a block of steps of many rollouts, each safety function at the samples
+(`h`), a lower bound of it over each step (`lb`: from its values and rates along the flow at both
+ends), the integration error mapped onto it (`dh`), the RoA margin, the local error norm, the
+times and the inputs. The judge keeps the running error estimates and decides, in time order:
+
+- C first at each sample: a value below -tol even after adding its error estimate is a certain
+  violation (unsafe); a value within its error of -tol is a doubt (inconclusive);
+- E next: the flow is inside E when the RoA margin exceeds its own error estimate (safe, if no doubt
+  came before);
+- then the step that follows: a lower bound within its error of -tol is a doubt (inconclusive).
+
+A safe verdict therefore means that every active safety function stayed above -tol by more than
+what the numerics can hide, between samples as well as at them, until the flow was inside E.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..compile.primitive import INACTIVE, CompiledPrimitive
+from .evidence import OracleEvidence, Reason
+
+SAFE, UNSAFE, INCONCLUSIVE = "safe", "unsafe", "inconclusive"
+
+
+@dataclass
+class Block:
+    """K steps of m rollouts; h, lb, dh are (nh, m, K), u and u_raw (nu, m, K), the rest (m, K)."""
+
+    h: np.ndarray
+    lb: np.ndarray
+    dh: np.ndarray
+    margin: np.ndarray
+    err: np.ndarray
+    s: np.ndarray
+    dt: np.ndarray
+    u_raw: np.ndarray
+    u: np.ndarray
+    finite: np.ndarray  # (m, K): every output of the step (and, for the last, the end state) is finite
+
+
+class Carry:
+    """What each rollout in flight has accumulated: error estimates, least values, peaks."""
+
+    FIELDS = ("eh", "en", "min_h", "low", "count", "best_m", "peak", "peak_raw", "sat", "nsteps", "pending")
+
+    def __init__(self, nh: int, nu: int, m: int = 0):
+        self.eh = np.zeros((nh, m))  # integration error estimate of each h so far
+        self.en = np.zeros(m)  # sum of local error norms so far
+        self.min_h = np.full((nh, m), np.inf)  # least sampled value
+        self.low = np.full((nh, m), np.inf)  # least error-aware lower bound
+        self.count = np.zeros((nh, m), int)  # samples and steps at which each h was active
+        self.best_m = np.full(m, -np.inf)
+        self.peak = np.zeros((nu, m))
+        self.peak_raw = np.zeros((nu, m))
+        self.sat = np.zeros(m, bool)
+        self.nsteps = np.zeros(m, int)  # steps judged so far
+        self.pending = np.zeros(m, bool)  # the last step was doubtful: its end sample decides
+
+    def extend(self, k: int) -> None:
+        new = Carry(self.eh.shape[0], self.peak.shape[0], k)
+        for f in self.FIELDS:
+            setattr(self, f, np.concatenate([getattr(self, f), getattr(new, f)], axis=-1))
+
+    def keep(self, mask: np.ndarray) -> None:
+        for f in self.FIELDS:
+            setattr(self, f, getattr(self, f)[..., mask])
+
+
+@dataclass
+class Decision:
+    """Per rollout of a block: done, kind ('safe', 'left_C', 'non_finite', 'doubt', 'horizon' or ''), index."""
+
+    done: np.ndarray
+    kind: np.ndarray
+    k: np.ndarray
+
+
+def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np.ndarray, hi: np.ndarray) -> Decision:
+    """Decide what can be decided in this block and fold its judged part into the carry."""
+    nh, m, K = b.lb.shape if b.lb.ndim == 3 else (0, *b.margin.shape)
+    ar = np.arange(K)
+    if nh:
+        cdh = np.cumsum(b.dh, axis=2)
+        eh_s = c.eh[:, :, None] + cdh - b.dh  # error estimate at sample k
+        eh_e = c.eh[:, :, None] + cdh  # at the end of step k
+        act_s, act_t = b.h < INACTIVE / 2, b.lb < INACTIVE / 2
+        low_s = np.where(act_s, b.h - eh_s, np.inf)
+        low_t = np.where(act_t, b.lb - eh_e, np.inf)
+        viol = (np.where(act_s, b.h + eh_s, np.inf) < -tol).any(axis=0)
+        doubt_s = (low_s < -tol).any(axis=0)
+        doubt_t = (low_t < -tol).any(axis=0)
+    else:
+        viol = doubt_s = doubt_t = np.zeros((m, K), bool)
+    cen = np.cumsum(b.err, axis=1)
+    with np.errstate(invalid="ignore"):
+        en_s = c.en[:, None] + cen - b.err
+    valid = b.s <= T[:, None] + 1e-9
+    valid_t = b.s + b.dt <= T[:, None] + 1e-9
+    bad = ~b.finite
+    c_event = (viol | doubt_s | bad) & valid
+    enter = (b.margin - c_margin * en_s > 0) & valid
+    big = 2 * K + 2
+    pos_c = np.where(c_event.any(axis=1), 2 * c_event.argmax(axis=1), big)
+    pos_e = np.where(enter.any(axis=1), 2 * enter.argmax(axis=1), big)
+    st = doubt_t & valid_t
+    pos_t = np.where(st.any(axis=1), 2 * st.argmax(axis=1) + 1, big)
+    # a doubtful step is decided by the sample at its end: a certain violation there is unsafe
+    pos_t = np.where(c.pending, 0, pos_t)
+    first = np.minimum(np.minimum(pos_c, pos_e), pos_t)
+    rows = np.arange(m)
+    step_first = (pos_t == first) & (pos_c != first) & (first < big)
+    ke = np.minimum(first // 2 + (pos_t % 2), K - 1)  # sample at the doubtful step's end (this block)
+    end_in = step_first & ((first // 2 + 1 < K) | c.pending)
+    end_bad = end_in & (viol | bad)[rows, np.where(c.pending, 0, ke)]
+    first = np.where(end_bad, 2 * np.where(c.pending, 0, ke), first)
+    k = first // 2
+    kc = np.minimum(k, K - 1)
+    kind = np.full(m, "", dtype=object)
+    is_c = ((pos_c == first) | end_bad) & (first < big)
+    kind[is_c & bad[rows, kc]] = "non_finite"
+    kind[is_c & ~bad[rows, kc] & viol[rows, kc]] = "left_C"
+    kind[is_c & ~bad[rows, kc] & ~viol[rows, kc]] = "doubt"
+    kind[~is_c & (pos_e == first) & (first < big)] = "safe"
+    kind[~is_c & step_first & end_in] = "doubt"
+    wait = ~is_c & step_first & ~end_in  # the doubtful step is this block's last: decide on the next
+    horizon = (first >= big) & ((~valid).any(axis=1) | ~valid_t[:, -1])
+    kind[horizon] = "horizon"
+    c.pending = wait
+    first = np.where(wait, big, first)
+    done = kind != ""
+    # judged part: samples up to the decision, steps before it (and the doubtful step itself)
+    n_s = np.where(first < big, k + 1, valid.sum(axis=1))
+    n_t = np.where(first < big, (first + 1) // 2, valid_t.sum(axis=1))
+    js = ar[None, :] < n_s[:, None]
+    jt = ar[None, :] < n_t[:, None]
+    if nh:
+        with np.errstate(invalid="ignore"):
+            c.min_h = np.minimum(c.min_h, np.where(js[None] & act_s & np.isfinite(b.h), b.h, np.inf).min(axis=2))
+            c.low = np.minimum(c.low, np.minimum(np.where(js[None] & np.isfinite(low_s), low_s, np.inf).min(axis=2),
+                                                 np.where(jt[None] & np.isfinite(low_t), low_t, np.inf).min(axis=2)))
+        c.count += (js[None] & act_s).sum(axis=2) + (jt[None] & act_t).sum(axis=2)
+        c.eh = c.eh + np.where(jt[None], b.dh, 0.0).sum(axis=2)
+    c.en = c.en + np.where(jt, b.err, 0.0).sum(axis=1)
+    c.nsteps = c.nsteps + n_t
+    with np.errstate(invalid="ignore"):
+        c.best_m = np.maximum(c.best_m, np.where(js & ~np.isnan(b.margin), b.margin, -np.inf).max(axis=1))
+        if b.u.shape[0]:
+            c.peak = np.maximum(c.peak, np.where(js[None] & np.isfinite(b.u), np.abs(b.u), 0.0).max(axis=2))
+            c.peak_raw = np.maximum(c.peak_raw, np.where(js[None] & np.isfinite(b.u_raw), np.abs(b.u_raw), 0.0).max(axis=2))
+            c.sat |= (((b.u_raw < lo[:, None, None]) | (b.u_raw > hi[:, None, None])) & js[None]).any(axis=(0, 2))
+    return Decision(done, kind, np.where(horizon, np.maximum(n_s - 1, 0), kc))
+
+
+def evidence(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, j: int, t0: float, c_margin: float,
+             message_nonfinite: str = "") -> OracleEvidence:
+    """Evidence of rollout j of a decided block (carry and block columns j)."""
+    k = int(d.k[j])
+    kind = d.kind[j]
+    t = float(b.s[j, k])
+    names = prim.h_names
+    if kind == "safe":
+        ev = OracleEvidence(1, Reason.ENTERED_E, t, t_enter=t, status=SAFE)
+        ev.entry_margin = float(b.margin[j, k])
+        ev.entry_error = float(c_margin * c.en[j])
+    elif kind == "left_C":
+        hv = np.where(b.h[:, j, k] < INACTIVE / 2, b.h[:, j, k], np.inf)
+        ev = OracleEvidence(0, Reason.LEFT_C, t, violated=names[int(np.argmin(hv))], status=UNSAFE)
+    elif kind == "non_finite":
+        ev = OracleEvidence(0, Reason.INTEGRATION_FAILED, t, status=UNSAFE, message=message_nonfinite or "non-finite value")
+    elif kind == "doubt":
+        ev = OracleEvidence(0, Reason.INCONCLUSIVE, t, status=INCONCLUSIVE,
+                            message="a safety margin is within the numerical error bound")
+    else:
+        ev = OracleEvidence(0, Reason.HORIZON, t, status=UNSAFE)
+    ev.steps = int(c.nsteps[j])
+    ev.min_margins = {n: (float(v) if np.isfinite(v) else None) for n, v in zip(names, c.min_h[:, j])}
+    ev.lower_bounds = {n: (float(v) if np.isfinite(v) else None) for n, v in zip(names, c.low[:, j])}
+    if len(names):
+        ms, lw = np.min(c.min_h[:, j]), np.min(c.low[:, j])
+        ev.margin = float(ms) if np.isfinite(ms) else None
+        ev.error_bound = float(ms - lw) if np.isfinite(ms) and np.isfinite(lw) else None
+        if kind == "doubt":
+            worst = int(np.argmin(c.low[:, j]))
+            ev.violated = names[worst]
+    ev.best_roa_margin = float(c.best_m[j])
+    ev.peak_input = [float(v) for v in c.peak[:, j]]
+    ev.peak_demand = [float(v) for v in c.peak_raw[:, j]]
+    ev.saturated = bool(c.sat[j])
+    missing = unevaluated(prim, t0, ev.t_stop, c.count[:, j])
+    if missing:
+        return OracleEvidence(0, Reason.ERROR, ev.t_stop, status=INCONCLUSIVE, violated=missing,
+                              message=f"safety function {missing} was never evaluated in its active window")
+    ev.checked = True
+    return ev
+
+
+def unevaluated(prim: CompiledPrimitive, t0: float, t1: float, count: np.ndarray) -> str | None:
+    """The first safety function whose window overlaps the rollout's clock span but was never evaluated."""
+    for i, w in enumerate(prim.windows):
+        if count[i] > 0 or t1 <= 0:
+            continue
+        if w is None or _overlaps(w, t0, t0 + t1, prim.period):
+            return prim.h_names[i]
+    return None
+
+
+def _overlaps(w: tuple[float, float], a: float, b: float, period: float | None) -> bool:
+    """Does [w0, w1) (repeated every period, if any) overlap (a, b) with positive length?"""
+    if period is None:
+        return min(w[1], b) - max(w[0], a) > 1e-12
+    n0, n1 = int(np.floor((a - w[1]) / period)), int(np.ceil((b - w[0]) / period))
+    return any(min(w[1] + n * period, b) - max(w[0] + n * period, a) > 1e-12 for n in range(n0, n1 + 1))
