@@ -14,7 +14,7 @@ SPEC = Path(__file__).parents[2] / "specs" / "a1"
 
 
 @pytest.fixture(scope="module")
-def drop(tmp_path_factory):
+def drop_spec(tmp_path_factory):
     d = tmp_path_factory.mktemp("drop") / "a1"
     shutil.copytree(SPEC, d)
     p = (d / "project.yaml").read_text()
@@ -31,8 +31,12 @@ def drop(tmp_path_factory):
                       "0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0,0,0,0]")
     lie = lie.replace("  - use: quadruped_ground\n", "  - use: joint_limits\n  - use: aerial\n")
     (d / "primitives" / "lie.yaml").write_text(lie)
-    spec = load_project(d / "project.yaml")
-    return compile_project(spec)["Fall"], settings_for(spec)
+    return load_project(d / "project.yaml")
+
+
+@pytest.fixture(scope="module")
+def drop(drop_spec):
+    return compile_project(drop_spec)["Fall"], settings_for(drop_spec)
 
 
 def test_drop_touches_down_with_an_impact(drop):
@@ -101,3 +105,21 @@ def test_contact_schedule_sets_the_flags_by_the_clock(tmp_path):
     assert t[k] == pytest.approx(0.4, abs=1.5e-3)
     assert np.abs(np.array(feet_v(X[:, k]))).max() < 1e-6  # the impact stopped the rejoining feet
     assert np.abs(np.array(feet_v(X[:, k - 1]))).max() > 1e-3  # they were moving just before
+
+
+def test_a_backend_without_jump_maps_refuses_the_hybrid_drop(drop, drop_spec):
+    """scipy has no discrete part: it must refuse contact events by name, not fall through the ground."""
+    from mpgspec.api import build
+    from mpgspec.errors import SpecError
+    from mpgspec.oracle import SafetyOracle
+    from mpgspec.oracle.oracle import CapabilityError
+
+    fall, settings = drop
+    with pytest.raises(CapabilityError, match="lacks the capability hybrid"):
+        SafetyOracle(fall, settings.replace(method="scipy"))
+    e = SafetyOracle(fall, settings)(fall.x_star(0.0), 0.0)  # rk4 applies the impacts
+    assert e.status in ("safe", "unsafe", "inconclusive") and e.reason.value != "error"
+    with pytest.raises(SpecError) as err:
+        build(drop_spec, settings.replace(method="scipy"))
+    assert err.value.code == "MPG120" and "oracle.method" in err.value.format()
+
