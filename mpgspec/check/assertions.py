@@ -7,7 +7,8 @@ import networkx as nx
 
 from ..graph.transition import MotionPrimitiveGraph
 from ..plan.planner import plan_graph, shortest_plan
-from ..spec.models import ForbidEdge, RequireEdge, RequirePlan, RequireReachable, RequireSimulation
+from ..spec.models import (ForbidEdge, RequireConclusive, RequireEdge, RequirePlan, RequireReachable,
+                           RequireSimulation)
 
 
 @dataclass
@@ -68,6 +69,15 @@ def evaluate_assertions(assertions, g: MotionPrimitiveGraph, runs: dict) -> list
             out.append(AssertionResult(i, "reachable_from", f"every primitive reachable from {src}",
                                        "fail" if missing else "pass",
                                        f"unreachable: {', '.join(missing)}" if missing else "all reachable"))
+        elif isinstance(a, RequireConclusive):
+            per = {k: sum(e.status == "inconclusive" for row in tr.evidence for e in row)
+                   for k, tr in g.transitions.items()}
+            n = sum(per.values())
+            worst = sorted(((v, k) for k, v in per.items() if v), reverse=True)[:3]
+            where = ", ".join(f"{a} -> {b}: {v}" for v, (a, b) in worst)
+            out.append(AssertionResult(i, "max_inconclusive", f"at most {a.max_inconclusive} inconclusive oracle calls",
+                                       "pass" if n <= a.max_inconclusive else "fail",
+                                       f"{n} inconclusive" + (f" ({where})" if where else "")))
         elif isinstance(a, RequireSimulation):
             run = runs.get(a.simulation_safe)
             desc = f"{a.simulation_safe} sequence is {'safe' if a.expect else 'unsafe'}"

@@ -43,9 +43,11 @@ def _round(v, digits: int = 6):
 def transition_entry(tr, h_names: list[str]) -> dict:
     """One ordered pair's grid; each cell's least margins are listed in the order of h_names."""
     ev = tr.evidence
-    cells = [[{"verdict": e.verdict, "reason": e.reason.value, "t_stop": _round(e.t_stop), "t_enter": _round(e.t_enter),
-               "violated": e.violated, "checked": e.checked, "refined": e.refined,
-               "peak_input": [_round(v) for v in e.peak_input], "saturated": e.saturated,
+    cells = [[{"verdict": e.verdict, "status": e.status, "reason": e.reason.value, "t_stop": _round(e.t_stop),
+               "t_enter": _round(e.t_enter), "violated": e.violated, "checked": e.checked, "refined": e.refined,
+               "margin": _round(e.margin), "error_bound": _round(e.error_bound),
+               "peak_input": [_round(v) for v in e.peak_input], "peak_demand": [_round(v) for v in e.peak_demand],
+               "saturated": e.saturated,
                "min_margins": [_round(e.min_margins.get(k)) for k in h_names],
                "best_roa_margin": _round(e.best_roa_margin), "message": e.message} for e in row] for row in ev]
     flat = [e for row in ev for e in row]
@@ -55,6 +57,7 @@ def transition_entry(tr, h_names: list[str]) -> dict:
         "verdicts": tr.verdicts.tolist(), "cells": cells,
         "windows": [list(w) for w in tr.windows], "best_t_B": tr.best_t_B, "weights": tr.weights,
         "counts": {"safe": sum(e.verdict for e in flat), "total": len(flat),
+                   "inconclusive": sum(e.status == "inconclusive" for e in flat),
                    "refined": sum(e.refined for e in flat), "errors": sum(e.reason.value == "error" for e in flat)},
     }
 
@@ -101,6 +104,13 @@ def edge_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], se
     return out
 
 
+def verdict_counts(graph) -> dict:
+    """Oracle calls of the whole graph by status, with the refined and errored ones."""
+    flat = [e for tr in graph.transitions.values() for row in tr.evidence for e in row]
+    return {"total": len(flat), **{k: sum(e.status == k for e in flat) for k in ("safe", "unsafe", "inconclusive")},
+            "refined": sum(e.refined for e in flat), "errors": sum(e.reason.value == "error" for e in flat)}
+
+
 def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs, failures, timing,
                  status: str, assumptions=(), roa=None, edge_series=()) -> dict:
     """The report dict; see mpgspec/report/schema/report-v1.json."""
@@ -119,6 +129,7 @@ def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs
                    "inputs": list(csys.input_names), "input_bounds": bounds},
         "primitives": [primitive_entry(prims[i.name], i.spec, (roa or {}).get(i.name)) for i in spec.primitives],
         "transitions": [transition_entry(tr, prims[tr.target].h_names) for tr in graph.transitions.values()],
+        "verdicts": verdict_counts(graph),
         "edges": [{"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in ("duration", "peak_input", "hops") if k in d}}
                   for a, b, d in graph.G.edges(data=True)],
         "failures": failures,

@@ -14,7 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 SCHEMA_FILE = "schema/report-v1.json"
 Num = float | None  # non-finite numbers are written as null
-Reason = Literal["entered_E", "left_C", "horizon_reached", "integration_failed", "error"]
+Reason = Literal["entered_E", "left_C", "horizon_reached", "integration_failed", "inconclusive", "error"]
 Method = Literal["certified", "simulated", "empirical"]
 Status = Literal["pass", "fail", "error"]
 
@@ -69,13 +69,18 @@ class Cell(_Strict):
     """One oracle call O_B(x_A*(t_A), t_B) with its evidence."""
 
     verdict: Literal[0, 1]
+    status: Literal["safe", "unsafe", "inconclusive"] = Field(
+        default=None, description="safe only when every margin exceeds its numerical error bound")
     reason: Reason
     t_stop: Num
     t_enter: Num
     violated: str | None
     checked: bool
     refined: bool
-    peak_input: list[Num]
+    margin: Num = Field(default=None, description="least sampled value of any active safety function")
+    error_bound: Num = Field(default=None, description="what the numerics may hide below margin")
+    peak_input: list[Num] = Field(description="largest |u| applied, after saturation")
+    peak_demand: list[Num] = Field(default_factory=list, description="largest |u| asked for, before saturation")
     saturated: bool
     min_margins: list[Num] = Field(description="least value of each safety function, in the order of h_names")
     best_roa_margin: Num
@@ -85,6 +90,18 @@ class Cell(_Strict):
 class Counts(_Strict):
     safe: int
     total: int
+    inconclusive: int = 0
+    refined: int
+    errors: int
+
+
+class VerdictCounts(_Strict):
+    """Oracle calls by status; inconclusive calls had a margin within its numerical error bound."""
+
+    total: int
+    safe: int
+    unsafe: int
+    inconclusive: int
     refined: int
     errors: int
 
@@ -237,6 +254,7 @@ class Report(_Strict):
     system: System
     primitives: list[Primitive]
     transitions: list[Transition]
+    verdicts: VerdictCounts | None = Field(default=None, description="oracle calls of the graph by status")
     edges: list[Edge]
     failures: list[Failure]
     edge_traces: list[Failure] = Field(default_factory=list, description="the verified switch of every edge over time")

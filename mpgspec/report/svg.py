@@ -11,10 +11,10 @@ from html import escape
 import networkx as nx
 
 PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2")
-CELL_COLORS = {"safe": "#3a9d4a", "left_C": "#d64541", "horizon_reached": "#a0a0a0",
+CELL_COLORS = {"safe": "#3a9d4a", "left_C": "#d64541", "horizon_reached": "#a0a0a0", "inconclusive": "#f0b429",
                "integration_failed": "#111111", "error": "#111111"}
 CELL_LABELS = (("safe", "safe (entered E)"), ("left_C", "left C"), ("horizon_reached", "horizon reached"),
-               ("error", "integration failed / error"))
+               ("inconclusive", "inconclusive (margin within error bound)"), ("error", "integration failed / error"))
 SHAPES = {"fixed": "box", "periodic": "ellipse", "transient": "diamond"}
 NODE_FILL = {"fixed": "#dbe9f6", "periodic": "#dff0d8", "transient": "#fbe5c8"}
 ARROW_ID = "mpg-arrow"
@@ -232,6 +232,11 @@ def grid_svg(transition: dict, *, max_size: int = 360) -> str:
     def key_of(e: dict) -> tuple[str, str | None]:
         return "safe" if e.get("verdict") else e.get("reason", "error"), e.get("violated")
 
+    def bound_of(e: dict) -> str:
+        if e.get("status") != "inconclusive" or e.get("margin") is None:
+            return ""
+        return f"; margin {fmt(e['margin'])} within error bound {fmt(e.get('error_bound'))}"
+
     cells = transition.get("cells") or [[{"verdict": v, "reason": "entered_E" if v else "left_C"} for v in row]
                                          for row in transition["verdicts"]]
     c = max(4, min(22, max_size // max(len(tA), len(tB), 1)))
@@ -244,7 +249,8 @@ def grid_svg(transition: dict, *, max_size: int = 360) -> str:
             while k + 1 < len(row) and key_of(row[k + 1]) == key:
                 k += 1
             span = fmt(tB[j]) if k == j else f"{fmt(tB[j])}…{fmt(tB[k])}"
-            tip = f"t_A = {fmt(tA[i])}, t_B = {span}: {key[0]}" + (f" ({key[1]})" if key[1] else "")
+            tip = f"t_A = {fmt(tA[i])}, t_B = {span}: {key[0]}" + (f" ({key[1]})" if key[1] else "") + \
+                (bound_of(row[j]) if k == j else "")
             body.append(_el("rect", _tip(tip), x=x0 + c * j, y=y0 + c * i, width=c * (k - j + 1), height=c,
                             fill=CELL_COLORS.get(key[0], "#111111"), shape_rendering="crispEdges"))
             j = k + 1

@@ -9,13 +9,14 @@ from .primitive import (Controller, ContactPhase, ExplicitRoA, ExpressionControl
                         LQRController, MotionProfile, PDController, Primitive, PrimitiveClass, SafetyFunction,
                         Setpoint)
 from .project import (ASSERTION_KEYS, Assertion, EdgeRef, EdgeWithClass, ForbidEdge, GoalCommand, OracleConfig,
-                      PlanRef, Project, RequireEdge, RequirePlan, RequireReachable, RequireSimulation, Sequence)
+                      PlanRef, Project, RequireConclusive, RequireEdge, RequirePlan, RequireReachable,
+                      RequireSimulation, Sequence)
 from .system import AnalyticSystem, BaumgarteGains, ControlAffine, RigidBodySystem, System
 
 __all__ = [
     "ASSERTION_KEYS", "AnalyticSystem", "Assertion", "BaumgarteGains", "ContactPhase", "ControlAffine", "Controller",
     "EdgeRef", "EdgeWithClass", "ExplicitRoA", "ExprText", "ExpressionController", "ForbidEdge", "GoalCommand", "Grid",
     "IDQPController", "LQRController", "MotionProfile", "OracleConfig", "PDController", "PlanRef", "Primitive",
-    "PrimitiveClass", "Project", "RequireEdge", "RequirePlan", "RequireReachable", "RequireSimulation",
+    "PrimitiveClass", "Project", "RequireConclusive", "RequireEdge", "RequirePlan", "RequireReachable", "RequireSimulation",
     "RigidBodySystem", "SafetyFunction", "Sequence", "Setpoint", "Strict", "System",
 ]

@@ -58,8 +58,15 @@ class RequireSimulation(Strict):
     expect: bool = True
 
 
+class RequireConclusive(Strict):
+    """At most this many oracle calls may be inconclusive (a margin within its error bound)."""
+
+    max_inconclusive: int = Field(ge=0)
+
+
 ASSERTION_KEYS = {"edge": RequireEdge, "no_edge": ForbidEdge, "plan": RequirePlan,
-                  "reachable_from": RequireReachable, "simulation_safe": RequireSimulation}
+                  "reachable_from": RequireReachable, "simulation_safe": RequireSimulation,
+                  "max_inconclusive": RequireConclusive}
 
 
 def _assertion_kind(v):
