@@ -203,3 +203,18 @@ def test_algorithm_1_classes(rows, cls):
     g = MotionPrimitiveGraph({"A": {"cls": "periodic"}, "B": {"cls": "fixed"}}, {("A", "B"): tr})
     assert g.G.has_edge("A", "B") == (cls is not TransitionClass.NONE)
     assert (g.edge("A", "B") is tr) == (cls is not TransitionClass.NONE)
+
+
+def test_inconclusive_cells_give_no_edge_and_are_counted_by_the_assertion():
+    from mpgspec.check.assertions import evaluate_assertions
+    from mpgspec.spec.models import RequireConclusive
+
+    doubt = OracleEvidence(0, Reason.INCONCLUSIVE, 0.3, status="inconclusive", violated="h", margin=1e-3,
+                           error_bound=2e-3)
+    tr = Transition("A", "B", np.array([0.0, 1.0]), np.array([0.0]), [[doubt], [doubt]])
+    tr.classify()
+    assert tr.cls is TransitionClass.NONE  # never safe, so never an edge
+    g = MotionPrimitiveGraph({"A": {"cls": "fixed"}, "B": {"cls": "fixed"}}, {("A", "B"): tr})
+    zero, two = evaluate_assertions([RequireConclusive(max_inconclusive=0), RequireConclusive(max_inconclusive=2)], g, {})
+    assert (zero.status, two.status) == ("fail", "pass")
+    assert zero.message == "2 inconclusive (A -> B: 2)"
