@@ -2,7 +2,8 @@
 
 - setpoint_dynamics: x*(t) satisfies the closed loop, d/dt x* = f_cl(x*, t) (residual);
 - setpoint_safe: x*(t) stays in C(t) over the domain (least h);
-- roa_in_safe_set: E(t) lies inside C(t) (sampled points of E plus a local worst-case search);
+- roa_in_safe_set: E(t) lies inside C(t) (sampled points of E plus a local worst-case search; with
+  contact constraints, on the contact manifold the constrained flows stay on);
 - local_stability: eigenvalues of the closed-loop Jacobian at a fixed setpoint (Floquet
   multipliers of the orbit for periodic primitives come from the floquet verifier).
 
@@ -80,8 +81,29 @@ def setpoint_safe(p: CompiledPrimitive, tol: float, n: int = 40) -> AssumptionCh
                            {"min_h": worst if np.isfinite(worst) else None, "t": at})
 
 
-def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: int = 0) -> AssumptionCheck:
-    """Sample E's boundary (where h is smallest for convex C) and refine the worst point locally."""
+def _contact_projection(p: CompiledPrimitive, W: np.ndarray):
+    """(x, x*) -> (x on the contact manifold of the primitive's contact mode at x*, that mode), or
+    None for systems without contact constraints."""
+    sys = p.system
+    if not hasattr(sys, "project_to_contacts") or not sys.model.contact_frames:
+        return None
+
+    def project(x, xs):
+        feet = sys.contact_mode(xs, p.info.get("contacts"))
+        return sys.project_to_contacts(x, feet, W), feet
+
+    return project
+
+
+def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: int = 0,
+                    radius: float | None = None) -> AssumptionCheck:
+    """Sample E's boundary (where h is smallest for convex C) and refine the worst point locally.
+
+    With contact constraints the flows stay on the contact manifold (feet on the ground and still),
+    so E is checked where they can reach it: points of E, on its boundary and inside, are projected
+    onto the manifold of the primitive's contact mode and h is evaluated there. `radius` overrides
+    the primitive's radius of E.
+    """
     rng = np.random.default_rng(seed)
     nx = p.system.nx
     W = p.info.get("roa_W")
@@ -89,7 +111,10 @@ def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: 
     w, V = np.linalg.eigh(W)
     keep = w > 1e-12
     L = V[:, keep] / np.sqrt(w[keep])  # maps unit vectors of the weighted norm to state offsets
-    r = p.radius * (1 - 1e-9)
+    r = (p.radius if radius is None else radius) * (1 - 1e-9)
+    project = _contact_projection(p, W)
+    if project is not None:
+        return _roa_on_contact_manifold(p, tol, samples, rng, W, L, r, project)
     worst, arg = np.inf, None
     for t in _clock(p, 8):
         xs = p.x_star(t)
@@ -114,6 +139,110 @@ def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: 
     return AssumptionCheck(p.name, "roa_in_safe_set", "pass" if ok else "fail", "empirical",
                            f"least h on the boundary of E {worst:.3g} ({samples} samples per clock time + local search)",
                            {"min_h": worst if np.isfinite(worst) else None, "samples": samples})
+
+
+def _roa_on_contact_manifold(p, tol, samples, rng, W, L, r, project, starts: int = 3,
+                             steps: int = 8) -> AssumptionCheck:
+    """roa_in_safe_set on the contact manifold.
+
+    Per clock time: `samples` points on E's boundary and as many inside (uniform in radius), each
+    projected onto the manifold before h is evaluated; then a local worst-case search on E's
+    boundary. The search linearises every h_i(project(x* + L z)) in the ball coordinates z (forward
+    differences), steps to the boundary point z = -r grad h_i / |grad h_i| and repeats, from the
+    `starts` points (those steps and the samples) nearest to leaving C. Nearness is the least
+    h_i / h_i(x*): on the manifold the contact functions sit at their tolerance while forces (in
+    newtons) vary, so the relative margin, unlike h itself, finds the functions that can fail.
+    Distances are in E's norm ||.||_W.
+    """
+    k = L.shape[1]
+    worst, raw_worst = np.inf, np.inf
+    dist, spread, feet = [], [], set()
+
+    def wnorm(dx):
+        return float(np.sqrt(max(dx @ W @ dx, 0.0)))
+
+    for t in _clock(p, 8):
+        xs = p.x_star(t)
+        scale = np.maximum(_h(p, xs, t), 1e-9)
+        if not scale.size:
+            continue
+
+        def hv(z):
+            nonlocal worst
+            h = _h(p, project(xs + L @ z, xs)[0], t)
+            worst = min(worst, float(h.min()))
+            return h
+
+        def rel(z):
+            return float((hv(z) / scale).min())
+
+        def jac(z):
+            e = max(1e-7, 1e-4 * r)
+            h0 = hv(z)
+            return h0, np.stack([(hv(z + e * c) - h0) / e for c in np.eye(k)], axis=1)
+
+        def to_boundary(g):
+            n = np.linalg.norm(g)
+            return -r * g / n if n > 0 else None
+
+        d = rng.normal(size=(2 * samples, k))
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+        d *= r * np.r_[np.ones(samples), rng.uniform(size=samples)][:, None]
+        cands = []
+        for z in d:
+            x0 = xs + L @ z
+            x, mode = project(x0, xs)
+            feet.update(mode)
+            dist.append(wnorm(x - x0))
+            spread.append(wnorm(x - xs))
+            raw_worst = min(raw_worst, float(_h(p, x0, t).min()))
+            cands.append((rel(z), z))
+        if r > 0:
+            for g in jac(np.zeros(k))[1]:
+                z = to_boundary(g)
+                if z is not None:
+                    cands.append((rel(z), z))
+        cands.sort(key=lambda c: c[0])
+        for m, z in cands[:starts]:
+            for _ in range(steps):
+                h0, G = jac(z)
+                z_new = to_boundary(G[int(np.argmin(h0 / scale))])
+                if z_new is None:
+                    break
+                m_new = rel(z_new)
+                if m_new >= m - 1e-12:
+                    break
+                z, m = z_new, m_new
+    ok = worst >= -tol
+    dist = np.asarray(dist) if dist else np.zeros(1)
+    numbers = {"min_h": worst if np.isfinite(worst) else None, "samples": samples, "interior_samples": samples,
+               "contacts": sorted(feet), "projected": len(spread),
+               "projection_distance_max": float(dist.max()), "projection_distance_median": float(np.median(dist)),
+               "projected_radius_max": float(max(spread, default=0.0)) / r if r > 0 else 0.0,
+               "min_h_unprojected": raw_worst if np.isfinite(raw_worst) else None}
+    return AssumptionCheck(p.name, "roa_in_safe_set", "pass" if ok else "fail", "empirical",
+                           f"least h on E, checked on the contact manifold, {worst:.3g} ({samples} samples per clock "
+                           f"time on the boundary of E and {samples} inside, projected onto the manifold (distance in "
+                           f"||.||_W max {numbers['projection_distance_max']:.3g}, median "
+                           f"{numbers['projection_distance_median']:.3g}) + local search; least h before projection "
+                           f"{raw_worst:.3g})", numbers)
+
+
+def largest_radius_in_safe_set(p: CompiledPrimitive, tol: float = 1e-9, r_max: float | None = None,
+                               rel_tol: float = 1e-3, **kw) -> float:
+    """The largest radius of E, up to r_max (default: the primitive's), for which roa_in_safe_set
+    passes, by bisection with the same samples at every radius."""
+    hi = p.radius if r_max is None else r_max
+    if roa_in_safe_set(p, tol, radius=hi, **kw).status == "pass":
+        return float(hi)
+    lo = 0.0
+    while hi - lo > rel_tol * hi:
+        mid = 0.5 * (lo + hi)
+        if roa_in_safe_set(p, tol, radius=mid, **kw).status == "pass":
+            lo = mid
+        else:
+            hi = mid
+    return float(lo)
 
 
 def local_stability(p: CompiledPrimitive, rel_tol: float = 1e-6) -> AssumptionCheck:

@@ -164,6 +164,8 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         env[f"{n}_star_dot"] = x_star_dot[i]
     ctx = ControlContext(sys, t, s, x_sw, x_star, x_star_dot, setpoint, env, ec,
                          fixed=p.class_ is PrimitiveClass.FIXED, xdot=loop.xdot, contacts=loop.contacts)
+    if getattr(sys, "dyn", None) is not None:  # rigid bodies: the feet the primitive's dynamics hold
+        ctx.info["contacts"] = list(loop.contacts)
     u_raw = LAWS[p.controller.type](p.controller, ctx)
     sat_u = saturate(sys.u, sys.u_lo, sys.u_hi)
     args = [x, t, s, x_sw]

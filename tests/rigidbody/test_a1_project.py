@@ -15,12 +15,6 @@ from mpgspec.spec.loader import load_project
 SPEC = Path(__file__).parents[2] / "specs" / "a1"
 
 
-@pytest.fixture(scope="module")
-def a1():
-    spec = load_project(SPEC / "project.yaml")
-    return spec, compile_project(spec), settings_for(spec)
-
-
 def test_setpoints_are_on_the_ground(a1):
     _, prims, _ = a1
     sys = prims["Lie"].system

@@ -8,6 +8,7 @@ up); com_x, com_y, com_z; and `mass`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import casadi as ca
@@ -122,6 +123,74 @@ class RigidBodyCompiledSystem(CompiledSystem):
 
             x = contact_events(self, x, u)
         return x
+
+    def contact_mode(self, x: np.ndarray, default: tuple[str, ...] | list[str] | None = None) -> tuple[str, ...]:
+        """Feet in contact at state x: with contact events the feet whose flag is set, else `default`
+        (None: every contact frame)."""
+        if self.events:
+            return tuple(f for f in self.model.contact_frames if x[self.state_names.index(f"contact_{f}")] > 0.5)
+        return tuple(self.model.contact_frames if default is None else default)
+
+    @cached_property
+    def _manifold_kinematics(self) -> ca.Function:
+        """q -> [foot heights; vec(J); vec(G)]: all contact frames, stacked contact Jacobian J and
+        G = d q / d v, in one output (one conversion per call)."""
+        dyn = self.dyn
+        z = dyn.contact_positions_expr[2, :].T
+        J = dyn.contact_jacobian_expr(self.model.contact_frames)
+        G = ca.jacobian(qdot(self.model, dyn.q, dyn.v), dyn.v)
+        return ca.Function("manifold_kinematics", [dyn.q], [ca.vertcat(z, ca.vec(J), ca.vec(G))])
+
+    def _kinematics_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        m = self.model
+        nc, nv, nq = len(m.contact_frames), m.nv, m.nq
+        out = self._manifold_kinematics(q).full().ravel()
+        z, J, G = out[:nc], out[nc:nc + 3 * nc * nv], out[nc + 3 * nc * nv:]
+        return z, J.reshape((nv, 3 * nc)).T, G.reshape((nv, nq)).T
+
+    def project_to_contacts(self, x: np.ndarray, contacts: tuple[str, ...] | list[str], W: np.ndarray | None = None,
+                            tol: float = 1e-12, max_iter: int = 50) -> np.ndarray:
+        """The state near x on the contact manifold of `contacts`, close in the metric W.
+
+        States the constrained dynamics hold: a unit base quaternion and height 0 for every foot in
+        `contacts` (Gauss-Newton steps q (+) dv on the configuration manifold, each the least-norm
+        step that zeroes the linearised heights), and velocities in the null space of the contacts'
+        Jacobian (orthogonal projection), so those feet do not move. Both norms are W's blocks
+        plus 1e-3 of their largest entry times the identity, so directions W leaves free (e.g. yaw
+        on flat ground) are used only where weighted ones do not help. With contact events the
+        flags are set to `contacts`.
+        """
+        m = self.model
+        nq, nv = m.nq, m.nv
+        x = np.array(x, float).ravel()
+        W = np.eye(self.nx) if W is None else np.asarray(W, float)
+        rows = [m.contact_frames.index(f) for f in contacts]
+        rows3 = [3 * i + k for i in rows for k in range(3)]
+
+        def inverse_metric(block: np.ndarray) -> np.ndarray:
+            return np.linalg.inv(block + 1e-3 * max(1e-12, float(np.abs(block).max())) * np.eye(block.shape[0]))
+
+        q = np.array(self.dyn.normalize(x[:nq])).ravel()
+        Wq = W[:nq, :nq]
+        for _ in range(max_iter):
+            z, J, G = self._kinematics_at(q)
+            r = z[rows]
+            if not rows or np.abs(r).max() <= tol:
+                break
+            A = J[[3 * i + 2 for i in rows]]
+            Minv = inverse_metric(G.T @ Wq @ G)
+            dv = -Minv @ A.T @ np.linalg.lstsq(A @ Minv @ A.T, r, rcond=None)[0]
+            q = np.array(self.dyn.integrate(q, dv, 1.0)).ravel()
+        v = x[nq:nq + nv]
+        if rows:
+            J = self._kinematics_at(q)[1][rows3]
+            Minv = inverse_metric(W[nq:nq + nv, nq:nq + nv])
+            v = v - Minv @ J.T @ np.linalg.lstsq(J @ Minv @ J.T, J @ v, rcond=None)[0]
+        out = np.concatenate([q, v, x[nq + nv:]])
+        if self.events:
+            for f in m.contact_frames:
+                out[self.state_names.index(f"contact_{f}")] = float(f in contacts)
+        return out
 
     def _when_in_contact(self, frame: str, h: ca.SX) -> ca.SX:
         """With contact events, a contact condition binds only while the foot's flag is set."""

@@ -1,0 +1,94 @@
+"""E inside C on the contact manifold: the projection of states onto feet-on-the-ground-and-still,
+and the roa_in_safe_set check of the A1 primitives on it."""
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from mpgspec.check.assumptions import largest_radius_in_safe_set, roa_in_safe_set
+
+FEET = ("FL_foot", "FR_foot", "RL_foot", "RR_foot")
+
+
+def _feet(sys, x):
+    """Foot heights and world velocities from pinocchio (independent of the CasADi kinematics)."""
+    m = sys.model
+    pm = m.pin_model
+    pd = pm.createData()
+    q, v = x[:m.nq], x[m.nq:m.nq + m.nv]
+    pin.forwardKinematics(pm, pd, q, v)
+    pin.updateFramePlacements(pm, pd)
+    z, vel = {}, {}
+    for f in FEET:
+        fid = pm.getFrameId(f)
+        z[f] = pd.oMf[fid].translation[2]
+        vel[f] = pin.getFrameVelocity(pm, pd, fid, pin.LOCAL_WORLD_ALIGNED).linear
+    return z, vel
+
+
+def _wdist(W, dx):
+    return float(np.sqrt(dx @ W @ dx))
+
+
+def _offsets(W, r, n, seed):
+    w, V = np.linalg.eigh(W)
+    keep = w > 1e-12
+    L = V[:, keep] / np.sqrt(w[keep])
+    d = np.random.default_rng(seed).normal(size=(n, L.shape[1]))
+    return (r * d / np.linalg.norm(d, axis=1, keepdims=True)) @ L.T
+
+
+def test_projection_puts_feet_on_the_ground_at_rest(a1):
+    _, prims, _ = a1
+    lie = prims["Lie"]
+    sys, W = lie.system, np.asarray(lie.info["roa_W"])
+    xs = lie.x_star(0.0)
+    assert np.allclose(sys.project_to_contacts(xs, FEET, W), xs, atol=1e-10)  # already on the manifold
+    for dx in _offsets(W, 0.08, 5, seed=3):
+        x0 = xs + dx
+        z0, _ = _feet(sys, np.r_[x0[:3], x0[3:7] / np.linalg.norm(x0[3:7]), x0[7:]])
+        assert max(abs(h) for h in z0.values()) > 1e-4  # the sample lifts or sinks feet
+        x = sys.project_to_contacts(x0, FEET, W)
+        assert abs(np.linalg.norm(x[3:7]) - 1) < 1e-12
+        z, vel = _feet(sys, x)
+        for f in FEET:
+            assert abs(z[f]) < 1e-8 and np.abs(vel[f]).max() < 1e-8
+        assert _wdist(W, x - xs) <= 0.08  # the projection stays inside E
+    # two feet in contact: only they are held
+    x = sys.project_to_contacts(xs + _offsets(W, 0.08, 1, seed=4)[0], ("FL_foot", "RR_foot"), W)
+    z, vel = _feet(sys, x)
+    for f in ("FL_foot", "RR_foot"):
+        assert abs(z[f]) < 1e-8 and np.abs(vel[f]).max() < 1e-8
+    assert max(np.abs(vel[f]).max() for f in ("FR_foot", "RL_foot")) > 1e-3
+
+
+def test_e_lies_inside_c_on_the_contact_manifold(a1):
+    spec, prims, _ = a1
+    assert spec.project.assumptions.get("roa_in_safe_set", "fail") == "fail"
+    for name in ("Lie", "Stand"):
+        p = prims[name]
+        c = roa_in_safe_set(p, 1e-9)
+        n = c.numbers
+        assert c.status == "pass", c.message
+        assert c.level == "empirical" and "contact manifold" in c.message
+        assert n["min_h"] >= 0 and n["contacts"] == list(FEET)
+        assert n["projected"] == 2 * n["samples"]
+        assert 0 < n["projection_distance_median"] <= n["projection_distance_max"] <= p.radius
+        assert n["projected_radius_max"] <= 1.0
+        assert n["min_h_unprojected"] < 0  # the ball in the full state lifts feet: C holds only on the manifold
+
+
+def test_e_too_large_fails_on_the_contact_manifold(a1):
+    """Lie at the radius of the full-state ball: joint offsets make the PD push the feet out of the
+    friction cone; Stand with joint offsets of 1.5 rad crosses the joint limits."""
+    _, prims, _ = a1
+    c = roa_in_safe_set(prims["Lie"], 1e-9, radius=0.08)
+    assert c.status == "fail" and c.numbers["min_h"] < -1, c.message
+    c = roa_in_safe_set(prims["Stand"], 1e-9, samples=50, radius=1.5)
+    assert c.status == "fail" and c.numbers["min_h"] < -0.1, c.message
+
+
+def test_spec_radius_of_lie_is_within_the_largest_safe_one(a1):
+    _, prims, _ = a1
+    lie = prims["Lie"]
+    r = largest_radius_in_safe_set(lie, r_max=0.08, samples=40, rel_tol=0.05)
+    assert lie.radius <= r < 0.08
