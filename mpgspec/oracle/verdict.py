@@ -45,7 +45,7 @@ class Block:
 class Carry:
     """What each rollout in flight has accumulated: error estimates, least values, peaks."""
 
-    FIELDS = ("eh", "en", "min_h", "low", "count", "best_m", "peak", "peak_raw", "sat", "nsteps", "pending")
+    FIELDS = ("eh", "en", "min_h", "low", "count", "best_m", "peak", "peak_raw", "sat", "nsteps", "pending", "maybe_e")
 
     def __init__(self, nh: int, nu: int, m: int = 0):
         self.eh = np.zeros((nh, m))  # integration error estimate of each h so far
@@ -59,6 +59,7 @@ class Carry:
         self.sat = np.zeros(m, bool)
         self.nsteps = np.zeros(m, int)  # steps judged so far
         self.pending = np.zeros(m, bool)  # the last step was doubtful: its end sample decides
+        self.maybe_e = np.zeros(m, bool)  # some sample may have been inside E (within the margin's error)
 
     def extend(self, k: int) -> None:
         new = Carry(self.eh.shape[0], self.peak.shape[0], k)
@@ -72,7 +73,11 @@ class Carry:
 
 @dataclass
 class Decision:
-    """Per rollout of a block: done, kind ('safe', 'left_C', 'non_finite', 'doubt', 'horizon' or ''), index."""
+    """Per rollout of a block: done, kind and the index of the deciding sample.
+
+    kind: 'safe', 'left_C', 'non_finite', 'horizon', 'doubt' (a margin of C within its error),
+    'doubt_E' (E perhaps entered before C was left or the horizon reached) or '' (undecided).
+    """
 
     done: np.ndarray
     kind: np.ndarray
@@ -122,14 +127,20 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
     kind = np.full(m, "", dtype=object)
     is_c = ((pos_c == first) | end_bad) & (first < big)
     kind[is_c & bad[rows, kc]] = "non_finite"
-    kind[is_c & ~bad[rows, kc] & viol[rows, kc]] = "left_C"
+    # a violation after a sample that may have been inside E does not show the switch unsafe
+    maybe = c.maybe_e[:, None] | np.logical_or.accumulate((b.margin + c_margin * en_s > 0) & valid, axis=1)
+    maybe_v = maybe.copy()
+    maybe_v[c.nsteps == 0, 0] = False  # at the switch-in instant, E cannot have been entered before C was left
+    kind[is_c & ~bad[rows, kc] & viol[rows, kc] & ~maybe_v[rows, kc]] = "left_C"
+    kind[is_c & ~bad[rows, kc] & viol[rows, kc] & maybe_v[rows, kc]] = "doubt_E"
     kind[is_c & ~bad[rows, kc] & ~viol[rows, kc]] = "doubt"
     kind[~is_c & (pos_e == first) & (first < big)] = "safe"
     kind[~is_c & step_first & end_in] = "doubt"
     wait = ~is_c & step_first & ~end_in  # the doubtful step is this block's last: decide on the next
     horizon = (first >= big) & ((~valid).any(axis=1) | ~valid_t[:, -1])
-    kind[horizon] = "horizon"
+    kind[horizon] = np.where(maybe[:, -1][horizon], "doubt_E", "horizon")
     c.pending = wait
+    c.maybe_e = maybe[:, -1]
     first = np.where(wait, big, first)
     done = kind != ""
     # judged part: samples up to the decision, steps before it (and the doubtful step itself)
@@ -174,6 +185,10 @@ def evidence(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, j: int, t
     elif kind == "doubt":
         ev = OracleEvidence(0, Reason.INCONCLUSIVE, t, status=INCONCLUSIVE,
                             message="a safety margin is within the numerical error bound")
+    elif kind == "doubt_E":
+        ev = OracleEvidence(0, Reason.INCONCLUSIVE, t, status=INCONCLUSIVE,
+                            message="the flow may have entered E (its margin is within the numerical error bound) "
+                                    "but E was not entered beyond doubt before C was left or the horizon was reached")
     else:
         ev = OracleEvidence(0, Reason.HORIZON, t, status=UNSAFE)
     ev.steps = int(c.nsteps[j])
