@@ -41,6 +41,11 @@ def _print_errors(errors: list[dict], fmt: str):
                 pass
 
 
+def _inconclusive(r: dict) -> str:
+    v = r.get("verdicts") or {}
+    return f", {v['inconclusive']} inconclusive" if v.get("inconclusive") else ""
+
+
 def _human(res: api.VerifyResult, fmt: str):
     for p in res.projects:
         if p.status == "error" and p.errors:
@@ -50,7 +55,7 @@ def _human(res: api.VerifyResult, fmt: str):
         r = p.report
         t = r["timing"]
         print(f"{MARK[p.status]} {p.name}: {len(r['primitives'])} primitives, {len(r['edges'])} edges, "
-              f"{t['oracle_calls']} oracle calls (simulated) in {t['graph_s']:.2f} s")
+              f"{t['oracle_calls']} oracle calls (simulated) in {t['graph_s']:.2f} s{_inconclusive(r)}")
         for e in r["edges"]:
             print(f"    {e['from']} -> {e['to']}  class {e['class']}  duration {e.get('duration', 0):.3g} s")
         for a in r["assertions"]:

@@ -263,13 +263,18 @@ def grid_svg(transition: dict, *, max_size: int = 360) -> str:
     yc = max(y0 + gh / 2, 28)
     body += [_text(x0 + gw / 2, y0 + gh + 26, "t_B (s)"),
              _text(11, yc, "t_A (s)", transform=f"rotate(-90 11 {_n(yc)})")]
-    ly, lx = y0 + gh + 42, 8.0
+    ly, lx, wmax = y0 + gh + 42, 8.0, 8.0
+    limit = max(x0 + gw + 8, 340)  # the legend wraps instead of widening the picture
     for key, label in CELL_LABELS + (("refined", "refined (finer step)"),):
+        item = 22 + 5.6 * len(label)
+        if lx > 8.0 and lx + item > limit:
+            ly, lx = ly + 16, 8.0
         body.append(_el("circle", cx=lx + 5, cy=ly - 4.0, r=3, fill="#fff", stroke="#000", stroke_width=.6)
                     if key == "refined" else _el("rect", x=lx, y=ly - 9.0, width=10, height=10, fill=CELL_COLORS[key]))
         body.append(_text(lx + 14, ly, label, 10, "start"))
-        lx += 22 + 5.6 * len(label)
-    return _svg(max(x0 + gw + 8, lx), ly + 8, body, f"oracle grid {transition.get('from')} → {transition.get('to')}")
+        lx += item
+        wmax = max(wmax, lx)
+    return _svg(max(x0 + gw + 8, wmax), ly + 8, body, f"oracle grid {transition.get('from')} → {transition.get('to')}")
 
 
 def _reach(shape: str, a: float, b: float, ux: float, uy: float) -> float:
