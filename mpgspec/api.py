@@ -6,12 +6,11 @@
 from __future__ import annotations
 
 import time
-from functools import partial
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from .certify.roa import RANK, apply_radii, size_regions
+from .certify.roa import RANK, size_regions
 from .check.assertions import AssertionResult, evaluate_assertions
 from .check.assumptions import check_primitive
 from .compile.primitive import CompiledPrimitive, compile_primitive
@@ -19,11 +18,13 @@ from .compile.system import compile_system
 from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, UsageError  # noqa: F401
 from .execute.sequence import simulate_sequence
 from .graph.build import build_graph
+from .graph.traces import edge_traces, failure_traces
+from .graph.transition import MotionPrimitiveGraph
+from .oracle.executors import Executor, InProcess
 from .oracle.oracle import CapabilityError, needs, require_capabilities
 from .oracle.registry import get_backend
-from .graph.transition import MotionPrimitiveGraph
 from .plan.planner import lookup_table, shortest_plan
-from .report.build import build_report, edge_traces, failure_traces
+from .report.build import build_report
 from .settings import OracleSettings
 from .spec.loader import ProjectSpec, discover, load_project
 
@@ -69,16 +70,42 @@ def compile_project(spec: ProjectSpec) -> dict[str, CompiledPrimitive]:
     return {inst.name: compile_primitive(inst, sys) for inst in spec.primitives}
 
 
-def compile_path(path: str | Path, radii: dict[str, float] | None = None) -> dict[str, CompiledPrimitive]:
-    """Load and compile a project file with the given E radii (a picklable factory for workers)."""
-    spec = load_project(path)
-    prims = compile_project(spec)
-    apply_radii(prims, radii or {})
-    return prims
+@dataclass
+class CompiledProject:
+    """Compile stage: the project's closed loops with their regions of attraction sized."""
+
+    spec: ProjectSpec
+    settings: OracleSettings
+    prims: dict[str, CompiledPrimitive]
+    roa: dict
+    timing: dict
 
 
-def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None, workers: int = 1):
-    """Compile and run Algorithm 1; returns (primitives, graph, oracles, timing)."""
+@dataclass
+class VerifiedGraph:
+    """Graph stage: Algorithm 1's graph with its evidence, and the rollouts the report shows."""
+
+    graph: MotionPrimitiveGraph
+    edge_traces: list[dict]
+    failure_traces: list[dict]
+    timing: dict
+
+
+@dataclass
+class Checks:
+    """Check stage: plans, sequence runs, assertions and Definition-1 assumptions, with the verdict."""
+
+    plans: list
+    table: dict
+    runs: dict
+    assertions: list[AssertionResult]
+    assumptions: list
+    status: str
+    timing: dict
+
+
+def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None) -> CompiledProject:
+    """Closed loops of every primitive, refused early when the backend cannot run them; E sized."""
     t0 = time.perf_counter()
     prims = compile_project(spec)
     _check_capabilities(spec, settings, prims)
@@ -86,17 +113,56 @@ def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None
     if progress:
         progress(spec.name, "regions of attraction", 0, len(prims))
     roa = size_regions(spec, prims)
-    t2 = time.perf_counter()
-    oracles: dict = {}
+    return CompiledProject(spec, settings, prims, roa,
+                           {"compile_s": t1 - t0, "roa_s": time.perf_counter() - t1})
+
+
+def graph_stage(cp: CompiledProject, progress: Progress | None = None,
+                executor: Executor | None = None) -> VerifiedGraph:
+    """Algorithm 1 through the executor, then the traces of every edge and of the closest failures."""
+    spec, prims, settings = cp.spec, cp.prims, cp.settings
+    executor = executor or InProcess()
     cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
-    radii = {n: r.radius for n, r in roa.items()}
-    g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, oracles,
-                    workers=workers, factory=partial(compile_path, spec.path, radii))
-    t3 = time.perf_counter()
+    t0 = time.perf_counter()
+    g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, executor)
+    t1 = time.perf_counter()
+    names = list(prims)
+    pairs = [(a, b) for a in names for b in names if a != b]
+    edges, failures = edge_traces(g, prims, settings), failure_traces(g, prims, settings, pairs)
     calls = sum(len(tr.t_A) * len(tr.t_B) for tr in g.transitions.values())
-    timing = {"compile_s": t1 - t0, "roa_s": t2 - t1, "graph_s": t3 - t2, "oracle_calls": calls,
-              "oracle_calls_per_s": calls / max(t3 - t2, 1e-9)}
-    return prims, g, oracles, timing, roa
+    timing = {"graph_s": t1 - t0, "oracle_calls": calls, "oracle_calls_per_s": calls / max(t1 - t0, 1e-9),
+              "traces_s": time.perf_counter() - t1, **getattr(executor, "stats", {})}
+    return VerifiedGraph(g, edges, failures, timing)
+
+
+def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | None = None) -> Checks:
+    """Plans, the goal sequence naive and through the graph, assertions and assumptions."""
+    spec, prims, settings, g = cp.spec, cp.prims, cp.settings, vg.graph
+    t0 = time.perf_counter()
+    names = list(prims)
+    plans = [shortest_plan(g, a, b, "duration") for a in names for b in names if a != b]
+    table = {"weight": "duration", "next": lookup_table(g, "duration")}
+    runs = {}
+    if spec.project.sequence is not None:
+        if progress:
+            progress(spec.name, "sequence", 0, 2)
+        for mode in ("naive", "graph"):
+            runs[mode] = simulate_sequence(prims, g, table["next"], spec.project.sequence, settings, mode)
+    checks = evaluate_assertions(spec.project.assertions, g, runs)
+    checks += roa_requirements(spec, cp.roa, start=len(checks))
+    t1 = time.perf_counter()
+    assumed = check_assumptions(prims, spec.project.assumptions)
+    st = [c.status for c in checks] + [a.status for a in assumed]
+    status = "error" if "error" in st else "fail" if "fail" in st else "pass"
+    return Checks(plans, table, runs, checks, assumed, status,
+                  {"plan_execute_s": t1 - t0, "assumptions_s": time.perf_counter() - t1})
+
+
+def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
+          executor: Executor | None = None) -> tuple[CompiledProject, VerifiedGraph]:
+    """Compile and run Algorithm 1."""
+    cp = compile_stage(spec, settings, progress)
+    return cp, graph_stage(cp, progress, executor)
 
 
 def _check_capabilities(spec: ProjectSpec, settings: OracleSettings, prims: dict[str, CompiledPrimitive]) -> None:
@@ -141,14 +207,14 @@ def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict) -> li
 
 def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
                 progress: Progress | None = None, formats: tuple[str, ...] = ("json", "html", "dot", "graphml"),
-                workers: int = 1) -> ProjectResult:
+                executor: Executor | None = None) -> ProjectResult:
     """Verify one project file and write its reports under out_dir/<project>/."""
     res = ProjectResult(Path(path))
     try:
         spec = load_project(path)
         res.name = spec.name
         settings = settings_for(spec, overrides)
-        prims, g, oracles, timing, roa = build(spec, settings, progress, workers)
+        cp, vg = build(spec, settings, progress, executor)
     except SpecErrors as e:
         res.errors = [x.to_dict() | {"text": x.format()} for x in e.errors]
         return res
@@ -156,55 +222,41 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
         res.errors = [e.to_dict() | {"text": e.format()} if isinstance(e, SpecError) else
                       {"code": e.code, "message": str(e), "text": f"{path}: {e.code} {e}"}]
         return res
-    res.graph = g
+    res.graph = vg.graph
     try:
-        return _finish_project(res, spec, settings, prims, g, oracles, timing, roa, out_dir, formats, progress)
+        return _finish_project(res, cp, vg, out_dir, formats, progress)
     except Exception as err:  # a bug after the graph was built: this project's error, not the end of the run
         res.errors = [{"code": "MPG900", "message": f"internal error: {type(err).__name__}: {err}",
                        "text": f"{path}: MPG900 internal error: {type(err).__name__}: {err}"}]
         return res
 
 
-def _finish_project(res: ProjectResult, spec, settings, prims, g, oracles, timing, roa, out_dir, formats,
+def _finish_project(res: ProjectResult, cp: CompiledProject, vg: VerifiedGraph, out_dir, formats,
                     progress: Progress | None):
-    """Plans, sequences, checks and reports of a project whose graph is built."""
-    t0 = time.perf_counter()
-    names = list(prims)
-    plans = [shortest_plan(g, a, b, "duration") for a in names for b in names if a != b]
-    table = {"weight": "duration", "next": lookup_table(g, "duration")}
-    runs = {}
-    if spec.project.sequence is not None:
-        if progress:
-            progress(spec.name, "sequence", 0, 2)
-        for mode in ("naive", "graph"):
-            runs[mode] = simulate_sequence(prims, g, table["next"], spec.project.sequence, settings, mode)
-    checks = evaluate_assertions(spec.project.assertions, g, runs)
-    checks += roa_requirements(spec, roa, start=len(checks))
-    timing["plan_execute_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    assumed = check_assumptions(prims, spec.project.assumptions)
-    timing["assumptions_s"] = time.perf_counter() - t0
-    st = [c.status for c in checks] + [a.status for a in assumed]
-    status = "error" if "error" in st else "fail" if "fail" in st else "pass"
-    pairs = [(a, b) for a in names for b in names if a != b]
-    failures = failure_traces(g, prims, settings, oracles, pairs)
-    edge_series = edge_traces(g, prims, settings, oracles)
-    report = build_report(spec=spec, prims=prims, graph=g, settings=settings, plans=plans, table=table,
-                          assertions=checks, runs=runs, failures=failures, timing=timing, status=status,
-                          assumptions=assumed, roa=roa, edge_series=edge_series)
-    res.status, res.report = status, report
+    """Checks and reports of a project whose graph is built."""
+    ch = check_stage(cp, vg, progress)
+    timing = {**cp.timing, **vg.timing, **ch.timing}
+    report = build_report(spec=cp.spec, prims=cp.prims, graph=vg.graph, settings=cp.settings, plans=ch.plans,
+                          table=ch.table, assertions=ch.assertions, runs=ch.runs, failures=vg.failure_traces,
+                          timing=timing, status=ch.status, assumptions=ch.assumptions, roa=cp.roa,
+                          edge_series=vg.edge_traces)
+    res.status, res.report = ch.status, report
     if out_dir is not None:
         from .report.files import write_reports
 
-        res.files = write_reports(report, g, Path(out_dir) / spec.name, formats)
+        res.files = write_reports(report, vg.graph, Path(out_dir) / cp.spec.name, formats)
     return res
 
 
 def verify(paths, out_dir: str | Path | None = "reports", overrides: dict | None = None,
-           progress: Progress | None = None, workers: int = 1) -> VerifyResult:
-    """Verify every project found under `paths`; reports go to out_dir (None: write nothing)."""
+           progress: Progress | None = None, executor: Executor | None = None) -> VerifyResult:
+    """Verify every project found under `paths`; reports go to out_dir (None: write nothing).
+
+    executor: where oracle calls run (mpgspec.oracle.executors: InProcess, ProcessPool,
+    DaskExecutor; make_executor(jobs, dask) picks one); in this process when omitted.
+    """
     files: list[Path] = []
     for p in [paths] if isinstance(paths, (str, Path)) else paths:
         files.extend(discover(p))
-    return VerifyResult([run_project(f, Path(out_dir) if out_dir else None, overrides, progress, workers=workers)
+    return VerifyResult([run_project(f, Path(out_dir) if out_dir else None, overrides, progress, executor=executor)
                          for f in files])

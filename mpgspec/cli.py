@@ -46,6 +46,10 @@ def _inconclusive(r: dict) -> str:
     return f", {v['inconclusive']} inconclusive" if v.get("inconclusive") else ""
 
 
+def _cached(t: dict) -> str:
+    return f", {int(t['cache_hits'])} from the cache" if t.get("cache_hits") else ""
+
+
 def _human(res: api.VerifyResult, fmt: str):
     for p in res.projects:
         if p.status == "error" and p.errors:
@@ -55,7 +59,7 @@ def _human(res: api.VerifyResult, fmt: str):
         r = p.report
         t = r["timing"]
         print(f"{MARK[p.status]} {p.name}: {len(r['primitives'])} primitives, {len(r['edges'])} edges, "
-              f"{t['oracle_calls']} oracle calls (simulated) in {t['graph_s']:.2f} s{_inconclusive(r)}")
+              f"{t['oracle_calls']} oracle calls (simulated) in {t['graph_s']:.2f} s{_inconclusive(r)}{_cached(t)}")
         for e in r["edges"]:
             print(f"    {e['from']} -> {e['to']}  class {e['class']}  duration {e.get('duration', 0):.3g} s")
         for a in r["assertions"]:
@@ -75,8 +79,13 @@ def cmd_verify(args) -> int:
     overrides = {}
     if args.method:
         overrides["method"] = args.method
+    from .oracle.executors import make_executor
+
+    if args.jobs < 1:
+        raise api.UsageError(f"--jobs must be at least 1, not {args.jobs}")
+    executor = make_executor(args.jobs, args.dask or args.scheduler, cache=not args.no_cache)
     res = api.verify(args.paths, out_dir=None if args.no_write else args.out, overrides=overrides,
-                     progress=None if args.quiet else _progress(sys.stderr), workers=args.jobs)
+                     progress=None if args.quiet else _progress(sys.stderr), executor=executor)
     if args.format == "json":
         print(json.dumps({"exit_code": res.exit_code, "projects": [
             {"path": str(p.path), "name": p.name, "status": p.status, "errors": p.errors, "files": p.files,
@@ -86,14 +95,24 @@ def cmd_verify(args) -> int:
     return res.exit_code
 
 
+def cmd_cache(args) -> int:
+    from .oracle import cache
+
+    d = cache.clear() if args.action == "clear" else cache.info()
+    verb = "removed" if args.action == "clear" else "holds"
+    print(f"{d['folder']} {verb}: {d['oracle_results']} oracle results ({d['results_bytes'] / 1e6:.1f} MB), "
+          f"{d['compiled_chunks']} compiled chunks ({d['compiled_bytes'] / 1e6:.1f} MB)")
+    return EXIT_OK
+
+
 def _one_project(path):
     files = api.discover(path)
     if len(files) != 1:
         raise api.UsageError(f"{path}: expected one project, found {len(files)}")
     spec = api.load_project(files[0])
     settings = api.settings_for(spec)
-    prims, g, _, _, _ = api.build(spec, settings)
-    return spec, settings, prims, g
+    cp, vg = api.build(spec, settings)
+    return spec, settings, cp.prims, vg.graph
 
 
 def cmd_plan(args) -> int:
@@ -160,7 +179,13 @@ def parser() -> argparse.ArgumentParser:
     v.add_argument("--no-write", action="store_true", help="write no report files")
     v.add_argument("--format", choices=("human", "json", "github"), default="human")
     v.add_argument("--method", help="oracle backend (default: the project's, usually rk4)")
-    v.add_argument("-j", "--jobs", type=int, default=1, help="worker processes for oracle batches (default 1)")
+    v.add_argument("-j", "--jobs", type=int, default=1, help="local worker processes for oracle calls (default 1)")
+    v.add_argument("--dask", metavar="local|ADDRESS",
+                   help="run oracle calls on Dask: 'local' starts a LocalCluster of max(jobs, 2) workers, "
+                        "or the address of a running scheduler (needs the 'dask' extra)")
+    v.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a running Dask scheduler (same as --dask ADDRESS)")
+    v.add_argument("--no-cache", action="store_true",
+                   help="run every oracle call, ignoring and not storing results in the cache")
     v.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     v.set_defaults(fn=cmd_verify)
     p = sub.add_parser("plan", help="shortest safe transition sequence between two primitives")
@@ -175,6 +200,9 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--mode", choices=("naive", "graph", "both"), default="both")
     s.add_argument("--format", choices=("human", "json"), default="human")
     s.set_defaults(fn=cmd_simulate)
+    k = sub.add_parser("cache", help="show or clear stored oracle results and compiled chunks")
+    k.add_argument("action", choices=("info", "clear"))
+    k.set_defaults(fn=cmd_cache)
     c = sub.add_parser("schema", help="print the JSON Schema of project specs (or of reports)")
     c.add_argument("--kind", choices=("project", "report"), default="project")
     c.set_defaults(fn=cmd_schema)

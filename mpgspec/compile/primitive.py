@@ -7,6 +7,8 @@ oracle composes them; nothing here integrates.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import pickle
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -53,6 +55,39 @@ class CompiledPrimitive:
     hybrid: bool = False  # the state jumps (contact events or a contact schedule), not only renormalised
     cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
 
+    def __reduce__(self):
+        """Pickles through CasADi's serialisation (compiled chunks are dropped and rebuilt from the
+        on-disk cache where they are needed), so a closed loop can be shipped to worker processes."""
+        state = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "cache"}
+        with ca.global_pickle_context():
+            blob = pickle.dumps(state)
+        return _restore, (blob,)
+
+    @property
+    def needs(self) -> set[str]:
+        """Capabilities a backend must have to run this closed loop."""
+        return {"hybrid"} if self.hybrid else set()
+
+    def horizons(self, T: float, t0s) -> np.ndarray:
+        """How long the oracle runs from each switch-in clock t0: the primitive's own horizon, else
+        the project's T, and never past the end t_f of a transient's domain."""
+        t0s = np.atleast_1d(np.asarray(t0s, float))
+        h = np.full(t0s.shape, float(self.horizon or T))
+        if self.cls is PrimitiveClass.TRANSIENT:
+            h = np.minimum(h, self.domain[1] - t0s)
+        return np.maximum(h, 0.0)
+
+    def digest(self) -> str:
+        """Content hash of everything that decides an oracle verdict of this closed loop."""
+        if "digest" not in self.cache:
+            parts = [f.serialize() for f in (self.loop_raw or self.loop, self.f_cl, self.roa_margin, self.setpoint,
+                                              self.jump) if f is not None]
+            nums = repr((self.name, self.cls.value, self.period, self.domain, self.next, self.horizon, self.h_names,
+                         self.radius, self.windows, self.boundaries, self.hybrid, self.info.get("roa_W"),
+                         self.system.u_lo.tolist(), self.system.u_hi.tolist()))
+            self.cache["digest"] = hashlib.sha256("\n".join([*parts, nums]).encode()).hexdigest()
+        return self.cache["digest"]
+
     @property
     def t_range(self) -> tuple[float, float]:
         """Clock interval sampled by the grids (Algorithm 1)."""
@@ -85,6 +120,12 @@ class CompiledPrimitive:
         W = np.asarray(self.info["roa_W"])
         margin = _roa_margin(self.system, self.setpoint, W, radius, _ident(self.name))
         return dataclasses.replace(self, radius=radius, roa_margin=margin, cache={})
+
+
+def _restore(blob: bytes) -> "CompiledPrimitive":
+    with ca.global_unpickle_context():
+        state = pickle.loads(blob)
+    return CompiledPrimitive(**state)
 
 
 def _constants(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler) -> dict[str, float]:

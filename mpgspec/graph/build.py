@@ -6,8 +6,8 @@ from typing import Callable
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
-from ..oracle.evidence import OracleEvidence, Reason
-from ..oracle.oracle import SafetyOracle
+from ..oracle.evidence import OracleEvidence
+from ..oracle.executors import Executor, InProcess, split
 from ..settings import OracleSettings
 from .transition import MotionPrimitiveGraph, Transition
 
@@ -37,54 +37,34 @@ def _start_points(prims, gA, gB, b):
     return np.array(x0s).reshape(-1, nx), np.array(t0s, float), index
 
 
-def _evaluate_serial(prims, settings, b, x0s, t0s, oracles) -> list[OracleEvidence]:
-    try:
-        if b not in oracles:
-            oracles[b] = SafetyOracle(prims[b], settings)
-        return oracles[b].evaluate(x0s, t0s)
-    except Exception as err:  # a compile or backend failure is this batch's evidence
-        return [OracleEvidence(0, Reason.ERROR, 0.0, message=str(err)[:500])] * len(t0s)
-
-
 def build_graph(prims: dict[str, CompiledPrimitive], settings: OracleSettings, n_A: int = 12, n_B: int = 12,
-                progress: Progress | None = None, oracles: dict[str, SafetyOracle] | None = None,
-                workers: int = 1, factory: Callable[[], dict] | None = None) -> MotionPrimitiveGraph:
+                progress: Progress | None = None, executor: Executor | None = None) -> MotionPrimitiveGraph:
     """Run the oracle of every target B on the setpoints of every other primitive A.
 
-    All (A, t_A, t_B) start points of one target B go to its oracle in one batch; with workers > 1
-    and a factory that rebuilds the primitives, targets run in parallel processes. A failing
-    oracle call becomes that call's evidence (reason 'error') and the build goes on.
+    The start points of all targets are split into tasks for the executor (in-process unless
+    given); a failing oracle call becomes that call's evidence (reason 'error') and the build goes
+    on. The result does not depend on the executor.
     """
+    executor = executor or InProcess()
     gA, gB = grids(prims, n_A, n_B)
-    oracles = oracles if oracles is not None else {}
-    transitions: dict[tuple[str, str], Transition] = {}
     names = list(prims)
     points = {b: _start_points(prims, gA, gB, b) for b in names}
-    if workers > 1 and factory is not None:
-        from ..oracle.parallel import run_jobs
-
-        if progress:
-            progress(f"oracle on {workers} processes", 0, len(names))
-        results = dict(zip(names, run_jobs([(b, points[b][0], points[b][1]) for b in names], factory, settings,
-                                           workers)))
-    else:
-        results = {}
-        for k, b in enumerate(names):
-            if progress:
-                progress(f"oracle {b}", k, len(names))
-            results[b] = _evaluate_serial(prims, settings, b, points[b][0], points[b][1], oracles)
+    tasks = split({b: points[b][:2] for b in names}, executor.workers)
+    results: dict[str, list[OracleEvidence]] = {b: [] for b in names}
+    for task, ev in zip(tasks, executor.run(prims, settings, tasks, progress)):
+        results[task.target].extend(ev)
+    transitions: dict[tuple[str, str], Transition] = {}
     for b in names:
         sources = [a for a in names if a != b]
-        index, ev = points[b][2], results[b]
         for a in sources:
             cells = [[None] * len(gB[b]) for _ in gA[a]]
             transitions[(a, b)] = Transition(a, b, gA[a], gB[b], cells)
-        for (a, i, j), e in zip(index, ev):
+        for (a, i, j), e in zip(points[b][2], results[b]):
             transitions[(a, b)].evidence[i][j] = e
         for a in sources:
             transitions[(a, b)].classify()
     if progress:
-        progress("oracle", len(names), len(names))
+        progress("oracle", len(tasks), len(tasks))
     nodes = {n: {"cls": p.cls.value, "period": p.period, "domain": p.domain, "next": p.next}
              for n, p in prims.items()}
     return MotionPrimitiveGraph(nodes, transitions)

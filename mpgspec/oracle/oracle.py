@@ -18,7 +18,7 @@ class CapabilityError(UsageError):
 
 def needs(prim: CompiledPrimitive) -> set[str]:
     """Capabilities a backend must have to run this primitive's closed loop."""
-    return {"hybrid"} if prim.hybrid else set()
+    return prim.needs
 
 
 def require_capabilities(backend, prim: CompiledPrimitive) -> None:
@@ -47,10 +47,7 @@ class SafetyOracle:
         self.runner = backend.runner(prim, settings)
 
     def horizons(self, t0s: np.ndarray) -> np.ndarray:
-        h = np.full(len(t0s), self.horizon)
-        if self.prim.cls is PrimitiveClass.TRANSIENT:  # t_f is a step boundary: rollouts end exactly there
-            h = np.minimum(h, self.prim.domain[1] - np.asarray(t0s))
-        return np.maximum(h, 0.0)
+        return self.prim.horizons(self.settings.horizon, t0s)
 
     def evaluate(self, x0s: np.ndarray, t0s: np.ndarray) -> list[OracleEvidence]:
         """Verdict and evidence for every row of x0s, started at the matching clock in t0s."""

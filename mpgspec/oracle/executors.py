@@ -1,0 +1,174 @@
+"""Where oracle calls run: in this process, in a local process pool, or on a Dask cluster.
+
+Algorithm 1's start points are split into tasks of (target, batch of start points), sized so
+that every worker gets several even for a project with two primitives. Closed loops travel to
+workers once (pickled through CasADi's serialisation; each worker rebuilds its compiled chunks
+from the on-disk cache) and results come back in task order. Every rollout is computed in its own
+batch slot, independently of its neighbours, so the graph does not depend on the executor or the
+number of workers.
+"""
+from __future__ import annotations
+
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from typing import Callable, Protocol
+
+import numpy as np
+
+from ..compile.primitive import CompiledPrimitive
+from ..settings import OracleSettings
+from .evidence import OracleEvidence, Reason
+from .oracle import SafetyOracle
+
+Progress = Callable[[str, int, int], None]
+TASKS_PER_WORKER = 4
+MIN_BATCH = 16
+
+
+@dataclass
+class Task:
+    """Start points (rows of x0s, clocks t0s) of one target primitive."""
+
+    target: str
+    x0s: np.ndarray
+    t0s: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t0s)
+
+
+class Executor(Protocol):
+    workers: int
+
+    def run(self, prims: dict[str, CompiledPrimitive], settings: OracleSettings, tasks: list[Task],
+            progress: Progress | None = None) -> list[list[OracleEvidence]]: ...
+
+
+def split(points: dict[str, tuple[np.ndarray, np.ndarray]], workers: int) -> list[Task]:
+    """Tasks of (target, contiguous batch): about TASKS_PER_WORKER per worker, no batch under MIN_BATCH."""
+    total = sum(len(t0s) for _, t0s in points.values())
+    size = max(MIN_BATCH, -(-total // max(1, workers * TASKS_PER_WORKER))) if workers > 1 else max(total, 1)
+    tasks = []
+    for target, (x0s, t0s) in points.items():
+        for a in range(0, len(t0s), size):
+            tasks.append(Task(target, x0s[a:a + size], t0s[a:a + size]))
+    return tasks
+
+
+def evaluate(oracles: dict, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
+             task: Task) -> list[OracleEvidence]:
+    """One task's evidence; a compile or backend failure is the evidence of each of its calls."""
+    try:
+        if task.target not in oracles:
+            oracles[task.target] = SafetyOracle(prims[task.target], settings)
+        return oracles[task.target].evaluate(task.x0s, task.t0s)
+    except Exception as err:
+        return [OracleEvidence(0, Reason.ERROR, 0.0, status="inconclusive", message=str(err)[:500])
+                for _ in range(len(task))]
+
+
+class InProcess:
+    """All tasks in this process, one after the other; compiled oracles are kept for later calls."""
+
+    workers = 1
+
+    def __init__(self):
+        self.oracles: dict = {}
+
+    def run(self, prims, settings, tasks, progress=None):
+        out = []
+        for k, task in enumerate(tasks):
+            if progress:
+                progress(f"oracle {task.target}", k, len(tasks))
+            out.append(evaluate(self.oracles, prims, settings, task))
+        return out
+
+
+_worker: dict = {}
+
+
+def _init(prims: dict, settings: OracleSettings) -> None:
+    _worker.update(prims=prims, settings=settings, oracles={})
+
+
+def _run(task: Task) -> list[OracleEvidence]:
+    return evaluate(_worker["oracles"], _worker["prims"], _worker["settings"], task)
+
+
+class ProcessPool:
+    """A local pool of `workers` processes; each receives the closed loops once, at start-up."""
+
+    def __init__(self, workers: int):
+        self.workers = max(1, int(workers))
+
+    def run(self, prims, settings, tasks, progress=None):
+        out: list = [None] * len(tasks)
+        with ProcessPoolExecutor(max_workers=self.workers, initializer=_init, initargs=(prims, settings)) as pool:
+            futures = {pool.submit(_run, t): k for k, t in enumerate(tasks)}
+            for done, f in enumerate(as_completed(futures), start=1):
+                out[futures[f]] = f.result()
+                if progress:
+                    progress(f"oracle on {self.workers} processes", done, len(tasks))
+        return out
+
+
+_dask_oracles: dict = {}
+
+
+def _dask_run(task: Task, prims: dict, settings: OracleSettings) -> list[OracleEvidence]:
+    key = (id(prims), settings)  # the scattered closed loops live once per worker
+    return evaluate(_dask_oracles.setdefault(key, {}), prims, settings, task)
+
+
+class DaskExecutor:
+    """Tasks on a Dask cluster: `address` of a running scheduler, or a LocalCluster of `workers` processes."""
+
+    def __init__(self, address: str | None = None, workers: int = 2):
+        self.address = address
+        self.workers = max(1, int(workers))
+
+    def run(self, prims, settings, tasks, progress=None):
+        try:
+            from dask.distributed import Client, LocalCluster, as_completed as dask_completed
+        except ImportError as err:  # pragma: no cover - depends on the installation
+            from ..errors import UsageError
+
+            raise UsageError("Dask is not installed; install mpgspec with the 'dask' extra: "
+                             "pip install 'mpgspec[dask]'") from err
+        cluster = None
+        if self.address is None:
+            cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40)
+        client = Client(cluster if cluster is not None else self.address)
+        try:
+            if cluster is None:
+                self.workers = max(1, len(client.scheduler_info().get("workers", {})))
+            remote = client.scatter(prims, broadcast=True)
+            futures = client.map(_dask_run, tasks, prims=remote, settings=settings, pure=False)
+            index = {f.key: k for k, f in enumerate(futures)}
+            out: list = [None] * len(tasks)
+            for done, f in enumerate(dask_completed(futures), start=1):
+                out[index[f.key]] = f.result()
+                if progress:
+                    progress(f"oracle on Dask ({self.workers} workers)", done, len(tasks))
+            return out
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+def make_executor(jobs: int = 1, dask: str | None = None, cache: bool = False) -> Executor:
+    """In-process for one job, a process pool for more; Dask when asked ('local' or a scheduler
+    address); with `cache`, wrapped so that stored results are reused (mpgspec.oracle.cache)."""
+    if dask:
+        ex: Executor = DaskExecutor(None if dask == "local" else dask, workers=max(jobs, 2) if dask == "local" else jobs)
+    else:
+        jobs = min(int(jobs), os.cpu_count() or 1) if jobs > 1 else 1
+        ex = ProcessPool(jobs) if jobs > 1 else InProcess()
+    if cache:
+        from .cache import CachedExecutor
+
+        ex = CachedExecutor(ex)
+    return ex
