@@ -85,7 +85,7 @@ def _contact_projection(p: CompiledPrimitive, W: np.ndarray):
     """(x, x*) -> (x on the contact manifold of the primitive's contact mode at x*, that mode), or
     None for systems without contact constraints."""
     sys = p.system
-    if not hasattr(sys, "project_to_contacts") or not sys.model.contact_frames:
+    if not sys.is_rigid_body or not sys.model.contact_frames:
         return None
 
     def project(x, xs):

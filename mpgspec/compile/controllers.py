@@ -102,7 +102,7 @@ def pd_law(c: PDController, ctx: ControlContext) -> ca.SX:
     if c.feedforward is not None:
         u = u + ctx.ec.vector(c.feedforward, ("controller", "feedforward"), ctx.env)
     if c.gravity_compensation:
-        if not hasattr(sys, "static_torque"):
+        if not sys.is_rigid_body:
             raise SpecError("gravity compensation needs a rigid-body system",
                             location=ctx.ec.locate(("controller", "gravity_compensation")),
                             key=f"{ctx.ec.owner}: controller.gravity_compensation", expected="system kind rigid_body",
@@ -114,7 +114,7 @@ def pd_law(c: PDController, ctx: ControlContext) -> ca.SX:
 def _task_jacobian(sys: CompiledSystem, ydot: ca.SX, xdot: ca.SX) -> ca.SX:
     """J_y: how the inputs' own coordinates move the outputs (rigid bodies: d ydot / d(actuated joint rates));
     for other systems d ydot / dx times d xdot / du."""
-    if hasattr(sys, "model"):
+    if sys.is_rigid_body:
         m = sys.model
         v_act = sys.x[m.nq + m.n_base:]
         return ca.jacobian(ydot, v_act)

@@ -205,7 +205,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         env[f"{n}_star_dot"] = x_star_dot[i]
     ctx = ControlContext(sys, t, s, x_sw, x_star, x_star_dot, setpoint, env, ec,
                          fixed=p.class_ is PrimitiveClass.FIXED, xdot=loop.xdot, contacts=loop.contacts)
-    if getattr(sys, "dyn", None) is not None:  # rigid bodies: the feet the primitive's dynamics hold
+    if sys.is_rigid_body:  # rigid bodies: the feet the primitive's dynamics hold
         ctx.info["contacts"] = list(loop.contacts)
     u_raw = LAWS[p.controller.type](p.controller, ctx)
     sat_u = saturate(sys.u, sys.u_lo, sys.u_hi)
@@ -269,7 +269,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=radius,
         f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info, jump=jump,
         loop=loop_fn, loop_raw=loop_raw, windows=windows, boundaries=_boundaries(windows, p, period, domain),
-        hybrid=bool(getattr(sys, "events", False)) or p.contact_schedule is not None,
+        hybrid=sys.events or p.contact_schedule is not None,
     )
 
 
@@ -295,7 +295,7 @@ def _jump(inst: PrimitiveInstance, sys: CompiledSystem, tc: ca.SX, t: ca.SX) -> 
     sched = inst.spec.contact_schedule
     if sched is None:
         return ca.Function("jump", [x, u, t], [sys.project(x, u)])
-    if not getattr(sys, "events", False):
+    if not sys.events:
         raise SpecError("a contact schedule needs contact flags in the state", location=inst.locate(("contact_schedule",)),
                         key=f"primitive '{inst.name}': contact_schedule", expected="system.contact_events: true",
                         found="a system without contact events", code="MPG108")

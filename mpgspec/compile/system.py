@@ -40,6 +40,13 @@ class CompiledSystem:
     wrap: np.ndarray  # period per state, 0 = none
     extra_env: dict[str, ca.SX] = field(default_factory=dict)
 
+    kind = "analytic"  # the registry key this system was compiled by (SYSTEM_KINDS)
+    events = False  # the state jumps at contact events (rigid bodies with contact_events)
+
+    @property
+    def is_rigid_body(self) -> bool:
+        return self.kind == "rigid_body"
+
     @property
     def nx(self) -> int:
         return len(self.state_names)
@@ -80,13 +87,15 @@ class CompiledSystem:
         return ca.vertcat(*parts)
 
 
-def compile_system(spec: ProjectSpec) -> CompiledSystem:
-    """Build the CasADi symbols and dynamics of the project's system."""
-    if spec.system.kind == "rigid_body":
-        from .rigidbody.system import compile_rigid_body
+def _rigid_body(spec: ProjectSpec) -> CompiledSystem:
+    from .rigidbody.system import compile_rigid_body  # pinocchio is loaded only for robots
 
-        return compile_rigid_body(spec)
-    return compile_analytic(spec)
+    return compile_rigid_body(spec)
+
+
+def compile_system(spec: ProjectSpec) -> CompiledSystem:
+    """Build the CasADi symbols and dynamics of the project's system, by its kind (SYSTEM_KINDS)."""
+    return SYSTEM_KINDS[spec.system.kind](spec)
 
 
 def compile_analytic(spec: ProjectSpec) -> CompiledSystem:
@@ -141,3 +150,7 @@ def compile_analytic(spec: ProjectSpec) -> CompiledSystem:
                             expected="one of " + ", ".join(s.states), found=repr(k), code="MPG107")
         wrap[s.states.index(k)] = p
     return CompiledSystem(s.name, list(s.states), list(s.inputs), dict(s.parameters), x, u, xdot, lo, hi, wrap)
+
+
+SYSTEM_KINDS = {"analytic": compile_analytic, "rigid_body": _rigid_body}
+"""System kinds by the `kind` key of a system spec: each builds a CompiledSystem."""

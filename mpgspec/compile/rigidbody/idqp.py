@@ -35,7 +35,7 @@ def _profile_acc(s, duration, p0, v0, pf, vf):
 def idqp_law(c, ctx: ControlContext) -> ca.Function:
     """k(x, t, s, x_sw) = the torque part of the ID-QP solution, as a Function callable in MX."""
     sys = ctx.sys
-    if not hasattr(sys, "dyn"):
+    if not sys.is_rigid_body:
         raise SpecError("the ID-QP needs a rigid-body system", location=ctx.ec.locate(("controller", "type")),
                         key=f"{ctx.ec.owner}: controller.type", expected="system kind rigid_body",
                         found="an analytic system", code="MPG108")

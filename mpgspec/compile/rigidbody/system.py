@@ -37,6 +37,8 @@ class RigidBodyCompiledSystem(CompiledSystem):
     events: bool = False  # contact flags in the state, touchdown / lift-off / impact (hybrid.py)
     _loops: dict = field(default_factory=dict)
 
+    kind = "rigid_body"
+
     @property
     def model(self) -> RigidBodyModel:
         return self.dyn.model
