@@ -235,3 +235,41 @@ def test_console_script_entry_point():
                          timeout=300)
     assert bad.returncode == 2
     assert "MPG202" in bad.stderr and "Traceback" not in bad.stderr
+
+
+# ----------------------------------------------------------------------------- executors and the cache
+def _untimed_report(folder: Path) -> dict:
+    (path,) = folder.glob("*/report.json")
+    r = json.loads(path.read_text())
+    r.pop("timing"), r.pop("generated_at")
+    return r
+
+
+def test_jobs_dask_and_one_process_write_the_same_report(capsys, tmp_path):
+    outs = {}
+    for name, flags in {"one": ["-j", "1"], "pool": ["-j", "2"], "dask": ["--dask", "local"]}.items():
+        rc, _, err = run(capsys, "verify", TINY, "--out", tmp_path / name, "-q", "--no-cache", *flags)
+        assert rc == 0, err
+        outs[name] = _untimed_report(tmp_path / name)
+    assert outs["pool"] == outs["one"] and outs["dask"] == outs["one"]
+
+
+def test_second_verify_takes_every_call_from_the_cache(capsys, tmp_path, monkeypatch):
+    monkeypatch.setenv("MPGSPEC_CACHE", str(tmp_path / "cache"))
+    rc, first, _ = run(capsys, "verify", TINY, "--out", tmp_path / "a", "-q")
+    assert rc == 0 and "from the cache" not in first
+    rc, second, _ = run(capsys, "verify", TINY, "--out", tmp_path / "b", "-q")
+    (path,) = (tmp_path / "b").glob("*/report.json")
+    timing = json.loads(path.read_text())["timing"]
+    assert rc == 0 and timing["cache_misses"] == 0 and timing["cache_hits"] == timing["oracle_calls"] > 0
+    assert f"{int(timing['cache_hits'])} from the cache" in second
+    assert _untimed_report(tmp_path / "a") == _untimed_report(tmp_path / "b")
+    rc, out, _ = run(capsys, "cache", "info")
+    assert rc == 0 and f"{int(timing['cache_hits'])} oracle results" in out
+    rc, out, _ = run(capsys, "cache", "clear")
+    assert rc == 0 and "removed" in out and not (tmp_path / "cache" / "results.sqlite").exists()
+
+
+def test_jobs_below_one_is_a_usage_error(capsys):
+    rc, _, err = run(capsys, "verify", TINY, "--no-write", "-q", "-j", "0")
+    assert rc == 2 and "--jobs" in err
