@@ -12,7 +12,7 @@ from typing import Callable
 
 from .certify.roa import RANK, size_regions
 from .check.assertions import AssertionResult, evaluate_assertions
-from .check.assumptions import check_primitive
+from .check.assumptions import AssumptionCheck, check_primitive
 from .compile.primitive import CompiledPrimitive, compile_primitive
 from .compile.system import compile_system
 from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, UsageError  # noqa: F401
@@ -104,15 +104,17 @@ class Checks:
     timing: dict
 
 
-def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None) -> CompiledProject:
-    """Closed loops of every primitive, refused early when the backend cannot run them; E sized."""
+def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
+                  memo=None) -> CompiledProject:
+    """Closed loops of every primitive, refused early when the backend cannot run them; E sized
+    (memo: mpgspec.oracle.cache.Memo, to reuse the sizing of unchanged primitives)."""
     t0 = time.perf_counter()
     prims = compile_project(spec)
     _check_capabilities(spec, settings, prims)
     t1 = time.perf_counter()
     if progress:
         progress(spec.name, "regions of attraction", 0, len(prims))
-    roa = size_regions(spec, prims)
+    roa = size_regions(spec, prims, memo)
     return CompiledProject(spec, settings, prims, roa,
                            {"compile_s": t1 - t0, "roa_s": time.perf_counter() - t1})
 
@@ -123,6 +125,7 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     spec, prims, settings = cp.spec, cp.prims, cp.settings
     executor = executor or InProcess()
     cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
+    before = dict(getattr(executor, "stats", {}))
     t0 = time.perf_counter()
     g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, executor)
     t1 = time.perf_counter()
@@ -131,11 +134,12 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     edges, failures = edge_traces(g, prims, settings), failure_traces(g, prims, settings, pairs)
     calls = sum(len(tr.t_A) * len(tr.t_B) for tr in g.transitions.values())
     timing = {"graph_s": t1 - t0, "oracle_calls": calls, "oracle_calls_per_s": calls / max(t1 - t0, 1e-9),
-              "traces_s": time.perf_counter() - t1, **getattr(executor, "stats", {})}
+              "traces_s": time.perf_counter() - t1,
+              **{k: v - before.get(k, 0) for k, v in getattr(executor, "stats", {}).items()}}  # this project's
     return VerifiedGraph(g, edges, failures, timing)
 
 
-def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | None = None) -> Checks:
+def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | None = None, memo=None) -> Checks:
     """Plans, the goal sequence naive and through the graph, assertions and assumptions."""
     spec, prims, settings, g = cp.spec, cp.prims, cp.settings, vg.graph
     t0 = time.perf_counter()
@@ -151,7 +155,7 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     checks = evaluate_assertions(spec.project.assertions, g, runs)
     checks += roa_requirements(spec, cp.roa, start=len(checks))
     t1 = time.perf_counter()
-    assumed = check_assumptions(prims, spec.project.assumptions)
+    assumed = check_assumptions(prims, spec.project.assumptions, memo)
     st = [c.status for c in checks] + [a.status for a in assumed]
     status = "error" if "error" in st else "fail" if "fail" in st else "pass"
     return Checks(plans, table, runs, checks, assumed, status,
@@ -160,8 +164,8 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
 
 def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
           executor: Executor | None = None) -> tuple[CompiledProject, VerifiedGraph]:
-    """Compile and run Algorithm 1."""
-    cp = compile_stage(spec, settings, progress)
+    """Compile and run Algorithm 1; a caching executor also lends its memo to the sizing of E."""
+    cp = compile_stage(spec, settings, progress, getattr(executor, "memo", None))
     return cp, graph_stage(cp, progress, executor)
 
 
@@ -191,11 +195,18 @@ def roa_requirements(spec: ProjectSpec, roa: dict, start: int) -> list[Assertion
     return out
 
 
-def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict) -> list:
-    """Definition-1 checks of every primitive; a failure counts as the project's severity says."""
+def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict, memo=None) -> list:
+    """Definition-1 checks of every primitive; a failure counts as the project's severity says.
+
+    memo (optional) keeps the checks of each primitive by its content hash."""
     out = []
     for p in prims.values():
-        for c in check_primitive(p):
+        key = memo.key("assumptions", p.digest()) if memo else None
+        known = memo.get(key) if memo else None
+        checks = [AssumptionCheck(**c) for c in known] if known is not None else check_primitive(p)
+        if memo and known is None:
+            memo.put(key, [c.to_dict() for c in checks])
+        for c in checks:
             sev = severity.get(c.name, "fail")
             if sev == "off":
                 continue
@@ -224,7 +235,7 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
         return res
     res.graph = vg.graph
     try:
-        return _finish_project(res, cp, vg, out_dir, formats, progress)
+        return _finish_project(res, cp, vg, out_dir, formats, progress, executor)
     except Exception as err:  # a bug after the graph was built: this project's error, not the end of the run
         res.errors = [{"code": "MPG900", "message": f"internal error: {type(err).__name__}: {err}",
                        "text": f"{path}: MPG900 internal error: {type(err).__name__}: {err}"}]
@@ -232,9 +243,9 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
 
 
 def _finish_project(res: ProjectResult, cp: CompiledProject, vg: VerifiedGraph, out_dir, formats,
-                    progress: Progress | None):
+                    progress: Progress | None, executor: Executor | None = None):
     """Checks and reports of a project whose graph is built."""
-    ch = check_stage(cp, vg, progress)
+    ch = check_stage(cp, vg, progress, getattr(executor, "memo", None))
     timing = {**cp.timing, **vg.timing, **ch.timing}
     report = build_report(spec=cp.spec, prims=cp.prims, graph=vg.graph, settings=cp.settings, plans=ch.plans,
                           table=ch.table, assertions=ch.assertions, runs=ch.runs, failures=vg.failure_traces,

@@ -13,8 +13,8 @@ import numpy as np
 
 from mpgspec.compile.primitive import CompiledPrimitive
 from mpgspec.oracle.evidence import OracleEvidence, Reason
-from mpgspec.oracle.integrator import Chunk, build_chunk
-from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidence, judge
+from mpgspec.oracle.integrator import Chunk, build_chunk, build_first
+from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidences, judge
 from mpgspec.settings import OracleSettings
 
 SIZES = (1, 4, 16, 64, 256)
@@ -54,15 +54,40 @@ class RK4Runner:
             ev[i] = f
         return ev
 
+    def _first(self, Zall: np.ndarray, T: np.ndarray, t0s: np.ndarray, results: list) -> np.ndarray:
+        """Judge every start point's first sample in one vectorised call; returns those still open.
+
+        Many of Algorithm 1's start points are decided there (inside E, or outside C, at once),
+        so they never take a slot in a compiled chunk.
+        """
+        n = Zall.shape[1]
+        try:
+            H, M, UR, U = (np.asarray(v) for v in build_first(self.prim, self.dt, self.s.jit).map(n, "serial")(Zall))
+        except Exception:  # judged with the chunks instead
+            return np.arange(n)
+        nh, nu = len(self.prim.h_names), self.prim.system.nu
+        H, UR, U = H.reshape(nh, n, 1), UR.reshape(nu, n, 1), U.reshape(nu, n, 1)
+        zero = np.zeros((n, 1))
+        blk = Block(H, H, np.zeros((nh, n, 1)), M.reshape(n, 1), zero, zero, zero, UR, U,
+                    np.isfinite(H).all(axis=0) & np.isfinite(M.reshape(n, 1)) & np.isfinite(U).all(axis=0))
+        carry = Carry(nh, nu, n)
+        d = judge(blk, carry, T, self.s.h_tolerance, self.c_margin, self.prim.system.u_lo, self.prim.system.u_hi)
+        decided = np.flatnonzero(d.done & np.isin(d.kind, ("safe", "left_C")))
+        for b, ev in zip(decided, evidences(self.prim, blk, carry, d, decided, t0s[decided], self.c_margin)):
+            results[b] = ev
+        return np.flatnonzero(~np.isin(np.arange(n), decided))
+
     def _run(self, x0s: np.ndarray, t0s: np.ndarray, horizons: np.ndarray) -> list[OracleEvidence]:
         """Rollouts in slots of one batch; the bookkeeping of every chunk is vectorised over slots."""
         prim, ch = self.prim, self.chunk
         r, K = ch.rows, ch.K
         lo, hi = prim.system.u_lo, prim.system.u_hi
-        n = len(x0s)
         T = np.asarray(horizons, float)
-        results: list[OracleEvidence | None] = [None] * n
-        Zall = np.vstack([x0s.T, np.asarray(t0s, float)[None, :], np.zeros((1, n)), x0s.T])
+        results: list[OracleEvidence | None] = [None] * len(x0s)
+        Zall = np.vstack([x0s.T, np.asarray(t0s, float)[None, :], np.zeros((1, len(x0s))), x0s.T])
+        order = self._first(Zall, T, np.asarray(t0s, float), results)
+        Zall = Zall[:, order]
+        n = order.size
         cap = min(self.s.batch, SIZES[-1])
         Z, ids = np.zeros((Zall.shape[0], 0)), np.zeros(0, int)
         carry = Carry(r.nh, r.nu)
@@ -80,7 +105,8 @@ class RK4Runner:
                 Zf, out = ch.run(Zp)
             except Exception as err:  # a crash is the evidence of the calls in this batch
                 for b in range(m):
-                    results[ids[b]] = OracleEvidence(0, Reason.ERROR, 0.0, message=str(err)[:500])
+                    results[order[ids[b]]] = OracleEvidence(0, Reason.ERROR, 0.0, status="inconclusive",
+                                                            message=str(err)[:500])
                 Z, ids = Z[:, :0], ids[:0]
                 carry.keep(np.zeros(m, bool))
                 continue
@@ -90,11 +116,13 @@ class RK4Runner:
             finite[:, -1] &= end_ok
             blk = Block(out[r.h], out[r.lb], out[r.dh], out[r.margin], out[r.err], out[r.s], out[r.dt],
                         out[r.u_raw], out[r.u], finite)
-            d = judge(blk, carry, T[ids], self.s.h_tolerance, self.c_margin, lo, hi)
-            for b in np.flatnonzero(d.done):
-                k = int(d.k[b])
-                msg = _non_finite(out[:, b, k], r, k == K - 1 and not end_ok[b]) if d.kind[b] == "non_finite" else ""
-                results[ids[b]] = evidence(prim, blk, carry, d, b, float(t0s[ids[b]]), self.c_margin, msg)
+            d = judge(blk, carry, T[order[ids]], self.s.h_tolerance, self.c_margin, lo, hi)
+            done = np.flatnonzero(d.done)
+            msgs = {int(b): _non_finite(out[:, b, int(d.k[b])], r, int(d.k[b]) == K - 1 and not end_ok[b])
+                    for b in done if d.kind[b] == "non_finite"}
+            rows = order[ids[done]]
+            for i, ev in zip(rows, evidences(prim, blk, carry, d, done, np.asarray(t0s, float)[rows], self.c_margin, msgs)):
+                results[i] = ev
             keep = ~d.done
             Z, ids = Zf[:, keep], ids[keep]
             carry.keep(keep)

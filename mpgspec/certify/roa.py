@@ -47,8 +47,12 @@ def _estimate(method: str, prim: CompiledPrimitive, options: dict):
     return verifiers[method].estimate(from_primitive(prim, weights=W), dict(options))
 
 
-def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive]) -> dict[str, RoARecord]:
-    """Run each primitive's RoA method; recompile primitives whose radius changed (in place)."""
+def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=None) -> dict[str, RoARecord]:
+    """Run each primitive's RoA method; recompile primitives whose radius changed (in place).
+
+    memo (optional, with key/get/put) keeps records by the primitive's content hash, method and
+    options, so an unchanged primitive is not sized again.
+    """
     records = {}
     for inst in spec.primitives:
         roa = inst.spec.roa
@@ -56,6 +60,11 @@ def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive]) -> dict
         if roa.method == "given":
             records[inst.name] = RoARecord(inst.name, "given", "given", float(roa.radius), roa.radius,
                                            "radius chosen by the spec author")
+            continue
+        key = memo.key("roa", prim.digest(), roa.method, sorted(roa.options.items()), roa.radius) if memo else None
+        known = memo.get(key) if memo else None
+        if known is not None:
+            records[inst.name] = RoARecord(**known)
             continue
         t0 = time.perf_counter()
         try:
@@ -75,6 +84,8 @@ def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive]) -> dict
             rec.message = f"the spec's radius {roa.radius:g} lies within the {level} radius {r:.4g}. " + msg
             rec.level = level
         records[inst.name] = rec
+        if memo and rec.level != "failed":
+            memo.put(key, rec.to_dict())
     apply_radii(prims, {n: r.radius for n, r in records.items()})
     return records
 

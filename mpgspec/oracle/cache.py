@@ -39,6 +39,7 @@ class ResultStore:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._db = sqlite3.connect(self.path)
             self._db.execute("CREATE TABLE IF NOT EXISTS results (key TEXT PRIMARY KEY, evidence TEXT)")
+            self._db.execute("CREATE TABLE IF NOT EXISTS memo (key TEXT PRIMARY KEY, value TEXT)")
         return self._db
 
     def get(self, keys: list[str]) -> dict[str, OracleEvidence]:
@@ -63,10 +64,36 @@ class ResultStore:
             self._db = None
 
 
+def _plain(o):
+    """numpy scalars and arrays as JSON numbers and lists."""
+    if hasattr(o, "tolist"):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
 def _load(text: str) -> OracleEvidence:
     d = json.loads(text)
     d["reason"] = Reason(d["reason"])
     return OracleEvidence(**d)
+
+
+class Memo:
+    """JSON values of other deterministic per-primitive work (sized regions of attraction,
+    assumption checks), keyed by the content hash of what they depend on."""
+
+    def __init__(self, store: ResultStore):
+        self.store = store
+
+    def key(self, *parts) -> str:
+        return hashlib.sha256("|".join(map(str, (*parts, __version__))).encode()).hexdigest()
+
+    def get(self, key: str):
+        row = self.store.db.execute("SELECT value FROM memo WHERE key = ?", (key,)).fetchone()
+        return json.loads(row[0]) if row else None
+
+    def put(self, key: str, value) -> None:
+        with self.store.db:
+            self.store.db.execute("INSERT OR REPLACE INTO memo VALUES (?, ?)", (key, json.dumps(value, default=_plain)))
 
 
 class CachedExecutor:
@@ -76,6 +103,7 @@ class CachedExecutor:
         self.inner = inner
         self.store = store or ResultStore()
         self.stats = {"cache_hits": 0, "cache_misses": 0}
+        self.memo = Memo(self.store)
 
     @property
     def workers(self) -> int:

@@ -300,6 +300,27 @@ def compile_cached(fn: ca.Function, flags: tuple[str, ...]) -> ca.Function:
     return ca.external(fn.name(), str(lib))
 
 
+def build_first(prim: CompiledPrimitive, dt: float, jit: bool = True) -> ca.Function:
+    """z -> (h at the start with step 0's windows, RoA margin, u_raw, u), mapped over many start
+    points in one call: the data that decides rollouts already at their first sample."""
+    key = ("first", dt)
+    if key not in prim.cache:
+        nx = prim.system.nx
+        start, _end, _f = _ends(prim)
+        z = _sym(prim.f_cl)("z", 2 * nx + 2)
+        x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
+        tc = _wrap(prim, t)
+        h = _step_length(prim, dt, tc)
+        _k1, h0, _d0, u_raw, u = start(x, t, s, xs)
+        act = _active(prim, _wrap(prim, t + h / 2))
+        hm = ca.if_else(act, h0, INACTIVE) if prim.h_names else h0
+        fn = ca.Function("first_" + hashlib.sha1(f"{prim.name}{dt}".encode()).hexdigest()[:10], [z],
+                         [hm, prim.roa_margin(x, t), u_raw, u])
+        small = prim.loop.is_a("SXFunction") and prim.f_cl.n_nodes() <= INLINE_NODES
+        prim.cache[key] = compile_cached(fn, ("-O1",)) if jit and small else fn  # large loops: not worth a compile
+    return prim.cache[key]
+
+
 def initial_state(prim: CompiledPrimitive, x0: np.ndarray, t0: float) -> np.ndarray:
     """z at switch-in: clock t0, zero time since switch, x_sw = x0."""
     return np.concatenate([x0, [t0, 0.0], x0])

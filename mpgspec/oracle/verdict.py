@@ -166,51 +166,80 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
     return Decision(done, kind, np.where(horizon, np.maximum(n_s - 1, 0), kc))
 
 
+DOUBT = "a safety margin is within the numerical error bound"
+DOUBT_E = ("the flow may have entered E (its margin is within the numerical error bound) "
+           "but E was not entered beyond doubt before C was left or the horizon was reached")
+
+
+def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np.ndarray, t0s, c_margin: float,
+              messages: dict | None = None) -> list[OracleEvidence]:
+    """Evidence of the decided rollouts `cols` of a block, built in bulk (columns of the carry and
+    the block are converted to Python numbers once)."""
+    if not len(cols):
+        return []
+    names = prim.h_names
+    k = d.k[cols].astype(int)
+    t = b.s[cols, k].tolist()
+    kinds = d.kind[cols].tolist()
+    entry = b.margin[cols, k].tolist()
+    entry_err = (c_margin * c.en[cols]).tolist()
+    hv = np.where(b.h[:, cols, k] < INACTIVE / 2, b.h[:, cols, k], np.inf) if len(names) else None
+    first_bad = np.argmin(hv, axis=0).tolist() if len(names) else []
+    min_h, low, count = c.min_h[:, cols], c.low[:, cols], c.count[:, cols]
+    with np.errstate(invalid="ignore"):
+        ms = min_h.min(axis=0) if len(names) else np.full(len(cols), np.inf)
+        lw = low.min(axis=0) if len(names) else np.full(len(cols), np.inf)
+        worst = np.argmin(low, axis=0).tolist() if len(names) else []
+    fin = lambda v: v if v == v and abs(v) != np.inf else None  # noqa: E731
+    clean = bool(np.isfinite(min_h).all() and np.isfinite(low).all())
+    min_l, low_l = min_h.T.tolist(), low.T.tolist()
+    windows = any(w is not None for w in prim.windows)
+    check = (~count.all(axis=0) | windows).tolist() if len(names) else [False] * len(cols)
+    ms_l, lw_l = ms.tolist(), lw.tolist()
+    steps, best = c.nsteps[cols].tolist(), c.best_m[cols].tolist()
+    peak, peak_raw, sat = c.peak[:, cols].T.tolist(), c.peak_raw[:, cols].T.tolist(), c.sat[cols].tolist()
+    out = []
+    for n, j in enumerate(cols.tolist()):
+        kind, tn = kinds[n], t[n]
+        if kind == "safe":
+            ev = OracleEvidence(1, Reason.ENTERED_E, tn, t_enter=tn, status=SAFE, entry_margin=entry[n],
+                                entry_error=entry_err[n])
+        elif kind == "left_C":
+            ev = OracleEvidence(0, Reason.LEFT_C, tn, violated=names[first_bad[n]], status=UNSAFE)
+        elif kind == "non_finite":
+            ev = OracleEvidence(0, Reason.INTEGRATION_FAILED, tn, status=UNSAFE,
+                                message=(messages or {}).get(j) or "non-finite value")
+        elif kind in ("doubt", "doubt_E"):
+            ev = OracleEvidence(0, Reason.INCONCLUSIVE, tn, status=INCONCLUSIVE, message=DOUBT if kind == "doubt" else DOUBT_E,
+                                violated=names[worst[n]] if kind == "doubt" and names else None)
+        else:
+            ev = OracleEvidence(0, Reason.HORIZON, tn, status=UNSAFE)
+        ev.steps = steps[n]
+        if clean:
+            ev.min_margins, ev.lower_bounds = dict(zip(names, min_l[n])), dict(zip(names, low_l[n]))
+        else:
+            ev.min_margins = {nm: fin(v) for nm, v in zip(names, min_l[n])}
+            ev.lower_bounds = {nm: fin(v) for nm, v in zip(names, low_l[n])}
+        if names:
+            m0, l0 = fin(ms_l[n]), fin(lw_l[n])
+            ev.margin = m0
+            ev.error_bound = m0 - l0 if m0 is not None and l0 is not None else None
+        ev.best_roa_margin = best[n]
+        ev.peak_input, ev.peak_demand, ev.saturated = peak[n], peak_raw[n], sat[n]
+        missing = unevaluated(prim, float(t0s[n]), tn, count[:, n]) if check[n] else None
+        if missing:
+            ev = OracleEvidence(0, Reason.ERROR, tn, status=INCONCLUSIVE, violated=missing,
+                                message=f"safety function {missing} was never evaluated in its active window")
+        else:
+            ev.checked = True
+        out.append(ev)
+    return out
+
+
 def evidence(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, j: int, t0: float, c_margin: float,
              message_nonfinite: str = "") -> OracleEvidence:
     """Evidence of rollout j of a decided block (carry and block columns j)."""
-    k = int(d.k[j])
-    kind = d.kind[j]
-    t = float(b.s[j, k])
-    names = prim.h_names
-    if kind == "safe":
-        ev = OracleEvidence(1, Reason.ENTERED_E, t, t_enter=t, status=SAFE)
-        ev.entry_margin = float(b.margin[j, k])
-        ev.entry_error = float(c_margin * c.en[j])
-    elif kind == "left_C":
-        hv = np.where(b.h[:, j, k] < INACTIVE / 2, b.h[:, j, k], np.inf)
-        ev = OracleEvidence(0, Reason.LEFT_C, t, violated=names[int(np.argmin(hv))], status=UNSAFE)
-    elif kind == "non_finite":
-        ev = OracleEvidence(0, Reason.INTEGRATION_FAILED, t, status=UNSAFE, message=message_nonfinite or "non-finite value")
-    elif kind == "doubt":
-        ev = OracleEvidence(0, Reason.INCONCLUSIVE, t, status=INCONCLUSIVE,
-                            message="a safety margin is within the numerical error bound")
-    elif kind == "doubt_E":
-        ev = OracleEvidence(0, Reason.INCONCLUSIVE, t, status=INCONCLUSIVE,
-                            message="the flow may have entered E (its margin is within the numerical error bound) "
-                                    "but E was not entered beyond doubt before C was left or the horizon was reached")
-    else:
-        ev = OracleEvidence(0, Reason.HORIZON, t, status=UNSAFE)
-    ev.steps = int(c.nsteps[j])
-    ev.min_margins = {n: (float(v) if np.isfinite(v) else None) for n, v in zip(names, c.min_h[:, j])}
-    ev.lower_bounds = {n: (float(v) if np.isfinite(v) else None) for n, v in zip(names, c.low[:, j])}
-    if len(names):
-        ms, lw = np.min(c.min_h[:, j]), np.min(c.low[:, j])
-        ev.margin = float(ms) if np.isfinite(ms) else None
-        ev.error_bound = float(ms - lw) if np.isfinite(ms) and np.isfinite(lw) else None
-        if kind == "doubt":
-            worst = int(np.argmin(c.low[:, j]))
-            ev.violated = names[worst]
-    ev.best_roa_margin = float(c.best_m[j])
-    ev.peak_input = [float(v) for v in c.peak[:, j]]
-    ev.peak_demand = [float(v) for v in c.peak_raw[:, j]]
-    ev.saturated = bool(c.sat[j])
-    missing = unevaluated(prim, t0, ev.t_stop, c.count[:, j])
-    if missing:
-        return OracleEvidence(0, Reason.ERROR, ev.t_stop, status=INCONCLUSIVE, violated=missing,
-                              message=f"safety function {missing} was never evaluated in its active window")
-    ev.checked = True
-    return ev
+    return evidences(prim, b, c, d, np.array([j]), [t0], c_margin, {j: message_nonfinite})[0]
 
 
 def unevaluated(prim: CompiledPrimitive, t0: float, t1: float, count: np.ndarray) -> str | None:
