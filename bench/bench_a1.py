@@ -1,7 +1,7 @@
 """Benchmark of the safety oracle (Definition 4) on the Unitree A1 (rigid body, paper Section IV).
 
-    python bench/bench_a1.py            # about 1 minute on 2 cores
-    python bench/bench_a1.py --quick    # about 40 s: 3 rounds, one ID-QP call
+    python bench/bench_a1.py            # about 70 s on 2 cores
+    python bench/bench_a1.py --quick    # about 1 minute: 3 rounds, one ID-QP call
     options: --repeats R, --no-shipped (skip specs/a1's build and the ID-QP), --no-write
 
 The target (issue): "The compiled A1 oracle (2 s horizon, 1 ms step, four feet in contact, joint
@@ -16,11 +16,15 @@ joints, the 1 s cubic motion profile of eq. 7, Kp 60, Kd 3):
   StandPD     plain joint PD (the issue's case)
   StandPD_gc  the same plus gravity compensation (system.static_torque, as lie.yaml uses)
 
-and the project's oracle set to horizon 2.0, dt 0.001, accuracy low (no step-halving check).
-Their E radius is 1e-9 and the oracle runs with h_tolerance 1e9, so a call never enters E and
-never leaves C: it rolls the closed loop over the full 2 s, i.e. 2000 RK4 steps = 8000
-right-hand-side evaluations, while still computing every safety function, the RoA margin and the
-input at every step as usual. The start point is Lie's setpoint x_Lie*(0) at t_B = 0 (the
+and the project's oracle set to horizon 2.0, dt 0.001, accuracy low (refinements=0: an
+inconclusive rollout is not re-run at dt/2). Their E radius is 1e-9 and the oracle runs with
+h_tolerance 1e9, so a call never enters E and never leaves C: it rolls the closed loop over the
+full 2 s, i.e. 2000 RK4 steps = 8000 right-hand-side evaluations of classical RK4, while still
+computing, at every step as usual, every safety function at both ends of the step, their rates
+along the flow, the embedded error estimate, the RoA margin and the input. The A1's closed loop
+is too large to inline (integrator.INLINE_NODES), so a compiled step evaluates it 8 times: k1..k4
+and k5 = f(x_next) at the step's end (the error estimate), plus 3 evaluations for forward
+differences along the flow at both ends and h(x_next - e). The start point is Lie's setpoint x_Lie*(0) at t_B = 0 (the
 Lie -> Stand transition of Algorithm 1). The verdict with the real safe set (h_tolerance 0) is
 reported as well.
 
@@ -32,17 +36,23 @@ over rounds, a ratio is the median of the per-round ratios), JIT compilation tim
       through a zero-copy FunctionBuffer (the oracle's compiled work without its Python side);
   (b) the compiled closed-loop right-hand side alone: prim.f_cl jit-compiled with the oracle's
       flags (integrator.compile_cached), called 8000 times through Function.buffer() with numpy
-      memoryviews bound once; the ratio (a) / (b) is the first target (<= 1.5);
+      memoryviews bound once; the ratio (a) / (b) is the first target (<= 1.5), as the issue
+      counts evaluations (4 per RK4 step); (a) / (8 per step, what the error-aware step makes) is
+      shown next to it;
   (c) the same rollout written with pinocchio from Python: pin.crba, pin.nonLinearEffects, foot
       Jacobians (LOCAL_WORLD_ALIGNED) and classical foot accelerations, the same saturated PD
       law (and least-norm gravity compensation), the same Baumgarte-stabilised contact dynamics
       solved by a numpy Schur complement, qdot by the explicit free-flyer formula, classical RK4
       at 1 ms with the base quaternion renormalised after each step (system.project). Its
       trajectory is checked against the compiled one (mpgspec.oracle.trace.trace) and the
-      ratio (c) / (a) is the second target (>= 8).
+      ratio (c) / (a) is the second target (>= 8);
+  (d) for information, the plain RK4 chunk the oracle compiled before its verdicts became
+      error-aware (bench/plain_rk4.py: the loop at the step start, three f_cl evaluations, outputs
+      h, RoA margin, u_raw), jit-compiled the same way and run as the same 32 zero-copy chunk
+      calls: (a)'s chunks / (d) is what the error-aware check costs in compiled work.
 
 Then, for information, the shipped project specs/a1/project.yaml: mpgspec.api.build (graph build
-with the JIT time per primitive) and the cost of one oracle call of Stand, whose ID-QP (qrqp) is
+with the JIT time of each primitive's chunk, measured with a fresh, empty MPGSPEC_CACHE) and the cost of one oracle call of Stand, whose ID-QP (qrqp) is
 solved at every Runge-Kutta stage, next to one of Lie (joint PD).
 
 Prints a markdown table and replaces (or appends) the section "A1 (rigid body)" of
@@ -80,10 +90,11 @@ import pinocchio as pin  # noqa: E402
 import yaml  # noqa: E402
 
 from mpgspec.api import build, compile_project, settings_for  # noqa: E402
-from mpgspec.oracle.integrator import build_chunk, compile_cached, initial_state  # noqa: E402
+from mpgspec.oracle.integrator import INLINE_NODES, build_chunk, compile_cached, initial_state  # noqa: E402
 from mpgspec.oracle.oracle import SafetyOracle  # noqa: E402
 from mpgspec.oracle.trace import trace  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402
+from plain_rk4 import build_plain_chunk  # noqa: E402  (bench/plain_rk4.py)
 
 SPEC_DIR = ROOT / "specs" / "a1"
 VARIANTS = (("StandPD", False), ("StandPD_gc", True))
@@ -139,6 +150,14 @@ def make_variant(tmp: Path) -> Path:
     proj.pop("sequence", None)
     (dst / "project.yaml").write_text(yaml.safe_dump(proj, sort_keys=False))
     return dst / "project.yaml"
+
+
+def evals_per_step(prim) -> int:
+    """Closed-loop evaluations in one compiled step of integrator.build_chunk: k1..k4 and k5 at the
+    step's end; a loop too large to inline adds 3 (forward differences along the flow at both ends
+    and h(x_next - e)), a small one gets exact directional derivatives inlined instead."""
+    f = prim.f_cl
+    return 5 + (3 if (not f.is_a("SXFunction") or f.n_nodes() > INLINE_NODES) else 0)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -307,6 +326,7 @@ class PinocchioRollout:
 
 def shipped_project(n_stand: int, n_lie: int) -> dict:
     import verifiers.rk4 as _vr
+    os.environ["MPGSPEC_CACHE"] = tempfile.mkdtemp(prefix="cold-", dir=_JIT_DIR)  # cold: gcc really runs
     spec = load_project(SPEC_DIR / "project.yaml")
     st = settings_for(spec)
     orig, jit = _vr.build_chunk, {}
@@ -321,18 +341,19 @@ def shipped_project(n_stand: int, n_lie: int) -> dict:
     _vr.build_chunk = timed_bc
     try:
         t = time.perf_counter()
-        res = build(spec, st)
+        prims, g, info, oracle_of = common.run_build(build, spec, st, SafetyOracle)
         total = time.perf_counter() - t
     finally:
         _vr.build_chunk = orig
-    prims, g, oracles, info = res[:4]
-    out = {"total": total, "info": info, "jit": jit, "edges": g.G.number_of_edges(), "settings": st}
+    out = {"total": total, "info": info, "jit": jit, "edges": g.G.number_of_edges(), "settings": st,
+           "eps": {n: evals_per_step(p) for n, p in prims.items()}}
     xl, xs = prims["Lie"].x_star(0.0), prims["Stand"].x_star(0.0)
     for name, x0, n in (("Stand", xl, n_stand), ("Lie", xs, n_lie)):
         ts, ev = [], None
+        oracle = oracle_of(name)  # built (chunk compiled) outside the timing
         for _ in range(n):
             t = time.perf_counter()
-            ev = oracles[name](x0, 0.0)
+            ev = oracle(x0, 0.0)
             ts.append(time.perf_counter() - t)
         out[name] = {"t": statistics.median(ts), "ev": ev, "n": n}
     return out
@@ -350,6 +371,7 @@ def main(argv=None) -> int:
     R = args.repeats or (3 if args.quick else 5)
     T0 = time.perf_counter()
     mach = machine()
+    mach["revision"] = common.revision(ROOT)  # at the start: what is measured
     log(f"machine: {mach['nproc']} CPU ({mach['cpu']}), {mach['platform']}, Python {mach['python']}, "
         f"CasADi {mach['casadi']}, NumPy {mach['numpy']}, pinocchio {mach['pinocchio']};{loadavg()}")
 
@@ -358,11 +380,8 @@ def main(argv=None) -> int:
         return _run(args, R, T0, mach, tmp)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-        gc.collect()  # compiled Functions delete their own JIT files when freed; then the empty folder goes
-        try:
-            os.rmdir(_JIT_DIR)
-        except OSError:
-            pass
+        gc.collect()
+        shutil.rmtree(_JIT_DIR, ignore_errors=True)  # the private compile caches of this run
 
 
 def _run(args, R, T0, mach, tmp) -> int:
@@ -375,11 +394,11 @@ def _run(args, R, T0, mach, tmp) -> int:
     st = base.replace(h_tolerance=1e9)  # never leave C: run the full horizon
     x0 = prims["Lie"].x_star(0.0)
     nsteps = int(np.ceil(HORIZON / st.dt - 1e-9))
-    n_eval = 4 * nsteps
+    n_eval = 4 * nsteps  # classical RK4, as the issue counts
     n_chunks = nsteps // st.chunk + 1  # the oracle stops once steps + K > nsteps
     ctrl = {inst.name: inst.spec.controller for inst in spec.primitives}
     log(f"\nbenchmark project (temporary copy of specs/a1): compiled in {t_compile:.2f} s; oracle dt={st.dt:g}, "
-        f"T={HORIZON:g}, check={st.check!r}, chunk K={st.chunk}, jit flags {' '.join(st.jit_flags)}; start point "
+        f"T={HORIZON:g}, refinements={st.refinements}, chunk K={st.chunk}, jit flags {' '.join(st.jit_flags)}; start point "
         f"x_Lie*(0), t_B = 0; {nsteps} RK4 steps = {n_eval} RHS evaluations per rollout; the oracle computes "
         f"{n_chunks} chunks = {n_chunks * st.chunk} steps")
 
@@ -387,8 +406,10 @@ def _run(args, R, T0, mach, tmp) -> int:
     for name, _gc in VARIANTS:
         prim = prims[name]
         d = setup[name] = {"nodes": prim.f_cl.n_nodes() if prim.f_cl.is_a("SXFunction") else None,
-                           "h_nodes": prim.h.n_nodes() if prim.h.is_a("SXFunction") else None}
-        log(f"\n{name}: f_cl {d['nodes']} SX nodes, h {d['h_nodes']} SX nodes ({len(prim.h_names)} safety functions)")
+                           "h_nodes": prim.h.n_nodes() if prim.h.is_a("SXFunction") else None,
+                           "eps": evals_per_step(prim)}
+        log(f"\n{name}: f_cl {d['nodes']} SX nodes, h {d['h_nodes']} SX nodes ({len(prim.h_names)} safety functions); "
+            f"{d['eps']} closed-loop evaluations per compiled step")
         t = time.perf_counter()
         oracle = SafetyOracle(prim, st)
         d["jit_oracle"] = time.perf_counter() - t
@@ -404,7 +425,7 @@ def _run(args, R, T0, mach, tmp) -> int:
         log(f"  oracle: JIT {d['jit_oracle']:.2f} s, first call {d['first'] * 1e3:.1f} ms, {ev.steps} steps "
             f"({ev.reason.value}); smallest margins over the rollout: "
             + ", ".join(f"{k} {v:.3g}" for v, k in worst))
-        log(f"  with the real safe set (h_tolerance {base.h_tolerance:g}): verdict {ev_real.verdict}, "
+        log(f"  with the real safe set (h_tolerance {base.h_tolerance:g}): verdict {ev_real.verdict} ({ev_real.status}), "
             f"{ev_real.reason.value} at {ev_real.t_stop:.3f} s"
             + (f" ({ev_real.violated})" if ev_real.violated else ""))
         t = time.perf_counter()
@@ -417,6 +438,13 @@ def _run(args, R, T0, mach, tmp) -> int:
         chunk = build_chunk(prim, st.dt, st.chunk, st.jit, st.jit_flags)
         loop = ChunkLoop(chunk, initial_state(prim, x0, 0.0))
         loop.run(1)
+        t = time.perf_counter()
+        plain = build_plain_chunk(prim, st.dt, st.chunk, st.jit, st.jit_flags)
+        d["jit_plain"] = time.perf_counter() - t
+        ploop = ChunkLoop(plain, initial_state(prim, x0, 0.0))
+        d["plain_diff"] = float(np.abs(ploop.run(n_chunks)[:prim.system.nx] - loop.run(n_chunks)[:prim.system.nx]).max())
+        log(f"  plain RK4 chunk (before the error-aware check): JIT {d['jit_plain']:.2f} s; |x_plain(T') - x_new(T')|_inf "
+            f"after {n_chunks * st.chunk} steps = {d['plain_diff']:.1e}")
         # verification against the compiled trajectory
         t = time.perf_counter()
         tr = trace(prim, x0, 0.0, HORIZON, st, max_points=10 ** 7)
@@ -438,6 +466,7 @@ def _run(args, R, T0, mach, tmp) -> int:
             f"{Xc[-1][2]:.4f} m")
         fns[f"oracle {name}"] = lambda o=oracle: o(x0, 0.0)
         fns[f"chunks {name}"] = lambda lp=loop: lp.run(n_chunks)
+        fns[f"plain {name}"] = lambda lp=ploop: lp.run(n_chunks)
         fns[f"rhs {name}"] = lambda c=rhs: c.repeat(n_eval)
         fns[f"pin {name}"] = lambda p=pr: p.rollout(x0, st.dt, nsteps)
 
@@ -456,14 +485,17 @@ def _run(args, R, T0, mach, tmp) -> int:
     for name, _gc in VARIANTS:
         r = res[name] = {
             "oracle": md[f"oracle {name}"], "chunks": md[f"chunks {name}"], "rhs": md[f"rhs {name}"],
-            "pin": md[f"pin {name}"],
+            "pin": md[f"pin {name}"], "plain": md[f"plain {name}"],
             "r_rhs": med_ratio(T[f"oracle {name}"], T[f"rhs {name}"]),
+            "r_check": med_ratio(T[f"chunks {name}"], T[f"plain {name}"]),
             "r_chunks": med_ratio(T[f"oracle {name}"], T[f"chunks {name}"]),
             "r_chunks_rhs": med_ratio(T[f"chunks {name}"], T[f"rhs {name}"]),
             "r_pin": med_ratio(T[f"pin {name}"], T[f"oracle {name}"]),
         }
         log(f"  {name}: oracle / (RHS x {n_eval}) = {r['r_rhs']:.2f} (its compiled chunks alone: "
-            f"{r['r_chunks_rhs']:.2f}; oracle / its chunks {r['r_chunks']:.2f}); "
+            f"{r['r_chunks_rhs']:.2f}; oracle / its chunks {r['r_chunks']:.2f}); oracle / (RHS x "
+            f"{setup[name]['eps'] * nsteps}, the new step's evaluations) = {r['r_rhs'] * 4 / setup[name]['eps']:.2f}; "
+            f"its chunks / plain RK4 chunks = {r['r_check']:.2f}; "
             f"pinocchio / oracle = {r['r_pin']:.1f}x; "
             f"{r['rhs'] / n_eval * 1e6:.2f} us per compiled RHS, {r['pin'] / n_eval * 1e6:.0f} us per pinocchio RHS")
     triv_ns = md["trivial"] / n_eval * 1e9
@@ -477,13 +509,14 @@ def _run(args, R, T0, mach, tmp) -> int:
             f"{R} Lie oracle calls")
         shipped = shipped_project(n_stand, R)
         s, info = shipped, shipped["info"]
-        log(f"  build {s['total']:.2f} s (compile {info.get('compile_s', 0):.2f} s, graph {info['graph_s']:.2f} s with "
+        log(f"  build {s['total']:.2f} s (compile {info.get('compile_s', 0):.2f} s, traces {info.get('traces_s', 0):.2f} s, "
+            f"graph {info['graph_s']:.2f} s with "
             f"{info['oracle_calls']} oracle calls, {s['edges']} edges); JIT per primitive: "
             + ", ".join(f"{k} {v:.2f} s" for k, v in s["jit"].items()))
         for nm in ("Stand", "Lie"):
             e = s[nm]["ev"]
             log(f"  {nm} oracle call: {s[nm]['t'] * 1e3:.1f} ms, {e.steps} steps "
-                f"({s[nm]['t'] / max(e.steps, 1) * 1e6:.0f} us/step), verdict {e.verdict} ({e.reason.value})")
+                f"({s[nm]['t'] / max(e.steps, 1) * 1e6:.0f} us/step), verdict {e.verdict} ({e.status}, {e.reason.value})")
 
     # summary ------------------------------------------------------------------------------------
     A, B = (res[n] for n, _ in VARIANTS)
@@ -492,13 +525,15 @@ def _run(args, R, T0, mach, tmp) -> int:
     ok_traj = max(dA["final_diff"], dB["final_diff"]) <= 1e-6
 
     def verdict(e):
-        return f"{e.verdict}, {e.reason.value} at {e.t_stop:.3f} s" + (f" ({e.violated})" if e.violated else "")
+        return (f"{e.verdict} ({e.status}), {e.reason.value} at {e.t_stop:.3f} s"
+                + (f" ({e.violated})" if e.violated else ""))
 
     rows = [
         ("f_cl size (SX nodes)", f"{dA['nodes']:,}", f"{dB['nodes']:,}"),
-        ("JIT: oracle chunk / RHS alone / trace chunk (+ one rollout)",
-         f"{dA['jit_oracle']:.1f} s / {dA['jit_rhs']:.1f} s / {dA['t_trace']:.1f} s",
-         f"{dB['jit_oracle']:.1f} s / {dB['jit_rhs']:.1f} s / {dB['t_trace']:.1f} s"),
+        ("closed-loop evaluations per compiled step (RK4 k1..k4 + end + rates)", f"{dA['eps']}", f"{dB['eps']}"),
+        ("JIT: oracle chunk / RHS alone / trace chunk (+ one rollout) / plain RK4 chunk",
+         f"{dA['jit_oracle']:.1f} s / {dA['jit_rhs']:.1f} s / {dA['t_trace']:.1f} s / {dA['jit_plain']:.1f} s",
+         f"{dB['jit_oracle']:.1f} s / {dB['jit_rhs']:.1f} s / {dB['t_trace']:.1f} s / {dB['jit_plain']:.1f} s"),
         (f"(a) compiled oracle call, {nsteps} steps (computes {n_chunks * st.chunk})",
          f"{A['oracle'] * 1e3:.1f} ms", f"{B['oracle'] * 1e3:.1f} ms"),
         (f"    its {n_chunks} compiled chunks alone, zero-copy",
@@ -508,6 +543,12 @@ def _run(args, R, T0, mach, tmp) -> int:
          f"{B['rhs'] * 1e3:.1f} ms ({B['rhs'] / n_eval * 1e6:.2f} us/eval)"),
         ("**(a) / (b)** (target <= 1.5)", f"**{A['r_rhs']:.2f}**", f"**{B['r_rhs']:.2f}**"),
         ("    compiled chunks alone / (b)", f"{A['r_chunks_rhs']:.2f}", f"{B['r_chunks_rhs']:.2f}"),
+        (f"    (a) / (RHS x evaluations per compiled step x {nsteps})",
+         f"{A['r_rhs'] * 4 / dA['eps']:.2f}", f"{B['r_rhs'] * 4 / dB['eps']:.2f}"),
+        (f"(d) plain RK4 chunks (before the error-aware check), {n_chunks} zero-copy",
+         f"{A['plain'] * 1e3:.1f} ms", f"{B['plain'] * 1e3:.1f} ms"),
+        ("**cost of the error-aware check in compiled work** ((a)'s chunks / (d))",
+         f"**{A['r_check']:.2f}x**", f"**{B['r_check']:.2f}x**"),
         ("(c) same rollout, pinocchio + numpy from Python",
          f"{A['pin'] * 1e3:.0f} ms ({A['pin'] / n_eval * 1e6:.0f} us/eval)",
          f"{B['pin'] * 1e3:.0f} ms ({B['pin'] / n_eval * 1e6:.0f} us/eval)"),
@@ -531,10 +572,17 @@ def _run(args, R, T0, mach, tmp) -> int:
         jit_total = sum(s["jit"].values())
         rows2 = [
             (f"graph build, `mpgspec.api.build` ({info['oracle_calls']} oracle calls, dt={st0.dt:g}, "
-             f"T={st0.horizon:g}, check={st0.check})",
-             f"{s['total']:.1f} s: JIT {jit_total:.1f} s (" + ", ".join(f"{k} {v:.1f} s" for k, v in s["jit"].items())
-             + f"), oracle calls and the rest {s['total'] - jit_total:.1f} s"),
-            ("Stand oracle call, Lie -> Stand (ID-QP, qrqp at every RK4 stage)",
+             f"T={st0.horizon:g}, refinements={st0.refinements})",
+             f"{s['total']:.1f} s: JIT of the oracle chunks {jit_total:.1f} s ("
+             + ", ".join(f"{k} {v:.1f} s" for k, v in s["jit"].items())
+             + f"), oracle calls {info['graph_s'] - jit_total:.1f} s"
+             + (f", traces of edges and failures {info['traces_s']:.1f} s (their own JIT included)"
+                if "traces_s" in info else "")
+             + f", the rest {s['total'] - info['graph_s'] - info.get('traces_s', 0.0):.1f} s"),
+            ("JIT of the oracle chunks, cold cache (fresh MPGSPEC_CACHE)",
+             ", ".join(f"{k} {v:.1f} s" for k, v in s["jit"].items())),
+            (f"Stand oracle call, Lie -> Stand (ID-QP: qrqp at each of the {s['eps']['Stand']} loop evaluations "
+             "per step)",
              f"{s['Stand']['t'] * 1e3:,.0f} ms, {es.steps} steps, {ps * 1e6:,.0f} us/step, {verdict(es)}"),
             ("Lie oracle call, Stand -> Lie (joint PD + gravity comp.)",
              f"{s['Lie']['t'] * 1e3:.1f} ms, {el.steps} steps, {pl * 1e6:.1f} us/step, {verdict(el)}"),
@@ -544,13 +592,14 @@ def _run(args, R, T0, mach, tmp) -> int:
         table2 = "\n".join([f"| {'shipped specs/a1/project.yaml':{w2}s} | value |", f"|{'-' * (w2 + 2)}|-------|"]
                            + [f"| {a:{w2}s} | {b} |" for a, b in rows2])
     when = _dt.datetime.now().strftime("%Y-%m-%d %H:%M")
-    head = (f"A1 quadruped, {when}; {mach['nproc']} CPU ({mach['cpu']}), Python {mach['python']}, CasADi "
+    head = (f"A1 quadruped, {when}, {mach['revision']}; {mach['nproc']} CPU ({mach['cpu']}), Python {mach['python']}, CasADi "
             f"{mach['casadi']}, NumPy {mach['numpy']}, pinocchio {mach['pinocchio']};{loadavg()}; "
             f"`python bench/bench_a1.py{' --quick' if args.quick else ''}` (medians of {R} interleaved rounds; "
             f"{time.perf_counter() - T0:.0f} s wall). Start x_Lie*(0), t_B = 0; oracle dt={st.dt:g}, T={HORIZON:g}, "
-            f"check=none, K={st.chunk}, JIT {' '.join(st.jit_flags)}; E radius 1e-9 and h_tolerance 1e9 so every "
-            f"call runs the full {nsteps} steps ({n_eval} RHS evaluations), still computing h, the RoA margin and u "
-            f"at each step.")
+            f"refinements=0 (low), K={st.chunk}, JIT {' '.join(st.jit_flags)}; E radius 1e-9 and h_tolerance 1e9 so "
+            f"every call runs the full {nsteps} steps ({n_eval} RHS evaluations of classical RK4; the error-aware step "
+            f"makes {dA['eps']} closed-loop evaluations), still computing h at both ends of each step, its rates, the "
+            f"error estimate, the RoA margin and u.")
     section = f"{HEADING}\n\n{head}\n\n{table}\n" + (f"\n{table2}\n" if table2 else "") + \
         "\nSee the docstring of bench/bench_a1.py for the meaning of each row.\n"
     log("\n" + section)

@@ -41,3 +41,51 @@ def machine(**versions: str) -> dict:
         avail = os.cpu_count()
     return {"nproc": avail, "cpu": cpu or platform.processor() or platform.machine(),
             "python": platform.python_version(), **versions, "platform": platform.platform()}
+
+
+def revision(root: Path, paths: tuple[str, ...] = ("mpgspec", "verifiers", "specs")) -> str:
+    """The commit measured, and which of `paths` have uncommitted changes (the benchmark measures
+    the working tree)."""
+    import subprocess
+
+    def git(*a: str) -> str:
+        return subprocess.run(["git", "-C", str(root), *a], capture_output=True, text=True, check=True).stdout
+
+    try:
+        head = git("rev-parse", "--short", "HEAD").strip()
+        changed = [ln[3:] for ln in git("status", "--porcelain", "--", *paths).splitlines() if ln.strip()]
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown revision"
+    if not changed:
+        return f"commit {head}"
+    return f"commit {head} + uncommitted changes in {', '.join(sorted(changed))}"
+
+
+def run_build(build, spec, settings, oracle_cls):
+    """mpgspec.api.build across its two shapes, with an explicit in-process executor when it takes one
+    (so that no result cache answers for the oracle): (prims, graph, timing, oracle_of), where
+    oracle_of(name) is the oracle the build used (or a new one on the build's primitive, whose
+    compiled chunks are remembered on it, so no JIT happens again)."""
+    import inspect
+
+    kw = {}
+    if "executor" in inspect.signature(build).parameters:  # in-process and uncached: every call is simulated
+        try:
+            from mpgspec.oracle.executors import InProcess
+            kw["executor"] = InProcess()
+        except ImportError:
+            pass
+    res = build(spec, settings, **kw)
+    if isinstance(res, tuple) and len(res) == 2 and hasattr(res[1], "graph"):  # (CompiledProject, VerifiedGraph)
+        cp, vg = res
+        prims, g, timing, oracles = cp.prims, vg.graph, dict(vg.timing), {}
+        timing.setdefault("compile_s", cp.timing.get("compile_s", 0.0))
+    else:  # (prims, graph, oracles, timing, roa)
+        prims, g, oracles, timing = res[:4]
+
+    def oracle_of(name):
+        if name not in oracles:
+            oracles[name] = oracle_cls(prims[name], settings)
+        return oracles[name]
+
+    return prims, g, timing, oracle_of
