@@ -92,10 +92,10 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
         cdh = np.cumsum(b.dh, axis=2)
         eh_s = c.eh[:, :, None] + cdh - b.dh  # error estimate at sample k
         eh_e = c.eh[:, :, None] + cdh  # at the end of step k
-        act_s, act_t = b.h < INACTIVE / 2, b.lb < INACTIVE / 2
-        low_s = np.where(act_s, b.h - eh_s, np.inf)
-        low_t = np.where(act_t, b.lb - eh_e, np.inf)
-        viol = (np.where(act_s, b.h + eh_s, np.inf) < -tol).any(axis=0)
+        # inactive functions hold INACTIVE (1e9): never binding, and left out of the reported least values
+        low_s = b.h - eh_s
+        low_t = b.lb - eh_e
+        viol = ((b.h + eh_s) < -tol).any(axis=0)
         doubt_s = (low_s < -tol).any(axis=0)
         doubt_t = (low_t < -tol).any(axis=0)
     else:
@@ -149,13 +149,16 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
     js = ar[None, :] < n_s[:, None]
     jt = ar[None, :] < n_t[:, None]
     if nh:
+        full_s, full_t = bool(js.all()), bool(jt.all())  # the common case: no rollout decided in this block
         with np.errstate(invalid="ignore"):
-            c.min_h = np.minimum(c.min_h, np.where(js[None] & act_s & np.isfinite(b.h), b.h, np.inf).min(axis=2))
-            c.low = np.minimum(c.low, np.minimum(np.where(js[None] & np.isfinite(low_s), low_s, np.inf).min(axis=2),
-                                                 np.where(jt[None] & np.isfinite(low_t), low_t, np.inf).min(axis=2)))
-        c.count += (js[None] & act_s).sum(axis=2) + (jt[None] & act_t).sum(axis=2)
-        c.eh = c.eh + np.where(jt[None], b.dh, 0.0).sum(axis=2)
-    c.en = c.en + np.where(jt, b.err, 0.0).sum(axis=1)
+            hs = b.h if full_s else np.where(js[None], b.h, np.inf)
+            ls = low_s if full_s else np.where(js[None], low_s, np.inf)
+            lt = low_t if full_t else np.where(jt[None], low_t, np.inf)
+            c.min_h = np.fmin(c.min_h, np.fmin.reduce(hs, axis=2))
+            c.low = np.fmin(c.low, np.fmin(np.fmin.reduce(ls, axis=2), np.fmin.reduce(lt, axis=2)))
+        c.count += (hs < INACTIVE / 2).sum(axis=2) + (lt < INACTIVE / 2).sum(axis=2)
+        c.eh = c.eh + (cdh[:, :, -1] if full_t else np.where(jt[None], b.dh, 0.0).sum(axis=2))
+    c.en = c.en + (cen[:, -1] if bool(jt.all()) else np.where(jt, b.err, 0.0).sum(axis=1))
     c.nsteps = c.nsteps + n_t
     with np.errstate(invalid="ignore"):
         c.best_m = np.maximum(c.best_m, np.where(js & ~np.isnan(b.margin), b.margin, -np.inf).max(axis=1))
@@ -187,11 +190,11 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
     first_bad = np.argmin(hv, axis=0).tolist() if len(names) else []
     min_h, low, count = c.min_h[:, cols], c.low[:, cols], c.count[:, cols]
     with np.errstate(invalid="ignore"):
-        ms = min_h.min(axis=0) if len(names) else np.full(len(cols), np.inf)
-        lw = low.min(axis=0) if len(names) else np.full(len(cols), np.inf)
+        ms = np.fmin.reduce(min_h, axis=0) if len(names) else np.full(len(cols), np.inf)
+        lw = np.fmin.reduce(low, axis=0) if len(names) else np.full(len(cols), np.inf)
         worst = np.argmin(low, axis=0).tolist() if len(names) else []
-    fin = lambda v: v if v == v and abs(v) != np.inf else None  # noqa: E731
-    clean = bool(np.isfinite(min_h).all() and np.isfinite(low).all())
+    fin = lambda v: v if v == v and abs(v) < INACTIVE / 2 else None  # noqa: E731
+    clean = bool((np.abs(min_h) < INACTIVE / 2).all() and (np.abs(low) < INACTIVE / 2).all())
     min_l, low_l = min_h.T.tolist(), low.T.tolist()
     windows = any(w is not None for w in prim.windows)
     check = (~count.all(axis=0) | windows).tolist() if len(names) else [False] * len(cols)
