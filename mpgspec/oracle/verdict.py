@@ -227,6 +227,9 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
             m0, l0 = fin(ms_l[n]), fin(lw_l[n])
             ev.margin = m0
             ev.error_bound = m0 - l0 if m0 is not None and l0 is not None else None
+            if kind == "doubt" and ev.error_bound is not None and ev.error_bound > 1e3 * max(1.0, abs(m0)):
+                ev.message = (f"the integration error estimate ({ev.error_bound:.3g}) dwarfs the margin ({m0:.3g}): "
+                              "the step is too large for this closed loop (numerical blow-up); decrease dt")
         ev.best_roa_margin = best[n]
         ev.peak_input, ev.peak_demand, ev.saturated = peak[n], peak_raw[n], sat[n]
         missing = unevaluated(prim, float(t0s[n]), tn, count[:, n]) if check[n] else None
