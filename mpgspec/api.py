@@ -218,11 +218,14 @@ def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict, memo=
 
 def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
                 progress: Progress | None = None, formats: tuple[str, ...] = ("json", "html", "dot", "graphml"),
-                executor: Executor | None = None) -> ProjectResult:
-    """Verify one project file and write its reports under out_dir/<project>/."""
+                executor: Executor | None = None, allow_paths=None) -> ProjectResult:
+    """Verify one project file and write its reports under out_dir/<project>/.
+
+    allow_paths: folders outside the project folder that files named by the spec may lie in.
+    """
     res = ProjectResult(Path(path))
     try:
-        spec = load_project(path)
+        spec = load_project(path, allow_paths=allow_paths)
         res.name = spec.name
         settings = settings_for(spec, overrides)
         cp, vg = build(spec, settings, progress, executor)
@@ -236,7 +239,12 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
     res.graph = vg.graph
     try:
         return _finish_project(res, cp, vg, out_dir, formats, progress, executor)
+    except MpgError as err:  # e.g. the reports could not be written: this project's error
+        res.status = "error"
+        res.errors = [{"code": err.code, "message": str(err), "text": f"{path}: {err.code} {err}"}]
+        return res
     except Exception as err:  # a bug after the graph was built: this project's error, not the end of the run
+        res.status = "error"
         res.errors = [{"code": "MPG900", "message": f"internal error: {type(err).__name__}: {err}",
                        "text": f"{path}: MPG900 internal error: {type(err).__name__}: {err}"}]
         return res
@@ -260,14 +268,18 @@ def _finish_project(res: ProjectResult, cp: CompiledProject, vg: VerifiedGraph, 
 
 
 def verify(paths, out_dir: str | Path | None = "reports", overrides: dict | None = None,
-           progress: Progress | None = None, executor: Executor | None = None) -> VerifyResult:
+           progress: Progress | None = None, executor: Executor | None = None,
+           allow_paths=None) -> VerifyResult:
     """Verify every project found under `paths`; reports go to out_dir (None: write nothing).
 
     executor: where oracle calls run (mpgspec.oracle.executors: InProcess, ProcessPool,
     DaskExecutor; make_executor(jobs, dask) picks one); in this process when omitted.
+    allow_paths: folders outside each project folder that files named by specs may lie in
+    (paths a spec names must otherwise resolve inside its project folder).
     """
     files: list[Path] = []
     for p in [paths] if isinstance(paths, (str, Path)) else paths:
         files.extend(discover(p))
-    return VerifyResult([run_project(f, Path(out_dir) if out_dir else None, overrides, progress, executor=executor)
+    return VerifyResult([run_project(f, Path(out_dir) if out_dir else None, overrides, progress, executor=executor,
+                                     allow_paths=allow_paths)
                          for f in files])

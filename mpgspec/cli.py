@@ -10,28 +10,94 @@ Exit codes: 0 all checks pass, 1 a check failed, 2 a spec or usage error.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
+import signal
 import sys
 
 from . import __version__, api
-from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors
+from .errors import (EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, gh_command,
+                     gh_plain)
 from .spec.yamlpos import format_context
 
 MARK = {"pass": "PASS", "fail": "FAIL", "error": "ERROR", "warn": "WARN"}
+JOBS_PER_CORE = 4
 
 
-def _progress(stream):
+class Terminated(SystemExit):
+    """SIGTERM (or SIGHUP) arrived: raised in the main thread so that every finally-block runs (report
+    temporaries removed, worker processes terminated); exits with 128 + the signal number."""
+
+
+def _on_signal(signum, frame):
+    raise Terminated(128 + signum)
+
+
+@contextlib.contextmanager
+def _signal_handlers():
+    """SIGTERM/SIGHUP raise Terminated while the command runs (Ctrl-C already raises KeyboardInterrupt)."""
+    saved = {}
+    for s in (signal.SIGTERM, getattr(signal, "SIGHUP", None)):
+        if s is None:
+            continue
+        try:
+            saved[s] = signal.signal(s, _on_signal)
+        except (ValueError, OSError):  # not the main thread: leave signals alone
+            pass
+    try:
+        yield
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
+
+
+@contextlib.contextmanager
+def _stdout_to_stderr():
+    """While the pipeline runs, everything written to stdout (Python prints of verifiers, C or Rust
+    solver logs, worker processes started meanwhile) goes to stderr; stdout carries only mpgspec's
+    own result (one JSON document with --format json)."""
+    sys.stdout.flush()
+    with contextlib.redirect_stdout(sys.stderr):
+        try:
+            saved = os.dup(1)
+        except OSError:
+            saved = None
+        if saved is not None:
+            try:
+                os.dup2(2, 1)
+            except OSError:
+                null = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(null, 1)
+                os.close(null)
+        try:
+            yield
+        finally:
+            if saved is not None:
+                try:
+                    sys.stderr.flush()
+                except (OSError, ValueError):
+                    pass
+                os.dup2(saved, 1)
+                os.close(saved)
+
+
+def _line(text: str, fmt: str) -> str:
+    """A plain output line; with --format github, one that cannot start a workflow command."""
+    return gh_plain(text) if fmt == "github" else text
+
+
+def _progress(stream, fmt: str = "human"):
     def cb(project: str, what: str, i: int, n: int):
-        print(f"[{project}] {what} ({i}/{n})", file=stream, flush=True)
+        print(_line(f"[{project}] {what} ({i}/{n})", fmt), file=stream, flush=True)
     return cb
 
 
 def _print_errors(errors: list[dict], fmt: str):
     for e in errors:
         if fmt == "github":
-            print(f"::error file={e.get('file', '')},line={e.get('line', 0)},col={e.get('column', 0)},"
-                  f"title={e.get('code', '')}::{e.get('text', e.get('message'))}")
+            print(gh_command("error", e.get("text", e.get("message")), file=e.get("file", ""),
+                             line=e.get("line", 0), col=e.get("column", 0), title=e.get("code", "")))
             continue
         print(e.get("text", e.get("message")), file=sys.stderr)
         if e.get("line"):
@@ -50,29 +116,79 @@ def _cached(t: dict) -> str:
     return f", {int(t['cache_hits'])} from the cache" if t.get("cache_hits") else ""
 
 
+def _num(v, spec: str = ".3g") -> str:
+    try:
+        return format(float(v), spec)
+    except (TypeError, ValueError):
+        return "?"
+
+
 def _human(res: api.VerifyResult, fmt: str):
+    def out(text: str):
+        print(_line(text, fmt))
+
     for p in res.projects:
-        if p.status == "error" and p.errors:
-            print(f"{MARK['error']} {p.path}")
+        if p.report is None:
+            out(f"{MARK['error']} {p.path}")
             _print_errors(p.errors, fmt)
             continue
         r = p.report
         t = r["timing"]
-        print(f"{MARK[p.status]} {p.name}: {len(r['primitives'])} primitives, {len(r['edges'])} edges, "
-              f"{t['oracle_calls']} oracle calls (simulated) in {t['graph_s']:.2f} s{_inconclusive(r)}{_cached(t)}")
+        out(f"{MARK[p.status]} {p.name}: {len(r['primitives'])} primitives, {len(r['edges'])} edges, "
+            f"{t['oracle_calls']} oracle calls (simulated) in {_num(t['graph_s'], '.2f')} s"
+            f"{_inconclusive(r)}{_cached(t)}")
         for e in r["edges"]:
-            print(f"    {e['from']} -> {e['to']}  class {e['class']}  duration {e.get('duration', 0):.3g} s")
+            out(f"    {e['from']} -> {e['to']}  class {e['class']}  duration {_num(e.get('duration') or 0)} s")
         for a in r["assertions"]:
-            line = f"  {MARK[a['status']]:5} {a['description']}: {a['message']}"
             if fmt == "github" and a["status"] != "pass":
-                print(f"::error file={p.path},title=mpgspec assertion::{a['description']}: {a['message']}")
+                print(gh_command("error", f"{a['description']}: {a['message']}", file=p.path,
+                                 title="mpgspec assertion"))
             else:
-                print(line)
+                out(f"  {MARK[a['status']]:5} {a['description']}: {a['message']}")
         for c in r.get("assumptions", []):
             if c["status"] != "pass":
-                print(f"  {c['status'].upper():5} assumption {c['name']} of {c['primitive']}: {c['message']}")
+                out(f"  {c['status'].upper():5} assumption {c['name']} of {c['primitive']}: {c['message']}")
         for k, path in p.files.items():
-            print(f"  wrote {k}: {path}")
+            out(f"  wrote {k}: {path}")
+        _print_errors(p.errors, fmt)
+
+
+def _check_jobs(jobs: int) -> None:
+    cores = os.cpu_count() or 1
+    if not 1 <= jobs <= JOBS_PER_CORE * cores:
+        raise api.UsageError(f"--jobs must be between 1 and {JOBS_PER_CORE * cores} "
+                             f"({JOBS_PER_CORE} per core, {cores} cores), not {jobs}")
+
+
+def _write(res: api.VerifyResult, out_dir: str) -> None:
+    """Each project's report set into out_dir/<project>/ as a unit; a failure to write makes the
+    project an error (exit 2) with the reason, never a PASS."""
+    from .report.files import ReportWriteError, write_project_reports
+
+    for p in res.projects:
+        if p.report is None:
+            continue
+        try:
+            p.files = write_project_reports(p.report, out_dir, p.report["project"]["name"])
+        except ReportWriteError as e:
+            why = str(e)
+        except Exception as e:  # noqa: BLE001 - a bug in a writer: this project's error, not the run's end
+            why = f"internal error while writing reports: {type(e).__name__}: {e}"
+        else:
+            continue
+        p.status, p.files = "error", {}
+        p.errors.append({"code": "MPG400", "file": str(p.path), "message": why, "text": f"{p.path}: MPG400 {why}"})
+
+
+def _json_doc(res: api.VerifyResult | None, errors=(), code: int = EXIT_USAGE) -> str:
+    from .report.build import finite_json
+
+    doc = {"exit_code": res.exit_code if res is not None else code, "projects": [] if res is None else [
+        {"path": str(p.path), "name": p.name, "status": p.status, "errors": p.errors, "files": p.files,
+         "assertions": p.report["assertions"] if p.report else []} for p in res.projects]}
+    if errors:
+        doc["errors"] = list(errors)
+    return json.dumps(finite_json(doc), indent=1, allow_nan=False, default=str)
 
 
 def cmd_verify(args) -> int:
@@ -81,15 +197,17 @@ def cmd_verify(args) -> int:
         overrides["method"] = args.method
     from .oracle.executors import make_executor
 
-    if args.jobs < 1:
-        raise api.UsageError(f"--jobs must be at least 1, not {args.jobs}")
-    executor = make_executor(args.jobs, args.dask or args.scheduler, cache=not args.no_cache)
-    res = api.verify(args.paths, out_dir=None if args.no_write else args.out, overrides=overrides,
-                     progress=None if args.quiet else _progress(sys.stderr), executor=executor)
+    _check_jobs(args.jobs)
+    with _stdout_to_stderr():
+        executor = make_executor(args.jobs, args.dask or args.scheduler, cache=not args.no_cache)
+        res = api.verify(args.paths, out_dir=None, overrides=overrides,
+                         progress=None if args.quiet else _progress(sys.stderr, args.format), executor=executor,
+                         allow_paths=args.allow_path or None)
+        if not args.no_write:
+            _write(res, args.out)
+    args.exit_code = res.exit_code
     if args.format == "json":
-        print(json.dumps({"exit_code": res.exit_code, "projects": [
-            {"path": str(p.path), "name": p.name, "status": p.status, "errors": p.errors, "files": p.files,
-             "assertions": p.report["assertions"] if p.report else []} for p in res.projects]}, indent=1))
+        print(_json_doc(res))
     else:
         _human(res, args.format)
     return res.exit_code
@@ -123,6 +241,7 @@ def cmd_plan(args) -> int:
         if n not in prims:
             raise api.UsageError(f"unknown primitive {n!r}; expected one of {', '.join(prims)}")
     plan = shortest_plan(g, args.source, args.goal, args.weight)
+    args.exit_code = EXIT_OK if plan.found else EXIT_CHECK_FAILED
     if args.format == "json":
         print(json.dumps(plan.to_dict(), indent=1))
     elif plan.found:
@@ -142,6 +261,7 @@ def cmd_simulate(args) -> int:
     table = lookup_table(g)
     modes = ("naive", "graph") if args.mode == "both" else (args.mode,)
     runs = {m: simulate_sequence(prims, g, table, spec.project.sequence, settings, m) for m in modes}
+    args.exit_code = EXIT_OK if all(r.safe for r in runs.values()) else EXIT_CHECK_FAILED
     if args.format == "json":
         print(json.dumps({m: {k: v for k, v in r.to_dict().items() if k in ("mode", "safe", "switches", "violations",
                                                                              "final_primitive", "failed")}
@@ -184,6 +304,8 @@ def parser() -> argparse.ArgumentParser:
                    help="run oracle calls on Dask: 'local' starts a LocalCluster of max(jobs, 2) workers, "
                         "or the address of a running scheduler (needs the 'dask' extra)")
     v.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a running Dask scheduler (same as --dask ADDRESS)")
+    v.add_argument("--allow-path", action="append", metavar="DIR", default=[],
+                   help="a folder outside the project that specs may name files in (repeatable)")
     v.add_argument("--no-cache", action="store_true",
                    help="run every oracle call, ignoring and not storing results in the cache")
     v.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
@@ -209,37 +331,74 @@ def parser() -> argparse.ArgumentParser:
     return ap
 
 
-def main(argv=None) -> int:
+def _silence_stdout() -> None:
+    """The reader of stdout went away: point fd 1 at /dev/null so that nothing more (not even the
+    interpreter's last flush) fails."""
     try:
-        args = parser().parse_args(argv)
-    except SystemExit as e:
-        return EXIT_USAGE if e.code not in (0, None) else EXIT_OK
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def _fail(args, errors: list[dict], plain: str | None = None, code: int = EXIT_USAGE) -> int:
+    """Report an error that ended the command; exit code 2 (or code). With verify --format json the
+    error is the JSON document on stdout as well."""
+    args.exit_code = code
+    fmt = getattr(args, "format", "human")
+    if getattr(args, "cmd", None) == "verify" and fmt == "json":
+        print(_json_doc(None, errors, code))
+    if plain is not None:
+        print(gh_command("error", plain) if fmt == "github" else plain, file=sys.stderr)
+    else:
+        _print_errors(errors, fmt)
+    return code
+
+
+def _run(args) -> int:
     try:
         return args.fn(args)
     except SpecErrors as e:
-        _print_errors([x.to_dict() | {"text": x.format()} for x in e.errors], getattr(args, "format", "human"))
-        return EXIT_USAGE
+        return _fail(args, [x.to_dict() | {"text": x.format()} for x in e.errors])
     except SpecError as e:
-        _print_errors([e.to_dict() | {"text": e.format()}], getattr(args, "format", "human"))
-        return EXIT_USAGE
+        return _fail(args, [e.to_dict() | {"text": e.format()}])
     except MpgError as e:
-        print(f"mpgspec: {e.code} {e}", file=sys.stderr)
-        return EXIT_USAGE
-    except BrokenPipeError:  # the reader went away (e.g. `| head`): stop quietly
-        sys.stdout = open(os.devnull, "w")
-        return EXIT_OK
+        return _fail(args, [{"code": e.code, "message": str(e)}], f"mpgspec: {e.code} {e}")
+    except BrokenPipeError:
+        raise
     except KeyboardInterrupt:
-        print("mpgspec: interrupted", file=sys.stderr)
-        return EXIT_USAGE
+        return _fail(args, [{"code": "MPG002", "message": "interrupted"}], "mpgspec: interrupted")
+    except Terminated as e:
+        return _fail(args, [{"code": "MPG002", "message": "terminated by a signal"}], "mpgspec: terminated", e.code)
     except Exception as e:  # a bug, not the user's mistake: say so, keep the details
         import traceback
 
-        print(f"mpgspec: internal error: {type(e).__name__}: {e}", file=sys.stderr)
+        rc = _fail(args, [{"code": "MPG900", "message": f"internal error: {type(e).__name__}: {e}"}],
+                   f"mpgspec: internal error: {type(e).__name__}: {e}")
         if os.environ.get("MPGSPEC_DEBUG"):
             traceback.print_exc()
         else:
             print("set MPGSPEC_DEBUG=1 for the traceback", file=sys.stderr)
-        return EXIT_USAGE
+        return rc
+
+
+def main(argv=None) -> int:
+    args = argparse.Namespace()
+    try:
+        with _signal_handlers():
+            try:
+                args = parser().parse_args(argv)
+            except SystemExit as e:
+                return EXIT_USAGE if e.code not in (0, None) else EXIT_OK
+            rc = _run(args)
+            sys.stdout.flush()  # here, so that a closed pipe is seen while the exit code is known
+            return rc
+    except BrokenPipeError:  # the reader went away (e.g. `| head`): stop quietly, keep the exit code
+        _silence_stdout()
+        return getattr(args, "exit_code", EXIT_OK)
+    except Terminated as e:  # a signal while an error was being reported
+        return e.code
 
 
 if __name__ == "__main__":

@@ -26,6 +26,12 @@ class Location:
         return self.file
 
 
+def _cap(text: str, n: int = 200) -> str:
+    """Text from a spec, cut so that one hostile value cannot flood a log."""
+    text = str(text)
+    return text if len(text) <= n else text[: n - 1] + "…"
+
+
 class MpgError(Exception):
     """Base class of all mpgspec errors."""
 
@@ -52,11 +58,11 @@ class SpecError(MpgError, ValueError):
         code: str | None = None,
         context: str = "",
     ):
-        self.message = message
+        self.message = _cap(message, 300)
         self.location = location or Location()
-        self.key = key
-        self.expected = expected
-        self.found = found
+        self.key = _cap(key)
+        self.expected = _cap(expected, 300)
+        self.found = _cap(found)
         self.hint = hint
         self.context = context
         if code:
@@ -118,3 +124,30 @@ class CompileError(MpgError, RuntimeError):
     """A valid spec could not be compiled to CasADi (e.g. singular linearisation for LQR)."""
 
     code = "MPG300"
+
+
+# ----------------------------------------------------------------------------- output formatting helpers
+def gh_escape_data(text) -> str:
+    """The message of a GitHub workflow command: no CR or LF can end it and start another command."""
+    return str(text).replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A")
+
+
+def gh_escape_property(text) -> str:
+    """A property value of a GitHub workflow command (file=..., title=...): also ':' and ','."""
+    return gh_escape_data(text).replace(":", "%3A").replace(",", "%2C")
+
+
+def gh_command(command: str, message, **properties) -> str:
+    """One workflow command line, e.g. gh_command('error', msg, file=f, line=3) -> '::error file=f,line=3::msg'."""
+    props = ",".join(f"{k}={gh_escape_property(v)}" for k, v in properties.items() if v is not None)
+    return f"::{command}{' ' + props if props else ''}::{gh_escape_data(message)}"
+
+
+def gh_plain(text) -> str:
+    """A plain output line that GitHub must not read as a workflow command: line breaks inside it are
+    escaped and a leading '::' (after blanks, which the runner skips) is broken up."""
+    text = str(text).replace("\r", "%0D").replace("\n", "%0A")
+    stripped = text.lstrip()
+    if stripped.startswith("::"):
+        text = text[: len(text) - len(stripped)] + ": :" + stripped[2:]
+    return text

@@ -55,6 +55,11 @@ class FloquetVerifier:
         t_start = time.perf_counter()
         T = float(problem.period)
         m = monodromy(problem, float(o.get("t0", 0.0)), int(o.get("steps", 2000)))
+        if not (np.isfinite(m["Phi"]).all() and np.isfinite(m["x_end"]).all() and np.isfinite(m["orbit_defect"])):
+            return RoAResult(0.0, "failed", self.name, {"verdict": "non-finite monodromy", "period": T,
+                                                         "orbit_defect": m["orbit_defect"]},
+                             "the variational equation along x*(t) gave inf or NaN (the closed loop or its "
+                             "Jacobian is not finite on the orbit)")
         mu = np.linalg.eigvals(m["Phi"])
         trivial = None
         if m["autonomous"]:
@@ -82,7 +87,7 @@ class FloquetVerifier:
         rng = np.random.default_rng(o.get("seed", 0))
         r, tube = search(sim, lambda: T * rng.random(n), rng, o)
         ev.update(tube=tube, periods=periods, time_s=time.perf_counter() - t_start)
-        if r <= 0:
+        if not r > 0 or not np.isfinite(r):  # NaN or inf is no radius
             why = "; an autonomous loop keeps a phase shift, so starts off the orbit need not converge to x*(t)" \
                 if m["autonomous"] else ""
             return RoAResult(0.0, "failed", self.name, ev, f"orbit is stable but no sampled tube converged safely{why}")

@@ -36,6 +36,9 @@ class LyapunovVerifier:
         method = o.get("method_name", self.name)
         n, xs = problem.nx, np.asarray(problem.x_star, float).ravel()
         A, f0 = linearise(problem.f, xs)
+        if not (np.isfinite(A).all() and np.isfinite(f0).all()):
+            return RoAResult(0.0, "failed", method, {"equilibrium_defect": None},
+                             "the closed loop or its Jacobian is not finite at x_star (inf or NaN)")
         ev: dict = {"A_eigenvalues": [[z.real, z.imag] for z in np.linalg.eigvals(A)],
                     "equilibrium_defect": float(np.abs(f0).max(initial=0.0))}
         if ev["equilibrium_defect"] > o.get("equilibrium_tol", 1e-8):

@@ -122,7 +122,7 @@ class SamplingVerifier:
         sim = Simulator(f, h, ca.Function("xs", [t], [ca.DM(xs)]), problem.W, n, horizon, dt, o.get("conv", 0.02))
         rng = np.random.default_rng(o.get("seed", 0))
         r, ev = search(sim, lambda: np.zeros(n), rng, o)
-        if r <= 0:
+        if not r > 0 or not np.isfinite(r):  # NaN or inf is no radius
             return RoAResult(0.0, "failed", self.name, ev, "no sampled radius converged safely")
         return RoAResult(r, "empirical", self.name, ev,
                          f"{ev['simulations']} rollouts: every start within r = {r:.4g} converged and stayed safe")

@@ -10,6 +10,7 @@ number of workers.
 from __future__ import annotations
 
 import os
+import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from typing import Callable, Protocol
@@ -88,7 +89,25 @@ class InProcess:
 _worker: dict = {}
 
 
+def _worker_signals() -> None:
+    """In a pool worker: Ctrl-C (SIGINT to the whole process group) is the parent's to handle, and
+    SIGTERM ends the worker at once (not the parent's handler, inherited through fork). On Linux
+    the worker also gets SIGTERM when the parent dies, even by SIGKILL."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if sys.platform.startswith("linux"):  # prctl(PR_SET_PDEATHSIG, SIGTERM)
+        try:
+            import ctypes
+
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+
+
 def _init(prims: dict, settings: OracleSettings) -> None:
+    _worker_signals()
     _worker.update(prims=prims, settings=settings, oracles={})
 
 
@@ -104,13 +123,40 @@ class ProcessPool:
 
     def run(self, prims, settings, tasks, progress=None):
         out: list = [None] * len(tasks)
-        with ProcessPoolExecutor(max_workers=self.workers, initializer=_init, initargs=(prims, settings)) as pool:
+        pool = ProcessPoolExecutor(max_workers=self.workers, initializer=_init, initargs=(prims, settings))
+        finished = False
+        try:
             futures = {pool.submit(_run, t): k for k, t in enumerate(tasks)}
             for done, f in enumerate(as_completed(futures), start=1):
                 out[futures[f]] = f.result()
                 if progress:
                     progress(f"oracle on {self.workers} processes", done, len(tasks))
+            finished = True
+        finally:
+            if finished:
+                pool.shutdown(wait=True)
+            else:  # an error, SIGINT or SIGTERM (raised by the CLI's handler): no worker outlives us
+                _stop_pool(pool)
         return out
+
+
+def _stop_pool(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
+    """Cancel what has not started, then terminate the workers (kill those that linger)."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
+        try:
+            p.terminate()
+        except (OSError, ValueError, AttributeError):
+            pass
+    for p in procs:
+        try:
+            p.join(grace)
+            if p.is_alive():
+                p.kill()
+                p.join(grace)
+        except (OSError, ValueError, AssertionError, AttributeError):
+            pass
 
 
 _dask_oracles: dict = {}

@@ -19,13 +19,31 @@ def _f(v):
     return v if np.isfinite(v) else None
 
 
+def finite_json(v):
+    """A copy of v that strict JSON can hold: inf and NaN become None (null), numpy scalars and
+    arrays plain numbers and lists, tuples lists, keys strings; anything else is kept as it is."""
+    if isinstance(v, dict):
+        return {k if isinstance(k, str) else str(k): finite_json(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [finite_json(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return finite_json(v.tolist())
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return float(v) if np.isfinite(v) else None
+    return v
+
+
 def primitive_entry(p: CompiledPrimitive, spec, roa=None) -> dict:
     c = spec.controller
     rec = roa.to_dict() if roa is not None else {"method": "given", "level": "given", "message": "", "evidence": {}}
     return {
         "name": p.name, "class": p.cls.value, "period": _f(p.period),
         "domain": list(p.domain) if p.domain else None, "next": p.next,
-        "controller": c.type, "safety_functions": p.h_names, "roa_radius": p.radius,
+        "controller": c.type, "safety_functions": p.h_names, "roa_radius": _f(p.radius),
         "roa_method": rec["method"], "roa_level": rec["level"], "roa_message": rec["message"],
         "roa_evidence": rec["evidence"], "horizon": _f(p.horizon), "setpoint_t0": [float(v) for v in p.x_star(p.t_range[0])],
         "description": spec.description.strip(), "info": p.info,

@@ -5,6 +5,8 @@ box = fixed, circle = periodic, diamond = transient; solid = Class 1, dashed = C
 """
 from __future__ import annotations
 
+import math
+
 import networkx as nx
 
 SHAPES = {"fixed": "box", "periodic": "circle", "transient": "diamond"}
@@ -18,7 +20,22 @@ def _q(s) -> str:
 
 
 def _num(v) -> str:
-    return f"{float(v):.4g}"
+    """A number for a label; None (a non-finite number in the report) as '?'."""
+    if v is None:
+        return "?"
+    try:
+        return f"{float(v):.4g}"
+    except (TypeError, ValueError):
+        return str(v)
+
+
+def _float(v) -> float | None:
+    """A finite float, or None (GraphML gets no attribute then)."""
+    try:
+        v = float(v)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
 
 
 def _methods(report: dict) -> dict[tuple[str, str], dict]:
@@ -60,14 +77,14 @@ def to_networkx(report: dict) -> nx.DiGraph:
                  "roa_radius": p.get("roa_radius"), "roa_method": p.get("roa_method", ""), "period": p.get("period"),
                  "next": p.get("next")}
         if p.get("domain"):
-            attrs["domain_start"], attrs["domain_end"] = float(p["domain"][0]), float(p["domain"][1])
+            attrs["domain_start"], attrs["domain_end"] = (_float(v) for v in p["domain"][:2])
         attrs["safety_functions"] = ",".join(p.get("safety_functions", []))
         G.add_node(p["name"], **{k: v for k, v in attrs.items() if v is not None})
     trs = _methods(report)
     for e in report.get("edges", []):
         tr = trs.get((e["from"], e["to"]))
         attrs = {"class": int(e["class"]), "style": STYLES.get(e["class"], "dotted"),
-                 **{k: float(e[k]) for k in EDGE_WEIGHTS if e.get(k) is not None}}
+                 **{k: _float(e[k]) for k in EDGE_WEIGHTS if _float(e.get(k)) is not None}}
         if tr:
             attrs["method"] = tr["method"]
             attrs["windows"] = len(tr["windows"])

@@ -54,7 +54,7 @@ class Primitive(_Strict):
     next: str | None
     controller: str
     safety_functions: list[str]
-    roa_radius: float = Field(description="radius of the region of attraction E")
+    roa_radius: float | None = Field(description="radius of the region of attraction E (null when not finite)")
     roa_method: str = Field(description="how E was obtained: 'given' in the spec, or a verifier's name")
     roa_level: Literal["certified", "empirical", "given", "failed"] = "given"
     roa_message: str = ""

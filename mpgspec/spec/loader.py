@@ -2,12 +2,16 @@
 
 The result is a `ProjectSpec`: validated models plus a way to locate any key in its source file,
 so that later stages (expression compilation) can still report file:line:column.
+
+Every path a spec names (included system and primitive files, setpoint tables, URDFs) must lie
+inside the project folder, the data folder of a `share:` package or a folder passed in
+`allow_paths` (mpgspec.spec.paths); files are read with a size bound.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from pydantic import ValidationError
 
@@ -22,7 +26,19 @@ from .models import (
     RequireReachable,
     SafetyFunction,
 )
-from .yamlpos import PositionMap, load_yaml
+from .paths import (
+    SAFE_NAME_TEXT,
+    ReadProblem,
+    clip,
+    clip_repr,
+    confine,
+    confine_share,
+    name_problem,
+    project_root,
+    read_text_bounded,
+    resolve_roots,
+)
+from .yamlpos import PositionMap, parse_yaml
 
 PROJECT_FILE = "project.yaml"
 BUILTIN_BLOCKS = ("joint_limits", "ground_contact", "no_slip", "aerial")
@@ -42,6 +58,7 @@ class PrimitiveInstance:
     safe_set: tuple[SafetyFunction, ...]
     locate: Locator = field(compare=False, repr=False)
     source: Path = field(default=Path("."), compare=False)  # the YAML file the primitive is written in
+    roots: tuple[Path, ...] = field(default=(), compare=False, repr=False)  # folders its files may be in
 
     @property
     def cls(self) -> PrimitiveClass:
@@ -58,6 +75,8 @@ class ProjectSpec:
     system_locate: Locator
     primitives: list[PrimitiveInstance]
     locate: Locator
+    roots: tuple[Path, ...] = ()
+    """Folders the files a spec names may lie in: the project folder first, then allow_paths."""
 
     @property
     def name(self) -> str:
@@ -108,17 +127,17 @@ def _validation_errors(err: ValidationError, positions: PositionMap, prefix: tup
             continue  # the file-name branch of an inline part: the model branch explains the error
         loc = prefix + tuple(e["loc"])
         data_loc = _data_path(data, loc)
-        key = ".".join(str(x) for x in data_loc) or "<root>"
+        key = clip(".".join(str(x) for x in data_loc) or "<root>")
         found = e.get("input")
-        found_s = repr(found) if not isinstance(found, (dict, list)) else type(found).__name__
-        msg = e["msg"]
+        found_s = clip_repr(found) if not isinstance(found, (dict, list)) else type(found).__name__
+        msg = clip(e["msg"], 300)
         if msg.startswith("Value error, "):
             msg = msg[len("Value error, ") :]
         code = "MPG102" if e["type"] == "extra_forbidden" else "MPG103" if e["type"] == "missing" else "MPG104"
         expected = ""
         if e["type"] == "extra_forbidden":
             msg = "unknown key"
-            found_s = repr(data_loc[-1]) if data_loc else ""
+            found_s = clip_repr(data_loc[-1]) if data_loc else ""
         elif e["type"] == "missing":
             msg = "required key is missing"
             found_s = ""
@@ -141,7 +160,34 @@ def _at(pos: PositionMap, loc: tuple, offset: int | None) -> Location:
 
 
 def _read(path: Path) -> tuple[Any, PositionMap]:
-    return load_yaml(path)
+    """The project file itself: a missing file is a usage error, other problems spec errors."""
+    try:
+        text = read_text_bounded(path, allow_empty=True)
+    except ReadProblem as p:
+        if p.missing:
+            raise UsageError(f"{path}: no such file") from None
+        raise SpecErrors([SpecError(f"project file: {p.message}", location=Location(str(path)), key="project file",
+                                    expected=p.expected, found=p.found, code="MPG100")]) from None
+    return parse_yaml(text, str(path))
+
+
+def _read_included(path: Path, written: str, where: Location, key: str) -> tuple[Any, PositionMap]:
+    """An included spec file, read bounded; a problem is a SpecError at the key that names it."""
+    try:
+        text = read_text_bounded(path)
+    except ReadProblem as p:
+        if p.missing:
+            raise SpecError("included file not found", location=where, key=key,
+                            expected="a path relative to the project file", found=clip_repr(written),
+                            code="MPG301") from None
+        raise SpecError(f"included file: {p.message}", location=where, key=key, expected=p.expected,
+                        found=f"{clip_repr(written)} ({p.found})" if p.found else clip_repr(written),
+                        code="MPG301") from None
+    data, positions = parse_yaml(text, str(path))
+    if data is None:
+        raise SpecError("included file has no content", location=where, key=key,
+                        expected="a YAML mapping", found="only comments", code="MPG301")
+    return data, positions
 
 
 def _within(item: SafetyFunction, when: tuple[float, float] | None) -> SafetyFunction:
@@ -165,40 +211,67 @@ def _expand(p: Primitive) -> list[tuple[str, dict[str, float]]]:
     return [(f"{p.name}({label})", {arg: float(v)}) for label, v in items]
 
 
-def load_project(path: str | Path) -> ProjectSpec:
-    """Read, validate and cross-check one project file; raise SpecErrors listing every problem."""
+def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = None) -> ProjectSpec:
+    """Read, validate and cross-check one project file; raise SpecErrors listing every problem.
+
+    Files the spec names must lie inside the project folder (the folder of `path`, symlinks
+    resolved), inside the data folder of a `share:` package, or inside one of `allow_paths`.
+    """
     path = Path(path)
+    roots = resolve_roots(project_root(path), allow_paths)
+    try:
+        confine(path.name, path.absolute().parent, roots, where=Location(str(path)), key="project file")
+    except SpecError as err:
+        raise SpecErrors([err]) from None
     data, pos = _read(path)
     if not isinstance(data, dict):
         raise SpecErrors([SpecError("a project file must be a mapping", location=Location(str(path), 1, 1),
                                     expected="keys project, system, primitives", found=type(data).__name__,
                                     code="MPG104")])
     errors: list[SpecError] = []
+    name_errors: list[SpecError] = []  # reported with the errors of whichever later pass fails
+    name = data.get("project")
+    if isinstance(name, str) and name_problem(name):
+        name_errors.append(SpecError(f"project name is not a safe name ({name_problem(name)})",
+                                     location=pos.locate(("project",)), key="project", expected=SAFE_NAME_TEXT,
+                                     found=clip_repr(name), code="MPG104",
+                                     hint="reports are written to <out>/<project>"))
     # resolve included files, keeping each one's positions
     system_locate: Locator = lambda loc, offset=None: _at(pos, ("system",) + tuple(loc), offset)
     sys_data = data.get("system")
     if isinstance(sys_data, str):
-        sys_path = path.parent / sys_data
-        if not sys_path.is_file():
-            errors.append(SpecError("included file not found", location=pos.locate_value(("system",)), key="system",
-                                    expected="a path relative to the project file", found=repr(sys_data),
-                                    code="MPG301"))
+        try:
+            sys_path = confine(sys_data, path.parent, roots, where=pos.locate(("system",)), key="system")
+            sd, spos = _read_included(sys_path, sys_data, pos.locate_value(("system",)), "system")
+        except SpecError as err:
+            errors.append(err)
         else:
-            sd, spos = _read(sys_path)
             data = {**data, "system": sd}
             system_locate = lambda loc, offset=None, spos=spos: _at(spos, tuple(loc), offset)
     prim_locates: list[Locator] = []
     prim_sources: list[Path] = []
     prims_in: list = []
-    for i, item in enumerate(data.get("primitives") or []):
+    prims_raw = data.get("primitives")
+    if prims_raw is not None and not isinstance(prims_raw, list):
+        errors.append(SpecError("primitives must be a list", location=pos.locate(("primitives",)), key="primitives",
+                                expected="a list of primitive files or inline primitives",
+                                found=type(prims_raw).__name__, code="MPG104"))
+        prims_raw = None
+    for i, item in enumerate(prims_raw or []):
         if isinstance(item, str):
-            ppath = path.parent / item
-            if not ppath.is_file():
-                errors.append(SpecError("included file not found", location=pos.locate_value(("primitives", i)),
-                                        key=f"primitives.{i}", expected="a path relative to the project file",
-                                        found=repr(item), code="MPG301"))
+            key = f"primitives.{i}"
+            try:
+                ppath = confine(item, path.parent, roots, where=pos.locate(("primitives", i)), key=key)
+                pd_, ppos = _read_included(ppath, item, pos.locate_value(("primitives", i)), key)
+            except SpecError as err:
+                errors.append(err)
                 continue
-            pd_, ppos = _read(ppath)
+            if not isinstance(pd_, (dict, list)):
+                errors.append(SpecError("an included primitive file must hold a mapping or a list of mappings",
+                                        location=pos.locate_value(("primitives", i)), key=key,
+                                        expected="a primitive (mapping) or a list of primitives",
+                                        found=type(pd_).__name__, code="MPG104"))
+                continue
             items = pd_ if isinstance(pd_, list) else [pd_]
             for j, it in enumerate(items):
                 prims_in.append(it)
@@ -210,7 +283,7 @@ def load_project(path: str | Path) -> ProjectSpec:
             prim_locates.append(lambda loc, offset=None, i=i: _at(pos, ("primitives", i) + tuple(loc), offset))
             prim_sources.append(path)
     if errors:
-        raise SpecErrors(errors)
+        raise SpecErrors(name_errors + errors)
     data = {**data, "primitives": prims_in}
 
     class _Pos:
@@ -227,7 +300,8 @@ def load_project(path: str | Path) -> ProjectSpec:
     try:
         project = Project.model_validate(data)
     except ValidationError as e:
-        raise SpecErrors(_validation_errors(e, merged, data=data)) from None
+        raise SpecErrors(name_errors + _validation_errors(e, merged, data=data)) from None
+    errors = name_errors + _check_named_files(path, project, prim_locates, prim_sources, system_locate, roots)
 
     instances: list[PrimitiveInstance] = []
     names: dict[str, Location] = {}
@@ -240,9 +314,10 @@ def load_project(path: str | Path) -> ProjectSpec:
                     resolved.append(sf)  # expanded by the system at compile time
                 elif sf.use not in project.safe_sets:
                     errors.append(SpecError("unknown safe-set block", location=loc_fn(("safe_set", j, "use")),
-                                            key=f"primitive '{p.name}': safe_set.{j}.use",
-                                            expected="one of " + ", ".join(sorted(project.safe_sets) + list(BUILTIN_BLOCKS)),
-                                            found=repr(sf.use), code="MPG302"))
+                                            key=f"primitive '{clip(p.name, 60)}': safe_set.{j}.use",
+                                            expected=clip("one of " + ", ".join(
+                                                sorted(project.safe_sets) + list(BUILTIN_BLOCKS)), 300),
+                                            found=clip_repr(sf.use), code="MPG302"))
                 else:
                     resolved.extend(_within(item, sf.when) for item in project.safe_sets[sf.use])
             else:
@@ -251,22 +326,24 @@ def load_project(path: str | Path) -> ProjectSpec:
             if name in names:
                 errors.append(SpecError("duplicate primitive name", location=loc_fn(("name",)),
                                         key="name", expected="unique names",
-                                        found=f"{name!r} also defined at {names[name]}", code="MPG303"))
+                                        found=f"{clip_repr(name)} also defined at {names[name]}", code="MPG303"))
             names[name] = loc_fn(("name",))
-            instances.append(PrimitiveInstance(name, p.name, p, arg, tuple(resolved), loc_fn, prim_sources[i]))
+            instances.append(PrimitiveInstance(name, p.name, p, arg, tuple(resolved), loc_fn, prim_sources[i],
+                                               roots))
     node_names = {p.name for p in instances}
 
     def check_name(n: str, loc: tuple, key: str):
         if n not in node_names:
             errors.append(SpecError("unknown primitive", location=merged.locate(loc), key=key,
-                                    expected="one of " + ", ".join(sorted(node_names)), found=repr(n), code="MPG304"))
+                                    expected=clip("one of " + ", ".join(sorted(node_names)), 300),
+                                    found=clip_repr(n), code="MPG304"))
 
     for i, p in enumerate(project.primitives):
         if p.next is not None and p.next not in node_names:
             errors.append(SpecError("unknown next primitive", location=prim_locates[i](("next",)),
-                                    key=f"primitive '{p.name}': next",
-                                    expected="one of " + ", ".join(sorted(node_names)), found=repr(p.next),
-                                    code="MPG304"))
+                                    key=f"primitive '{clip(p.name, 60)}': next",
+                                    expected=clip("one of " + ", ".join(sorted(node_names)), 300),
+                                    found=clip_repr(p.next), code="MPG304"))
     for i, a in enumerate(project.assertions):
         base = ("assertions", i)
         if isinstance(a, (RequireEdge, ForbidEdge)):
@@ -285,4 +362,33 @@ def load_project(path: str | Path) -> ProjectSpec:
             check_name(c.goal, ("sequence", "commands", i, "goal"), f"sequence.commands.{i}.goal")
     if errors:
         raise SpecErrors(errors)
-    return ProjectSpec(path, project, project.system, system_locate, instances, merged.locate)
+    return ProjectSpec(path, project, project.system, system_locate, instances, merged.locate, roots)
+
+
+def _check_named_files(path: Path, project: Project, prim_locates: list[Locator], prim_sources: list[Path],
+                       system_locate: Locator, roots: tuple[Path, ...]) -> list[SpecError]:
+    """Confinement of the files the validated models name: setpoint tables and the URDF.
+
+    They are read later (compile stage), which checks again; checking here reports them with
+    every other spec error and before anything is compiled.
+    """
+    errors = []
+    for i, p in enumerate(project.primitives):
+        file = p.setpoint.file
+        if file is not None:
+            try:
+                confine(file, prim_sources[i].parent, roots, where=prim_locates[i](("setpoint", "file")),
+                        key=f"primitive '{clip(p.name, 60)}': setpoint.file")
+            except SpecError as err:
+                errors.append(err)
+    urdf = getattr(project.system, "urdf", None)
+    if isinstance(urdf, str):
+        where = system_locate(("urdf",))
+        try:
+            if urdf.startswith("share:"):
+                confine_share(urdf, roots, where=where, key="system.urdf")
+            else:
+                confine(urdf, path.parent, roots, where=where, key="system.urdf")
+        except SpecError as err:
+            errors.append(err)
+    return errors

@@ -232,21 +232,44 @@ class RigidBodyCompiledSystem(CompiledSystem):
 
 
 def _urdf_path(spec, urdf: str) -> Path:
+    """The URDF a rigid-body spec names, confined like every path of a spec (mpgspec.spec.paths).
+
+    `share:<package>/<path>` must stay inside the package's data folder (cmeel.prefix/share/
+    <package>); any other path is relative to the project file and must stay inside the project
+    folder or a folder passed in allow_paths. Raises a located SpecError otherwise.
+    """
+    from ...spec.paths import confine, confine_share, project_root, resolve_roots
+
+    where = spec.system_locate(("urdf",))
+    roots = getattr(spec, "roots", ()) or resolve_roots(project_root(spec.path))
     if urdf.startswith("share:"):
-        return find_urdf(urdf[len("share:"):])
-    return (Path(spec.path).parent / urdf).resolve()
+        path = confine_share(urdf, roots, where=where, key="system.urdf")
+        if not path.is_file():  # the package is not installed: say where it was looked for
+            find_urdf(urdf[len("share:"):])
+        return path
+    return confine(urdf, Path(spec.path).parent, roots, where=where, key="system.urdf")
 
 
 def compile_rigid_body(spec) -> RigidBodyCompiledSystem:
     """Load the URDF with pinocchio and build symbols, env and limits."""
+    from ...spec.paths import ReadProblem, clip_repr, read_text_bounded
+
     s = spec.system
+    where = spec.system_locate(("urdf",))
     try:
         path = _urdf_path(spec, s.urdf)
+        read_text_bounded(path)  # a regular UTF-8 file of bounded size before pinocchio parses it
         model = RigidBodyModel(path, s.contacts, floating_base=s.floating_base)
+    except SpecError:
+        raise
+    except ReadProblem as p:
+        raise SpecError(f"cannot load the robot model: {p.message}", location=where, key="system.urdf",
+                        expected=p.expected, found=f"{clip_repr(s.urdf)} ({p.found})" if p.found
+                        else clip_repr(s.urdf), code="MPG109") from None
     except (FileNotFoundError, OSError, ValueError, KeyError) as err:
-        raise SpecError("cannot load the robot model", location=spec.system_locate(("urdf",)), key="system.urdf",
-                        expected="a readable URDF with the named contact frames", found=f"{s.urdf!r} ({err})",
-                        code="MPG109") from None
+        raise SpecError("cannot load the robot model", location=where, key="system.urdf",
+                        expected="a readable URDF with the named contact frames",
+                        found=f"{clip_repr(s.urdf)} ({str(err)[:300]})", code="MPG109") from None
     dyn = RigidBodyDynamics(model)
     qn = (BASE_Q if model.n_base else []) + list(model.joint_names)
     vn = (BASE_V if model.n_base else []) + [f"{j}_dot" for j in model.joint_names]
