@@ -1,7 +1,10 @@
 """Registry of region-of-attraction verifiers, loaded through the `mpgspec.roa` entry-point group.
 
 A verifier has `name`, `description`, `is_installed()` and `estimate(problem, options) -> RoAResult`
-(see verifiers/roa_common.py); third parties add theirs with an entry point of their package.
+(see verifiers/roa_common.py); third parties add theirs with an entry point of their package. A
+verifier may list the keys of `roa.options` it reads in an `options` attribute; the spec's options
+are then checked against it (unknown keys are spec errors). The built-in verifiers' keys are listed
+here.
 """
 from __future__ import annotations
 
@@ -13,8 +16,34 @@ GROUP = "mpgspec.roa"
 _BUILTIN = {"lyapunov": "verifiers.lyapunov:verifier", "sos": "verifiers.sos:verifier",
             "floquet": "verifiers.floquet:verifier", "sampling": "verifiers.sampling:verifier"}
 
+_SEARCH = ("r0", "r_max", "rtol", "confirm_rounds", "samples", "seed", "conv", "dt")
+_LEVEL_SET = ("P", "Q", "rho", "rho_max", "rtol", "eps", "equilibrium_tol", "polynomial", "samples", "radial",
+              "local_starts", "boundary_tol", "empirical_margin", "seed", "mult_half_degree", "solver",
+              "solver_opts", "tol_eig", "tol_res")
+BUILTIN_OPTIONS: dict[str, frozenset[str]] = {
+    "lyapunov": frozenset(_LEVEL_SET + ("require_certified",)),
+    "sos": frozenset(_LEVEL_SET),
+    "sampling": frozenset(_SEARCH + ("horizon",)),
+    "floquet": frozenset(_SEARCH + ("t0", "steps", "tol", "orbit_tol", "periods", "steps_per_period")),
+}
+"""Keys of `roa.options` each built-in verifier reads (verifiers/*.py)."""
+
 
 @lru_cache(maxsize=None)
 def roa_verifiers() -> dict[str, object]:
     """Installed RoA verifiers by name (entry points override the built-in table)."""
     return load_plugins(GROUP, _BUILTIN)
+
+
+def accepted_options(name: str) -> frozenset[str] | None:
+    """Option keys the installed verifier `name` accepts, or None when it does not say (any key)."""
+    verifier = roa_verifiers().get(name)
+    if verifier is None:
+        return None
+    declared = getattr(verifier, "options", None)
+    if declared is not None:
+        return frozenset(declared)
+    builtin = _BUILTIN.get(name, "").partition(":")[0]
+    if builtin and type(verifier).__module__ == builtin:  # the built-in, not a plug-in of the same name
+        return BUILTIN_OPTIONS.get(name)
+    return None

@@ -8,14 +8,16 @@ enter it, so no transition into the primitive is claimed.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
+from ..errors import SpecError, SpecErrors
 from ..spec.loader import ProjectSpec
-from .registry import roa_verifiers
+from .registry import accepted_options, roa_verifiers
 
 RANK = {"certified": 3, "empirical": 2, "given": 1, "failed": 0}
 
@@ -47,12 +49,50 @@ def _estimate(method: str, prim: CompiledPrimitive, options: dict):
     return verifiers[method].estimate(from_primitive(prim, weights=W), dict(options))
 
 
+def _did_you_mean(word: str, choices) -> str:
+    close = difflib.get_close_matches(word, sorted(choices), n=2)
+    return f"did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+
+
+def check_roa_specs(spec: ProjectSpec) -> None:
+    """Every `roa.method` names an installed verifier (or 'given') and every `roa.options` key is one
+    the verifier reads; raises SpecErrors naming each wrong value, with a suggestion."""
+    verifiers = roa_verifiers()
+    methods = sorted({"given", *verifiers})
+    errors: dict[str, SpecError] = {}
+    for inst in spec.primitives:
+        roa = inst.spec.roa
+        owner = f"primitive '{inst.base}'"
+        if roa.method not in methods:
+            err = SpecError("unknown region-of-attraction method", location=inst.locate(("roa", "method")),
+                            key=f"{owner}: roa.method", expected="one of " + ", ".join(methods),
+                            found=repr(roa.method[:60]), hint=_did_you_mean(roa.method, methods), code="MPG104")
+            errors.setdefault(err.format(), err)
+            continue
+        accepted = frozenset() if roa.method == "given" else accepted_options(roa.method)
+        if accepted is None:
+            continue
+        for key in roa.options:
+            if key in accepted:
+                continue
+            what = ("a radius given by the spec takes no options" if roa.method == "given"
+                    else f"unknown option of the {roa.method} verifier")
+            err = SpecError(what, location=inst.locate(("roa", "options", key)), key=f"{owner}: roa.options.{key}",
+                            expected="one of " + ", ".join(sorted(accepted)) if accepted else "no options",
+                            found=repr(str(key)[:60]), hint=_did_you_mean(str(key), accepted), code="MPG102")
+            errors.setdefault(err.format(), err)
+    if errors:
+        raise SpecErrors(list(errors.values()))
+
+
 def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=None) -> dict[str, RoARecord]:
     """Run each primitive's RoA method; recompile primitives whose radius changed (in place).
 
-    memo (optional, with key/get/put) keeps records by the primitive's content hash, method and
-    options, so an unchanged primitive is not sized again.
+    The methods and options are checked first (check_roa_specs). memo (optional, with
+    key/get/put) keeps records by the primitive's content hash, method and options, so an
+    unchanged primitive is not sized again.
     """
+    check_roa_specs(spec)
     records = {}
     for inst in spec.primitives:
         roa = inst.spec.roa
@@ -72,6 +112,9 @@ def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=No
             level, r, msg, ev = res.level, float(res.radius), res.message, res.evidence
         except Exception as err:  # a verifier crash is this primitive's evidence
             level, r, msg, ev = "failed", 0.0, f"{type(err).__name__}: {err}", {}
+        if level not in RANK or not np.isfinite(r):  # a plug-in's answer must be a level and a finite radius
+            msg = f"{msg}; the verifier answered level {str(level)[:40]!r} and radius {r!r}"
+            level, r = "failed", 0.0
         rec = RoARecord(inst.name, roa.method, level, r, roa.radius, msg, ev, time.perf_counter() - t0)
         if level == "failed" or r <= 0:
             rec.radius = float(roa.radius or 0.0)

@@ -29,6 +29,22 @@ def _edge_text(a, b):
     return f"{a} -> {b}"
 
 
+def _run_text(run) -> str:
+    """What happened in a sequence run: safe, the first violation, or why it stopped (a state that
+    blew up, an unverified hand-over); a run that failed without a violation is unsafe too."""
+    if run.safe:
+        return "safe throughout"
+    parts = []
+    first = run.violations[0] if run.violations else None
+    if isinstance(first, dict):
+        t = first.get("t")
+        when = f" at t = {t:.3f} s" if isinstance(t, (int, float)) else ""
+        parts.append(f"violated {first.get('h', '?')} of {first.get('primitive', '?')}{when}")
+    if run.failed:
+        parts.append(str(run.failed))
+    return "; ".join(parts) or "unsafe"
+
+
 def evaluate_assertions(assertions, g: MotionPrimitiveGraph, runs: dict) -> list[AssertionResult]:
     """Check every assertion against the built graph and the sequence runs (mode -> SequenceRun)."""
     out = []
@@ -85,8 +101,6 @@ def evaluate_assertions(assertions, g: MotionPrimitiveGraph, runs: dict) -> list
                 out.append(AssertionResult(i, "simulation_safe", desc, "error", "the project has no sequence"))
                 continue
             ok = run.safe == a.expect
-            first = run.violations[0] if run.violations else None
-            msg = ("safe throughout" if run.safe else
-                   f"violated {first['h']} of {first['primitive']} at t = {first['t']:.3f} s")
+            msg = _run_text(run)
             out.append(AssertionResult(i, "simulation_safe", desc, "pass" if ok else "fail", msg))
     return out

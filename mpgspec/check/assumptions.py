@@ -263,6 +263,9 @@ def local_stability(p: CompiledPrimitive, rel_tol: float = 1e-6) -> AssumptionCh
         e = np.zeros(nx)
         e[i] = 1e-6
         A[:, i] = (_f(p, xs + e, 0.0) - _f(p, xs - e, 0.0)) / 2e-6
+    if not np.isfinite(A).all():
+        return AssumptionCheck(p.name, "local_stability", "fail", "computed",
+                               "closed-loop Jacobian at x* is not finite (inf/NaN)", {"max_real": None, "eigenvalues": []})
     ev = np.linalg.eigvals(A)
     tol = rel_tol * max(1.0, float(np.linalg.norm(A)))  # below this, finite differences cannot tell the sign
     re = ev.real.max()
@@ -281,6 +284,10 @@ def floquet_stability(p: CompiledPrimitive, tol: float = 1e-6) -> AssumptionChec
     from verifiers.roa_common import from_primitive
 
     m = monodromy(from_primitive(p))
+    if not np.isfinite(m["Phi"]).all():
+        return AssumptionCheck(p.name, "local_stability", "fail", "computed",
+                               "monodromy matrix is not finite (inf/NaN along x*(t))",
+                               {"max_abs_multiplier": None, "multipliers": [], "orbit_defect": None})
     mu = np.linalg.eigvals(m["Phi"])
     if m["autonomous"] and mu.size:  # the multiplier along the orbit is 1 by construction
         mu_rest = np.delete(mu, int(np.argmin(np.abs(mu - 1))))

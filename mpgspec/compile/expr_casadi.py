@@ -24,6 +24,7 @@ from mpgspec.spec.expr import (
     Num,
     Unary,
     expr_error,
+    fold,
     parse_value,
     unknown_name_error,
 )
@@ -36,13 +37,41 @@ _UNARY: dict[str, Callable] = {
     "log": ca.log, "log10": ca.log10, "sqrt": ca.sqrt, "abs": ca.fabs, "sign": ca.sign,
     "floor": ca.floor, "ceil": ca.ceil, "sq": lambda x: x * x,
 }
-_BINARY: dict[str, Callable] = {
+_ARITH: dict[str, Callable] = {
     "+": lambda a, b: a + b, "-": lambda a, b: a - b, "*": lambda a, b: a * b,
     "/": lambda a, b: a / b, "^": ca.power,
-    "<": ca.lt, "<=": ca.le, ">": ca.gt, ">=": ca.ge, "==": ca.eq, "!=": ca.ne,
-    "and": ca.logic_and, "or": ca.logic_or,
 }
+_COMPARE: dict[str, Callable] = {"<": ca.lt, "<=": ca.le, ">": ca.gt, ">=": ca.ge, "==": ca.eq, "!=": ca.ne}
+_LOGIC: dict[str, Callable] = {"and": ca.logic_and, "or": ca.logic_or}
 _FUNC2: dict[str, Callable] = {"atan2": ca.atan2, "fmod": ca.fmod, "hypot": ca.hypot}
+
+# NaN must reach the oracle's judge: CasADi's fmin/fmax return the other operand for a NaN, its
+# comparisons answer 0 and its if_else takes a NaN condition as true. The forms below keep NaN.
+# (x != x is no NaN test for CasADi: it simplifies it to 0; x <= inf is false only for NaN.)
+
+
+def isnan(x: Sym) -> Sym:
+    """1 where x is NaN, else 0 (elementwise), in a form CasADi does not simplify away."""
+    return ca.logic_not(x <= ca.inf)
+
+
+def nan_if(cond: Sym, value: Sym) -> Sym:
+    """value, or NaN where cond holds."""
+    return ca.if_else(cond, np.nan, value)
+
+
+def _any_nan(*xs: Sym) -> Sym:
+    return reduce(ca.logic_or, (isnan(x) for x in xs))
+
+
+def nan_min(a: Sym, b: Sym) -> Sym:
+    """min(a, b), NaN when either is NaN."""
+    return ca.if_else(a <= b, a, ca.if_else(b < a, b, a + b))
+
+
+def nan_max(a: Sym, b: Sym) -> Sym:
+    """max(a, b), NaN when either is NaN."""
+    return ca.if_else(a >= b, a, ca.if_else(b > a, b, a + b))
 
 
 def _kind(env: Mapping[str, object]) -> type:
@@ -55,8 +84,10 @@ def _kind(env: Mapping[str, object]) -> type:
 def to_casadi(expr: Expr, env: Mapping[str, object]) -> Sym:
     """CasADi expression for expr; env maps names to SX/MX/float values.
 
-    pi, e and inf resolve to constants unless env defines them. Comparisons and logic yield 0/1.
-    Raises ExprError MPG204 (offset, found, hint set) for a name missing from env.
+    pi, e and inf resolve to constants unless env defines them. Comparisons and logic yield 0/1,
+    or NaN when an operand is NaN; min, max, clip, sat, norm_inf and the conditions of if_else and
+    piecewise pass NaN on as well. Raises ExprError MPG204 (offset, found, hint set) for a name
+    missing from env.
     """
     kind = _kind(env)
     return _Compiler(env, kind).compile(expr)
@@ -80,6 +111,10 @@ class _Compiler:
         return value if isinstance(value, (ca.SX, ca.MX)) else self.kind(value)
 
     def compile(self, expr: Expr) -> Sym:
+        """Children first, without recursion (chains of thousands of terms are fine)."""
+        return fold(expr, self.node)
+
+    def node(self, expr: Expr, args: list) -> Sym:
         if isinstance(expr, Num):
             return self.kind(expr.value)
         if isinstance(expr, Name):
@@ -89,35 +124,36 @@ class _Compiler:
                 return self.kind(CONSTANTS[expr.id])
             raise unknown_name_error(expr.id, expr.pos, [*self.env, *CONSTANTS])
         if isinstance(expr, Unary):
-            operand = self.compile(expr.operand)
-            return -operand if expr.op == "-" else ca.logic_not(operand)
+            (operand,) = args
+            return -operand if expr.op == "-" else nan_if(isnan(operand), ca.logic_not(operand))
         if isinstance(expr, Binary):
-            return _BINARY[expr.op](self.compile(expr.left), self.compile(expr.right))
-        return self.call(expr)
+            a, b = args
+            if expr.op in _ARITH:
+                return _ARITH[expr.op](a, b)
+            op = _COMPARE.get(expr.op) or _LOGIC[expr.op]
+            return nan_if(_any_nan(a, b), op(a, b))
+        return self.call(expr, args)
 
-    def call(self, expr: Call) -> Sym:
+    def call(self, expr: Call, args: list) -> Sym:
         if expr.func not in FUNCTIONS:
             raise expr_error("MPG202", f"unknown function '{expr.func}'", expr.pos, "",
                              expected="a whitelisted function", found=repr(expr.func))
-        args = [self.compile(a) for a in expr.args]
         f = expr.func
         if f in _UNARY:
             return _UNARY[f](*args)
         if f in _FUNC2:
             return _FUNC2[f](*args)
         if f == "min":
-            return reduce(ca.fmin, args)
+            return reduce(nan_min, args)
         if f == "max":
-            return reduce(ca.fmax, args)
+            return reduce(nan_max, args)
         if f in ("clip", "sat"):
             x, lo, hi = args
-            return ca.fmin(ca.fmax(x, lo), hi)
-        if f == "if_else":
-            return ca.if_else(*args)
-        if f == "piecewise":
+            return nan_min(nan_max(x, lo), hi)
+        if f in ("if_else", "piecewise"):
             *pairs, result = args
             for cond, value in reversed(list(zip(pairs[::2], pairs[1::2]))):
-                result = ca.if_else(cond, value, result)
+                result = nan_if(isnan(cond), ca.if_else(cond, value, result))
             return result
         stacked = ca.vertcat(*args)
         if f == "norm_2":
@@ -125,7 +161,8 @@ class _Compiler:
         if f == "norm_1":
             return ca.sum1(ca.fabs(stacked))
         if f == "norm_inf":
-            return ca.mmax(ca.fabs(stacked))
+            mags = ca.fabs(stacked)
+            return nan_if(isnan(ca.sum1(mags)), ca.mmax(mags))
         raise ExprError(f"function '{f}' has no CasADi translation", code="MPG202")
 
 

@@ -9,18 +9,19 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import pickle
+import re
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
-from ..errors import SpecError
+from ..errors import SpecError, SpecErrors
 from ..spec.loader import PrimitiveInstance
 from ..spec.models import PrimitiveClass
 from .controllers import LAWS, ControlContext
 from .expr_casadi import interp_cubic, interp_linear
 from .exprs import ExprCompiler
-from .system import CompiledSystem
+from .system import CompiledSystem, shadowing_error, taken_names
 
 INACTIVE = 1e9
 """Value of a safety function outside its active window: never binding."""
@@ -128,7 +129,24 @@ def _restore(blob: bytes) -> "CompiledPrimitive":
     return CompiledPrimitive(**state)
 
 
-def _constants(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler) -> dict[str, float]:
+def _constants(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, loop_env: dict) -> dict[str, float]:
+    """Parameters, the argument's value and the `let` constants, in order; none may shadow a name
+    an expression already means (a state, input, parameter, setpoint symbol, constant, function, t, s)."""
+    taken = taken_names(sys, env={**sys.extra_env, **loop_env})
+    errors = []
+    for arg in inst.spec.arguments:
+        err = shadowing_error(arg, sys, inst.locate(("arguments", arg)), f"primitive '{inst.base}': arguments.{arg}",
+                              what="argument", taken=taken)
+        if err is not None:
+            errors.append(err)
+    taken.update({a: "the primitive's argument" for a in inst.spec.arguments})
+    for k in inst.spec.let:
+        err = shadowing_error(k, sys, inst.locate(("let", k)), f"primitive '{inst.base}': let.{k}",
+                              what="let constant", taken=taken)
+        if err is not None:
+            errors.append(err)
+    if errors:
+        raise SpecErrors(errors)
     env: dict[str, float] = dict(sys.parameters)
     env.update(inst.argument)
     for k, v in inst.spec.let.items():
@@ -136,18 +154,25 @@ def _constants(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler) -
     return env
 
 
+def _clock_time(ec: ExprCompiler, inst: PrimitiveInstance, value, path: tuple, consts: dict, what: str) -> float:
+    v = ec.number(value, path, consts, finite=True)
+    if what == "period" and v <= 0:
+        raise SpecError("period must be > 0", location=inst.locate(path), key=f"primitive '{inst.name}': period",
+                        expected="T_p > 0", found=f"{v:g}", code="MPG104")
+    return v
+
+
 def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledPrimitive:
     """Build f_cl, control, h, roa_margin and setpoint for one graph node."""
     p = inst.spec
     ec = ExprCompiler(inst.locate, f"primitive '{inst.name}'")
-    consts = _constants(inst, sys, ec)
-    period = ec.number(p.period, ("period",), consts) if p.period is not None else None
-    if period is not None and period <= 0:
-        raise SpecError("period must be > 0", location=inst.locate(("period",)), key=f"primitive '{inst.name}': period",
-                        expected="T_p > 0", found=f"{period:g}", code="MPG104")
+    loop = sys.open_loop(p.contacts)
+    consts = _constants(inst, sys, ec, loop.env)
+    period = _clock_time(ec, inst, p.period, ("period",), consts, "period") if p.period is not None else None
     domain = None
     if p.domain is not None:
-        domain = (ec.number(p.domain[0], ("domain", 0), consts), ec.number(p.domain[1], ("domain", 1), consts))
+        domain = (_clock_time(ec, inst, p.domain[0], ("domain", 0), consts, "domain"),
+                  _clock_time(ec, inst, p.domain[1], ("domain", 1), consts, "domain"))
         if domain[1] <= domain[0]:
             raise SpecError("domain must be [t0, tf] with tf > t0", location=inst.locate(("domain",)),
                             key=f"primitive '{inst.name}': domain", expected="tf > t0", found=f"{list(domain)}",
@@ -160,7 +185,6 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     tc = t - period * ca.floor(t / period) if period is not None else t
     env: dict[str, object] = {**sys.env(), **consts, "t": tc, "s": s}  # t: the clock, within one period
     sp = p.setpoint
-    loop = sys.open_loop(p.contacts)
     if sp.named is not None:
         unknown = [k for k in sp.named if k not in sys.state_names]
         if unknown:
@@ -319,25 +343,37 @@ def _jump(inst: PrimitiveInstance, sys: CompiledSystem, tc: ca.SX, t: ca.SX) -> 
 
 
 def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) -> tuple[np.ndarray, np.ndarray]:
-    """Times and full-state samples of a setpoint table; states without a column take their default."""
-    path = (inst.source.parent / inst.spec.setpoint.file).resolve()
+    """Times and full-state samples of a setpoint table; states without a column take their default.
+
+    The table must lie inside the project folder (or an allowed folder), be a regular UTF-8 file
+    of at most MAX_FILE_BYTES and hold finite numbers; errors never echo more than a short piece
+    of a line.
+    """
+    from ..spec.paths import MAX_FILE_BYTES, ReadProblem, clip, clip_repr, confine, read_text_bounded
+
     where = inst.locate(("setpoint", "file"))
-    key = f"primitive '{inst.name}': setpoint.file"
+    key = f"primitive '{clip(inst.name, 60)}': setpoint.file"
+    raw = inst.spec.setpoint.file
+    if inst.roots:
+        path = confine(raw, inst.source.parent, inst.roots, where=where, key=key)
+    else:  # an instance built without the loader: no project folder known
+        path = (inst.source.parent / raw).resolve()
 
     def fail(msg, expected, found, line=0):
         loc = where if not line else type(where)(str(path), line, 1)
         raise SpecError(msg, location=loc, key=key, expected=expected, found=found, code="MPG110")
 
     try:
-        lines = path.read_text().splitlines()
-    except OSError as err:
-        fail("cannot read the setpoint table", "a CSV file relative to the spec", f"{path} ({err.strerror})")
+        lines = read_text_bounded(path, MAX_FILE_BYTES).splitlines()
+    except ReadProblem as p:
+        fail(f"cannot read the setpoint table: {p.message}", p.expected or "a CSV file relative to the spec",
+             f"{clip_repr(raw)} ({p.found})" if p.found else clip_repr(raw))
     header = [h.strip() for h in lines[0].split(",")] if lines else []
     if not header or header[0] != "t":
-        fail("the first column must be the time", "a header 't,<state>,...'", repr(lines[0] if lines else ""), 1)
+        fail("the first column must be the time", "a header 't,<state>,...'", clip_repr(lines[0] if lines else ""), 1)
     unknown = [h for h in header[1:] if h not in sys.state_names]
     if unknown:
-        fail("unknown state in the header", "state names of the system", repr(unknown[0]), 1)
+        fail("unknown state in the header", "state names of the system", clip_repr(unknown[0]), 1)
     rows = []
     for n, text in enumerate(lines[1:], start=2):
         if not text.strip():
@@ -346,6 +382,8 @@ def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) ->
             vals = [float(v) for v in text.split(",")]
         except ValueError:
             fail("not a number", "numbers separated by commas", repr(text[:60]), n)
+        if not all(np.isfinite(vals)):
+            fail("not a finite number", "finite numbers (no nan or inf)", repr(text[:60]), n)
         if len(vals) != len(header):
             fail("wrong number of columns", f"{len(header)}", f"{len(vals)}", n)
         rows.append(vals)
@@ -402,4 +440,13 @@ def _roa_margin(sys: CompiledSystem, setpoint: ca.Function, W: np.ndarray, radiu
 
 
 def _ident(name: str) -> str:
-    return "".join(c if c.isalnum() else "_" for c in name)
+    """A valid CasADi Function name part for a node name such as 'Swing(-1.5)' or '_B'.
+
+    CasADi accepts only ASCII letters, digits and single underscores, starting with a letter
+    (its callers prefix one). Names that had to be changed get a short hash, so that distinct
+    nodes (Swing(-1), Swing(1)) keep distinct Function names.
+    """
+    base = re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_") or "p"
+    if base != name:
+        base += "_" + hashlib.sha1(name.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+    return base

@@ -1,14 +1,20 @@
 """Compile a system spec to CasADi: state/input symbols and the open-loop dynamics xdot(x, u)."""
 from __future__ import annotations
 
+import math
+import re
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
-from ..errors import SpecError
+from ..errors import SpecError, SpecErrors
+from ..spec.expr import CONSTANTS, FUNCTIONS, KEYWORDS
 from ..spec.loader import ProjectSpec
+from ..spec.models import PrimitiveClass
 from .exprs import ExprCompiler
+
+_IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
 @dataclass
@@ -94,8 +100,99 @@ def _rigid_body(spec: ProjectSpec) -> CompiledSystem:
 
 
 def compile_system(spec: ProjectSpec) -> CompiledSystem:
-    """Build the CasADi symbols and dynamics of the project's system, by its kind (SYSTEM_KINDS)."""
-    return SYSTEM_KINDS[spec.system.kind](spec)
+    """Build the CasADi symbols and dynamics of the project's system, by its kind (SYSTEM_KINDS).
+
+    Checks first what concerns the whole project (transient hand-over chains), then, with the
+    system's names known, that parameters shadow nothing an expression can name.
+    """
+    check_transients(spec)
+    sys = SYSTEM_KINDS[spec.system.kind](spec)
+    taken = taken_names(sys, parameters=False)
+    errors = [e for n in sys.parameters
+              if (e := shadowing_error(n, sys, spec.system_locate(("parameters", n)), f"parameters.{n}",
+                                       what="parameter", taken=taken)) is not None]
+    if errors:
+        raise SpecErrors(errors)
+    return sys
+
+
+def builtin_names() -> dict[str, str]:
+    """Names the expression language defines itself, with what they are."""
+    names = {n: "a built-in constant" for n in CONSTANTS}
+    names.update({n: "a function of the expression language" for n in FUNCTIONS})
+    names.update({n: "a keyword of the expression language" for n in KEYWORDS})
+    names.update({"t": "the primitive's clock", "s": "the time since switch-in"})  # RESERVED
+    return names
+
+
+def taken_names(sys: "CompiledSystem", *, env: dict | None = None, parameters: bool = True) -> dict[str, str]:
+    """Every name an expression of a primitive can already mean, with what it means."""
+    names = builtin_names()
+    for n in sys.parameters if parameters else ():
+        names[n] = "a parameter of the system"
+    for k in (env or sys.extra_env):
+        names.setdefault(k, "a quantity the system defines")
+    for n in sys.input_names:
+        names[n] = "an input of the system"
+    for n in sys.state_names:
+        names[n] = "a state of the system"
+        names[f"{n}_star"] = f"the setpoint of state {n}"
+        names[f"{n}_star_dot"] = f"the setpoint rate of state {n}"
+    return names
+
+
+def shadowing_error(name: str, sys: "CompiledSystem | None", location, key: str, *, what: str,
+                    taken: dict[str, str] | None = None) -> SpecError | None:
+    """The error for a declared name (parameter, argument, let) that cannot be named in an
+    expression or that would hide a state, input, parameter, constant, function or t/s."""
+    if not _IDENT.fullmatch(name):
+        return SpecError(f"a {what} name must be an identifier", location=location, key=key,
+                         expected="a letter or '_', then letters, digits or '_'", found=repr(name[:60]),
+                         code="MPG105")
+    taken = taken if taken is not None else taken_names(sys)
+    if name in taken:
+        return SpecError(f"{what} '{name}' shadows {taken[name]}", location=location, key=key,
+                         expected="a name that is not a state, input, parameter, setpoint symbol, built-in "
+                                  "constant (pi, e, inf), function, keyword or t/s",
+                         found=f"{name!r} ({taken[name]})", code="MPG105", hint="rename it")
+    return None
+
+
+def check_transients(spec: ProjectSpec) -> None:
+    """Every transient hands over, at the end of its domain, to an existing primitive, and
+    following `next` from a transient reaches a primitive that is not transient (no cycles)."""
+    nodes = {p.name: p for p in spec.primitives}
+    errors: list[SpecError] = []
+    reported: set[str] = set()
+    cycles: set[frozenset] = set()
+    for inst in spec.primitives:
+        nxt = inst.spec.next
+        if inst.cls is not PrimitiveClass.TRANSIENT or inst.base in reported:
+            continue
+        if nxt not in nodes:
+            reported.add(inst.base)
+            errors.append(SpecError("unknown next primitive", location=inst.locate(("next",)),
+                                    key=f"primitive '{inst.base}': next", expected="one of " + ", ".join(sorted(nodes)),
+                                    found=repr(nxt), code="MPG304"))
+            continue
+        chain, cur = [inst.name], nodes[nxt]
+        while cur.cls is PrimitiveClass.TRANSIENT and cur.name not in chain and cur.spec.next in nodes:
+            chain.append(cur.name)
+            cur = nodes[cur.spec.next]
+        if cur.name in chain:
+            cycle = chain[chain.index(cur.name):]
+            if inst.name not in cycle or frozenset(cycle) in cycles:
+                continue  # reported at a member of the cycle
+            cycles.add(frozenset(cycle))
+            reported.add(inst.base)
+            loop = " -> ".join(cycle + [cur.name])
+            errors.append(SpecError("transient primitives hand over in a cycle", location=inst.locate(("next",)),
+                                    key=f"primitive '{inst.base}': next",
+                                    expected="a chain of transients that ends in a fixed or periodic primitive",
+                                    found=loop, code="MPG306",
+                                    hint="a transient runs once over its domain; its next must lead out of it"))
+    if errors:
+        raise SpecErrors(errors)
 
 
 def compile_analytic(spec: ProjectSpec) -> CompiledSystem:
@@ -107,6 +204,18 @@ def compile_analytic(spec: ProjectSpec) -> CompiledSystem:
     if dup:
         raise SpecError("names of states, inputs and parameters must be distinct", location=spec.system_locate(("states",)),
                         key="states", expected="unique names", found=", ".join(sorted(dup)), code="MPG105")
+    builtins = builtin_names()
+    errors = [e for field_, what in (("states", "state"), ("inputs", "input")) for i, n in enumerate(getattr(s, field_))
+              if (e := shadowing_error(n, None, spec.system_locate((field_, i)), f"{field_}.{i}", what=what,
+                                       taken=builtins)) is not None]
+    stars = {f"{n}{suffix}": n for n in s.states for suffix in ("_star", "_star_dot")}
+    errors += [SpecError(f"{what} '{n}' shadows the setpoint symbol of state {stars[n]}",
+                         location=spec.system_locate((field_, i)), key=f"{field_}.{i}",
+                         expected="a name that is not <state>_star or <state>_star_dot", found=repr(n), code="MPG105")
+               for field_, what in (("states", "state"), ("inputs", "input")) for i, n in enumerate(getattr(s, field_))
+               if n in stars]
+    if errors:
+        raise SpecErrors(errors)
     x = ca.SX.sym("x", len(s.states))
     u = ca.SX.sym("u", len(s.inputs))
     env = dict(s.parameters)
@@ -137,6 +246,11 @@ def compile_analytic(spec: ProjectSpec) -> CompiledSystem:
             raise SpecError("bound for an unknown input", location=spec.system_locate(("input_bounds", k)),
                             key=f"input_bounds.{k}", expected="one of " + ", ".join(s.inputs), found=repr(k),
                             code="MPG107")
+        if math.isnan(a) or math.isnan(b) or a == math.inf or b == -math.inf:
+            raise SpecError("input bounds must be numbers, low < +inf and high > -inf",
+                            location=spec.system_locate(("input_bounds", k)), key=f"input_bounds.{k}",
+                            expected="[low, high] with low < high (either side may be infinite outward)",
+                            found=f"[{a}, {b}]", code="MPG107")
         if b <= a:
             raise SpecError("input bounds must be [low, high] with low < high",
                             location=spec.system_locate(("input_bounds", k)), key=f"input_bounds.{k}",

@@ -45,9 +45,23 @@ def _start_clock(p: CompiledPrimitive) -> float:
 def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiveGraph | None,
                       table: dict | None, seq: Sequence, settings: OracleSettings, mode: str,
                       max_points: int = 1500) -> SequenceRun:
-    """Run the sequence from the start primitive's setpoint; returns what happened."""
-    dt, tol = settings.dt, settings.h_tolerance
+    """Run the sequence from the start primitive's setpoint; returns what happened.
+
+    A run that cannot go on (a state that is no longer finite, a numerical failure) stops there
+    and is unsafe, with the reason in `failed`; it never raises.
+    """
     run = SequenceRun(mode)
+    try:
+        _simulate(run, prims, graph, table, seq, settings, mode, max_points)
+    except (ArithmeticError, ValueError, RuntimeError, KeyError, IndexError) as err:
+        run.safe = False
+        run.failed = run.failed or f"the simulation stopped: {type(err).__name__}: {str(err)[:200]}"
+    return run
+
+
+def _simulate(run: SequenceRun, prims: dict[str, CompiledPrimitive], graph: MotionPrimitiveGraph | None,
+              table: dict | None, seq: Sequence, settings: OracleSettings, mode: str, max_points: int) -> None:
+    dt, tol = settings.dt, settings.h_tolerance
     cur = seq.start
     clock = _start_clock(prims[cur])
     x = prims[cur].x_star(clock)
@@ -58,12 +72,18 @@ def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiv
     stride = max(1, nsteps // max_points)
     k = 0
     run.switches.append({"t": 0.0, "to": cur, "clock": clock, "reason": "start"})
+    run.final_primitive = cur
+    if not np.isfinite(x).all():
+        run.safe = False
+        run.failed = f"the setpoint of {cur} is not finite at its start clock {clock:g}"
+        return
 
     def switch(to: str, t_B: float | None, why: str, x_now: np.ndarray, t_now: float):
         nonlocal cur, z, converged
         t_B = _start_clock(prims[to]) if t_B is None else t_B
         run.switches.append({"t": t_now, "from": cur, "to": to, "clock": float(t_B), "reason": why})
         cur, converged = to, False
+        run.final_primitive = cur
         z = initial_state(prims[to], x_now, t_B)
 
     while k < nsteps:
@@ -97,7 +117,8 @@ def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiv
                 run.t.append(t_now)
                 run.x.append([float(v) for v in xi])
                 act = hv[hv < INACTIVE / 2]
-                run.min_h.append(float(act.min()) if act.size else None)
+                low = float(act.min()) if act.size else None
+                run.min_h.append(low if low is not None and np.isfinite(low) else None)
                 run.active.append(cur)
             if M[i] > 0:
                 converged = True
@@ -144,4 +165,3 @@ def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiv
         else:
             switch(arg[0], arg[1], f"towards {goal}", xi, t_now)
     run.final_primitive = cur
-    return run

@@ -78,7 +78,14 @@ FUNCTIONS: dict[str, tuple[int, int | None]] = {
 CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e, "inf": math.inf}
 
 COMPARISONS = frozenset({"<", "<=", ">", ">=", "==", "!="})
+LOGIC = frozenset({"and", "or"})
 KEYWORDS = frozenset({"and", "or", "not"})
+RESERVED = frozenset({"t", "s"})
+"""Names every primitive defines: its clock t and the time s since switch-in."""
+
+MAX_DEPTH = 100
+"""Deepest nesting of parentheses, calls, signs and powers the parser accepts (MPG207); long
+chains such as a sum of thousands of terms are not nested and have no limit."""
 
 # ---------------------------------------------------------------------------------------------
 # Errors
@@ -199,6 +206,7 @@ class _Parser:
         self.text = text
         self.tokens = list(tokenize(text))
         self.i = 0
+        self.depth = 0
 
     def peek(self) -> Token:
         return self.tokens[self.i]
@@ -231,6 +239,19 @@ class _Parser:
         return expr
 
     def expr(self, min_bp: int) -> Expr:
+        self.depth += 1
+        try:
+            return self._expr(min_bp)
+        finally:
+            self.depth -= 1
+
+    def _expr(self, min_bp: int) -> Expr:
+        if self.depth > MAX_DEPTH:
+            tok = self.peek()
+            raise expr_error("MPG207", f"expression nested too deeply (limit {MAX_DEPTH})", tok.pos, self.text,
+                             expected=f"at most {MAX_DEPTH} levels of parentheses, calls, signs and powers",
+                             found=f"more at offset {tok.pos}",
+                             hint="split it into `let` constants or simplify it")
         lhs = self.prefix()
         chained = False
         while True:
@@ -317,38 +338,80 @@ def parse(text: str) -> Expr:
 
 
 def parse_value(value: object) -> Expr:
-    """Parse a YAML scalar: numbers become Num, strings are parsed, anything else is rejected."""
+    """Parse a YAML scalar: numbers become Num, strings are parsed, anything else is rejected.
+
+    Booleans (YAML true/false) and NaN are not numbers here: both raise MPG201.
+    """
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
         raise expr_error("MPG201", "not an expression", 0, "",
-                         expected="a number or an expression", found=_describe_value(value))
+                         expected="a number-valued expression", found=_describe_value(value))
     if isinstance(value, str):
         return parse(value)
+    if isinstance(value, float) and math.isnan(value):
+        raise expr_error("MPG201", "not a number (NaN)", 0, "", expected="a number-valued expression",
+                         found=".nan")
     return Num(float(value), 0)
+
+
+def not_a_bool(value: object) -> object:
+    """Pydantic before-validator of expression and number fields: YAML true/false is no number."""
+    if isinstance(value, bool):
+        raise ValueError(f"{str(value).lower()} is a boolean, not a number; expected a number-valued expression")
+    if isinstance(value, float) and math.isnan(value):
+        raise ValueError("NaN is not a value; expected a number-valued expression")
+    return value
 
 
 def _describe_value(value: object) -> str:
     if value is None:
         return "nothing (null)"
     if isinstance(value, bool):
-        return str(value).lower()
+        return f"{str(value).lower()} (a boolean)"
     return f"a {type(value).__name__}" if isinstance(value, (dict, list)) else repr(value)
 
 
 # ---------------------------------------------------------------------------------------------
-# Walkers
+# Walkers (iterative: an expression may be a chain of thousands of terms)
+
+
+def children(expr: Expr) -> tuple[Expr, ...]:
+    """The direct subexpressions of expr, in source order."""
+    if isinstance(expr, Unary):
+        return (expr.operand,)
+    if isinstance(expr, Binary):
+        return (expr.left, expr.right)
+    if isinstance(expr, Call):
+        return expr.args
+    return ()
 
 
 def walk(expr: Expr) -> Iterator[Expr]:
-    """All nodes of expr, parents before children."""
-    yield expr
-    if isinstance(expr, Unary):
-        yield from walk(expr.operand)
-    elif isinstance(expr, Binary):
-        yield from walk(expr.left)
-        yield from walk(expr.right)
-    elif isinstance(expr, Call):
-        for arg in expr.args:
-            yield from walk(arg)
+    """All nodes of expr, parents before children (depth first, left to right)."""
+    stack = [expr]
+    while stack:
+        node = stack.pop()
+        yield node
+        stack.extend(reversed(children(node)))
+
+
+def fold(expr: Expr, visit: Callable[[Expr, list], object]) -> object:
+    """visit(node, values of its children) for every node, children first; no recursion."""
+    out: list = []
+    stack: list[tuple[Expr, bool]] = [(expr, False)]
+    while stack:
+        node, ready = stack.pop()
+        kids = children(node)
+        if kids and not ready:
+            stack.append((node, True))
+            stack.extend((k, False) for k in reversed(kids))
+            continue
+        if kids:
+            vals = out[len(out) - len(kids):]
+            del out[len(out) - len(kids):]
+        else:
+            vals = []
+        out.append(visit(node, vals))
+    return out[0]
 
 
 def free_names(expr: Expr) -> set[str]:
@@ -356,16 +419,101 @@ def free_names(expr: Expr) -> set[str]:
     return {node.id for node in walk(expr) if isinstance(node, Name)}
 
 
+# ---------------------------------------------------------------------------------------------
+# Kinds: numbers and truth values (comparisons, and/or/not) are not interchangeable
+
+_BOOL, _NUM = "truth value", "number"
+
+
+def _what(expr: Expr) -> str:
+    if isinstance(expr, Unary) and expr.op == "not":
+        return "a negation ('not')"
+    if isinstance(expr, Binary) and expr.op in LOGIC:
+        return f"a logical '{expr.op}'"
+    return "a comparison"
+
+
+def _kind_error(node: Expr, where: str) -> ExprError:
+    text = to_text(node)
+    shown = text if len(text) <= 60 else text[:57] + "..."
+    return expr_error("MPG206", f"{_what(node)} is not a number", node.pos, "",
+                      expected="a number-valued expression", found=f"{shown!r} ({where})",
+                      hint=f"comparisons and and/or/not belong in conditions: write if_else({shown}, 1, 0)"
+                      if len(text) <= 60 else "comparisons and and/or/not belong in if_else/piecewise conditions")
+
+
+def check_number(expr: Expr) -> None:
+    """Raise ExprError MPG206 unless expr is number-valued throughout.
+
+    Comparisons and and/or/not give truth values; these may only be conditions of if_else and
+    piecewise or operands of and/or/not, never terms of arithmetic, function arguments, branch
+    values or the value of the whole expression.
+    """
+    def need(node: Expr, kind: str, where: str) -> None:
+        if kind == _BOOL:
+            raise _kind_error(node, where)
+
+    def visit(node: Expr, kinds: list) -> str:
+        if isinstance(node, (Num, Name)):
+            return _NUM
+        if isinstance(node, Unary):
+            if node.op == "not":
+                return _BOOL
+            need(node.operand, kinds[0], "negated with '-'")
+            return _NUM
+        if isinstance(node, Binary):
+            if node.op in LOGIC:
+                return _BOOL
+            where = "compared" if node.op in COMPARISONS else f"an operand of '{node.op}'"
+            need(node.left, kinds[0], where)
+            need(node.right, kinds[1], where)
+            return _BOOL if node.op in COMPARISONS else _NUM
+        args = node.args
+        if node.func == "if_else":
+            values = [1, 2]
+        elif node.func == "piecewise":
+            values = list(range(1, len(args) - 1, 2)) + [len(args) - 1]
+        else:
+            values = range(len(args))
+        for i in values:
+            need(args[i], kinds[i], f"a value of {node.func}()" if node.func in ("if_else", "piecewise")
+                 else f"an argument of {node.func}()")
+        return _NUM
+
+    top = fold(expr, visit)
+    if top == _BOOL:
+        raise _kind_error(expr, "the value of the whole expression")
+
+
+# ---------------------------------------------------------------------------------------------
+# Evaluation on floats (NaN propagates: a NaN operand gives NaN, also through min, max, clip,
+# comparisons, and/or/not and the conditions of if_else and piecewise)
+
+_nan = math.nan
+
+
+def _isnan(x: float) -> bool:
+    return x != x
+
+
 def _truth(x: float) -> bool:
     return x != 0.0
 
 
 def _sign(x: float) -> float:
-    return float((x > 0) - (x < 0))
+    return _nan if _isnan(x) else float((x > 0) - (x < 0))
+
+
+def _min(*a: float) -> float:
+    return _nan if any(map(_isnan, a)) else min(a)
+
+
+def _max(*a: float) -> float:
+    return _nan if any(map(_isnan, a)) else max(a)
 
 
 def _clip(x: float, lo: float, hi: float) -> float:
-    return min(max(x, lo), hi)
+    return _min(_max(x, lo), hi)
 
 
 _MATH: dict[str, Callable[..., float]] = {
@@ -374,65 +522,89 @@ _MATH: dict[str, Callable[..., float]] = {
     "tanh": math.tanh, "exp": math.exp, "log": math.log, "log10": math.log10,
     "sqrt": math.sqrt, "abs": abs, "sign": _sign, "floor": lambda x: float(math.floor(x)),
     "ceil": lambda x: float(math.ceil(x)), "fmod": math.fmod, "hypot": math.hypot,
-    "sq": lambda x: x * x, "min": lambda *a: min(a), "max": lambda *a: max(a),
+    "sq": lambda x: x * x, "min": _min, "max": _max,
     "clip": _clip, "sat": _clip,
     "norm_2": lambda *a: math.sqrt(sum(x * x for x in a)),
     "norm_1": lambda *a: sum(abs(x) for x in a),
-    "norm_inf": lambda *a: max(abs(x) for x in a),
+    "norm_inf": lambda *a: _max(*(abs(x) for x in a)),
 }
+
+
+def _compare(op: Callable[[float, float], bool]) -> Callable[[float, float], float]:
+    return lambda a, b: _nan if _isnan(a) or _isnan(b) else float(op(a, b))
+
 
 _BINARY: dict[str, Callable[[float, float], float]] = {
     "+": lambda a, b: a + b, "-": lambda a, b: a - b, "*": lambda a, b: a * b,
     "/": lambda a, b: a / b, "^": math.pow,
-    "<": lambda a, b: float(a < b), "<=": lambda a, b: float(a <= b),
-    ">": lambda a, b: float(a > b), ">=": lambda a, b: float(a >= b),
-    "==": lambda a, b: float(a == b), "!=": lambda a, b: float(a != b),
+    "<": _compare(lambda a, b: a < b), "<=": _compare(lambda a, b: a <= b),
+    ">": _compare(lambda a, b: a > b), ">=": _compare(lambda a, b: a >= b),
+    "==": _compare(lambda a, b: a == b), "!=": _compare(lambda a, b: a != b),
 }
+
+
+class _Failed:
+    """A math error in a subexpression; it is raised only if the value is used (branch taken)."""
+
+    __slots__ = ("error",)
+
+    def __init__(self, error: ExprError):
+        self.error = error
 
 
 def evaluate(expr: Expr, env: Mapping[str, float]) -> float:
     """Numeric value of expr given name values (pi, e, inf are known unless overridden).
 
     Raises ExprError MPG204 for an unknown name and MPG205 for a math error (division by zero,
-    sqrt of a negative number, overflow). if_else/piecewise/and/or only evaluate the branch taken.
+    sqrt of a negative number, overflow). if_else/piecewise/and/or only fail for the branch taken.
     """
     known = {**CONSTANTS, **env}
     for node in walk(expr):
         if isinstance(node, Name) and node.id not in known:
             raise unknown_name_error(node.id, node.pos, list(known))
-    return _eval(expr, known)
+    value = fold(expr, lambda node, vals: _eval_node(node, vals, known))
+    if isinstance(value, _Failed):
+        raise value.error
+    return value
 
 
-def _eval(expr: Expr, env: Mapping[str, float]) -> float:
-    if isinstance(expr, Num):
-        return expr.value
-    if isinstance(expr, Name):
-        return float(env[expr.id])
+def _eval_node(node: Expr, vals: list, env: Mapping[str, float]):
+    if isinstance(node, Num):
+        return node.value
+    if isinstance(node, Name):
+        return float(env[node.id])
+    if isinstance(node, Call) and node.func in ("if_else", "piecewise"):
+        *pairs, default = vals
+        for cond, value in zip(pairs[::2], pairs[1::2]):
+            if isinstance(cond, _Failed) or _isnan(cond):
+                return cond
+            if _truth(cond):
+                return value
+        return default
+    if isinstance(node, Binary) and node.op in LOGIC:
+        left, right = vals
+        if isinstance(left, _Failed):
+            return left
+        if _isnan(left) or (not isinstance(right, _Failed) and _isnan(right)):
+            return _nan
+        if _truth(left) == (node.op == "or"):  # decided by the left operand
+            return float(node.op == "or")
+        return right if isinstance(right, _Failed) else float(_truth(right))
+    failed = next((v for v in vals if isinstance(v, _Failed)), None)
+    if failed is not None:
+        return failed
     try:
-        if isinstance(expr, Unary):
-            value = _eval(expr.operand, env)
-            return -value if expr.op == "-" else float(not _truth(value))
-        if isinstance(expr, Binary):
-            left = _eval(expr.left, env)
-            if expr.op == "and":
-                return float(_truth(left) and _truth(_eval(expr.right, env)))
-            if expr.op == "or":
-                return float(_truth(left) or _truth(_eval(expr.right, env)))
-            return _BINARY[expr.op](left, _eval(expr.right, env))
-        if expr.func == "if_else":
-            cond, a, b = expr.args
-            return _eval(a if _truth(_eval(cond, env)) else b, env)
-        if expr.func == "piecewise":
-            *pairs, default = expr.args
-            for cond, value in zip(pairs[::2], pairs[1::2]):
-                if _truth(_eval(cond, env)):
-                    return _eval(value, env)
-            return _eval(default, env)
-        return float(_MATH[expr.func](*(_eval(a, env) for a in expr.args)))
+        if isinstance(node, Unary):
+            (value,) = vals
+            if node.op == "-":
+                return -value
+            return value if _isnan(value) else float(not _truth(value))
+        if isinstance(node, Binary):
+            return _BINARY[node.op](*vals)
+        return float(_MATH[node.func](*vals))
     except (ValueError, ZeroDivisionError, OverflowError) as exc:
-        raise expr_error("MPG205", "cannot evaluate expression", expr.pos, "",
-                         expected="a finite real value",
-                         found=f"{to_text(expr)} ({exc})") from None
+        return _Failed(expr_error("MPG205", "cannot evaluate expression", node.pos, "",
+                                  expected="a finite real value", found=f"{to_text(node)} ({exc})"))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -454,6 +626,8 @@ def _level(expr: Expr) -> int:
 
 
 def _num_text(value: float) -> str:
+    if math.isnan(value):
+        return "(inf - inf)"
     if math.isinf(value):
         return "inf" if value > 0 else "-inf"
     if value.is_integer() and abs(value) < 1e15:
@@ -463,26 +637,29 @@ def _num_text(value: float) -> str:
 
 def to_text(expr: Expr) -> str:
     """Canonical text of expr; parse(to_text(e)) == e."""
+    return fold(expr, _text_node)
+
+
+def _text_node(expr: Expr, texts: list[str]) -> str:
     if isinstance(expr, Num):
         return _num_text(expr.value)
     if isinstance(expr, Name):
         return expr.id
     if isinstance(expr, Call):
-        return f"{expr.func}({', '.join(to_text(a) for a in expr.args)})"
+        return f"{expr.func}({', '.join(texts)})"
     if isinstance(expr, Unary):
-        inner = _wrap(expr.operand, _level(expr.operand) < _level(expr))
+        inner = _wrap(texts[0], _level(expr.operand) < _level(expr))
         return f"not {inner}" if expr.op == "not" else f"-{inner}"
     level = _LEVEL[expr.op]
     if expr.op == "^":
-        left = _wrap(expr.left, _level(expr.left) <= level)
-        right = _wrap(expr.right, _level(expr.right) < _NEG)
+        left = _wrap(texts[0], _level(expr.left) <= level)
+        right = _wrap(texts[1], _level(expr.right) < _NEG)
     else:
-        left = _wrap(expr.left, _level(expr.left) < level or (
+        left = _wrap(texts[0], _level(expr.left) < level or (
             level == 4 and _level(expr.left) == 4))
-        right = _wrap(expr.right, _level(expr.right) <= level)
+        right = _wrap(texts[1], _level(expr.right) <= level)
     return f"{left} {expr.op} {right}"
 
 
-def _wrap(expr: Expr, paren: bool) -> str:
-    text = to_text(expr)
+def _wrap(text: str, paren: bool) -> str:
     return f"({text})" if paren else text

@@ -122,8 +122,10 @@ def _data_path(data, loc: tuple) -> tuple:
 def _validation_errors(err: ValidationError, positions: PositionMap, prefix: tuple = (),
                        data=None) -> list[SpecError]:
     out = []
-    for e in err.errors():
-        if e["type"] == "string_type" and isinstance(e.get("input"), (dict, list)):
+    errs = err.errors()
+    model_errors = [e for e in errs if not (e["type"] == "string_type" and isinstance(e.get("input"), (dict, list)))]
+    for e in errs:
+        if model_errors and e["type"] == "string_type" and isinstance(e.get("input"), (dict, list)):
             continue  # the file-name branch of an inline part: the model branch explains the error
         loc = prefix + tuple(e["loc"])
         data_loc = _data_path(data, loc)

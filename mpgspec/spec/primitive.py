@@ -4,9 +4,17 @@ from __future__ import annotations
 from enum import Enum
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from .base import ExprText, Strict
+from .base import Strict
+from .system import Expr, Number, Text
+
+
+def _rectangular(rows, what: str) -> None:
+    """A matrix written as a list of rows: every row as long as the first."""
+    if rows and isinstance(rows[0], list) and any(len(r) != len(rows[0]) for r in rows):
+        raise ValueError(f"{what}: every row needs the same number of entries; found rows of lengths "
+                         f"{[len(r) for r in rows][:10]}")
 
 
 class PrimitiveClass(str, Enum):
@@ -20,13 +28,13 @@ class PrimitiveClass(str, Enum):
 class Setpoint(Strict):
     """x*(t): constants or expressions of t (`expr`), or tabulated samples (`samples`)."""
 
-    expr: list[ExprText] | None = None
-    named: dict[str, ExprText] | None = Field(
+    expr: list[Expr] | None = None
+    named: dict[str, Expr] | None = Field(
         default=None, description="state name -> value; others take the system's default (0; unit quaternion)")
     feet_on_ground: bool = Field(default=False, description="rigid bodies: set base_z so the lowest foot is at z = 0")
-    times: list[float] | None = None
-    samples: list[list[float]] | None = None
-    file: str | None = Field(default=None, description="CSV next to the spec: a header 't,<state>,...' then one "
+    times: list[Number] | None = None
+    samples: list[list[Number]] | None = None
+    file: Text | None = Field(default=None, description="CSV next to the spec: a header 't,<state>,...' then one "
                                                         "row per sample; unnamed states take the system's default")
     interpolation: Literal["linear", "cubic"] = "linear"
 
@@ -45,32 +53,39 @@ class Setpoint(Strict):
 class MotionProfile(Strict):
     """Cubic motion profile (paper eq. 7) from the output at switch-in to the setpoint over duration."""
 
-    duration: float = Field(gt=0)
+    duration: Number = Field(gt=0)
 
 
 class ExpressionController(Strict):
     """u = k(x, t) written out, one expression per input."""
 
     type: Literal["expression"]
-    u: list[ExprText]
+    u: list[Expr]
 
 
 class PDController(Strict):
     """u = -Kp (y - y_d) - Kd (ydot - ydot_d) + feedforward, on named outputs y(x) (paper eq. 8)."""
 
     type: Literal["pd"]
-    outputs: list[ExprText] = Field(min_length=1, description="y(x); a state name or an expression")
-    kp: list[float]
-    kd: list[float]
-    input_map: list[list[float]] | Literal["jacobian_transpose"] | None = Field(
+    outputs: list[Expr] = Field(min_length=1, description="y(x); a state name or an expression")
+    kp: list[Number]
+    kd: list[Number]
+    input_map: list[list[Number]] | Literal["jacobian_transpose"] | None = Field(
         default=None,
         description="inputs x outputs matrix B_y, identity when omitted, or 'jacobian_transpose' for the "
                     "task-space law u = J_y^T (-Kp y - Kd ydot) (J_y: d ydot / d(actuated velocities))",
     )
-    feedforward: list[ExprText] | None = None
+    feedforward: list[Expr] | None = None
     gravity_compensation: bool = Field(
         default=False, description="rigid bodies: add the torques that hold the current pose on the contact feet")
     profile: MotionProfile | None = None
+
+    @field_validator("input_map")
+    @classmethod
+    def _map_rows(cls, v):
+        if isinstance(v, list):
+            _rectangular(v, "input_map")
+        return v
 
     @model_validator(mode="after")
     def _sizes(self):
@@ -84,22 +99,28 @@ class LQRController(Strict):
     """u = u* - K (x - x*) with K from the linearisation at a fixed setpoint (continuous ARE)."""
 
     type: Literal["lqr"]
-    Q: list[float] | list[list[float]]
-    R: list[float] | list[list[float]]
-    u_eq: list[ExprText] | None = Field(default=None, description="equilibrium input; solved when omitted")
+    Q: list[Number] | list[list[Number]]
+    R: list[Number] | list[list[Number]]
+    u_eq: list[Expr] | None = Field(default=None, description="equilibrium input; solved when omitted")
+
+    @field_validator("Q", "R")
+    @classmethod
+    def _weight_rows(cls, v, info):
+        _rectangular(v, info.field_name)
+        return v
 
 
 class IDQPController(Strict):
     """The ID-QP of the paper's Stand: CoM task with a cubic profile, posture task, friction cone."""
 
     type: Literal["id_qp"]
-    kp: list[float] = Field(default=[100.0, 100.0, 100.0], min_length=3, max_length=3)
-    kd: list[float] = Field(default=[20.0, 20.0, 20.0], min_length=3, max_length=3)
-    profile_duration: float = Field(default=1.0, gt=0)
-    posture_kp: float = Field(default=50.0, ge=0)
-    posture_kd: float = Field(default=5.0, ge=0)
-    posture_weight: float = Field(default=0.01, ge=0)
-    regularization: float = Field(default=1e-8, gt=0)
+    kp: list[Number] = Field(default=[100.0, 100.0, 100.0], min_length=3, max_length=3)
+    kd: list[Number] = Field(default=[20.0, 20.0, 20.0], min_length=3, max_length=3)
+    profile_duration: Number = Field(default=1.0, gt=0)
+    posture_kp: Number = Field(default=50.0, ge=0)
+    posture_kd: Number = Field(default=5.0, ge=0)
+    posture_weight: Number = Field(default=0.01, ge=0)
+    regularization: Number = Field(default=1e-8, gt=0)
     max_iter: int = Field(default=100, ge=1)
 
 
@@ -111,12 +132,12 @@ Controller = Annotated[
 class SafetyFunction(Strict):
     """One h(x, t) >= 0 (`h`) or |g(x, t)| <= tol (`eq`), optionally active only for t in `when`."""
 
-    name: str | None = None
-    h: ExprText | None = None
-    eq: ExprText | None = None
-    tol: float = Field(default=1e-3, gt=0)
-    when: tuple[float, float] | None = None
-    use: str | None = Field(default=None, description="name of a reusable safe-set block of the project")
+    name: Text | None = None
+    h: Expr | None = None
+    eq: Expr | None = None
+    tol: Number = Field(default=1e-3, gt=0)
+    when: tuple[Number, Number] | None = None
+    use: Text | None = Field(default=None, description="name of a reusable safe-set block of the project")
 
     @model_validator(mode="after")
     def _one_form(self):
@@ -137,12 +158,19 @@ class ExplicitRoA(Strict):
     floquet (periodic) compute it, and `require` demands a level of evidence for it.
     """
 
-    radius: float | None = Field(default=None, gt=0)
-    weights: list[float] | None = None
-    matrix: list[list[float]] | None = None
-    method: str = Field(default="given", description="given | lyapunov | sos | sampling | floquet | a plug-in")
+    radius: Number | None = Field(default=None, gt=0)
+    weights: list[Number] | None = None
+    matrix: list[list[Number]] | None = None
+    method: Text = Field(default="given", description="given | lyapunov | sos | sampling | floquet | a plug-in")
     options: dict[str, Any] = Field(default_factory=dict, description="options of the RoA verifier")
     require: Literal["certified", "empirical", "given"] | None = None
+
+    @field_validator("matrix")
+    @classmethod
+    def _matrix_rows(cls, v):
+        if v is not None:
+            _rectangular(v, "matrix")
+        return v
 
     @model_validator(mode="after")
     def _one_metric(self):
@@ -158,8 +186,8 @@ class ExplicitRoA(Strict):
 class ContactPhase(Strict):
     """Feet in contact from the previous phase's end (or 0) until `until` on the primitive's clock."""
 
-    until: float = Field(gt=0)
-    feet: list[str]
+    until: Number = Field(gt=0)
+    feet: list[Text]
 
 
 class Grid(Strict):
@@ -172,27 +200,27 @@ class Grid(Strict):
 class Primitive(Strict):
     """Definition 1: setpoint x*, control law k, safe set C, explicit safe RoA E, plus its class."""
 
-    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
+    name: Text = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
     class_: PrimitiveClass = Field(alias="class")
-    period: ExprText | None = None
-    domain: tuple[ExprText, ExprText] | None = None
-    next: str | None = None
-    arguments: dict[str, list[float] | dict[str, float]] = Field(
+    period: Expr | None = None
+    domain: tuple[Expr, Expr] | None = None
+    next: Text | None = None
+    arguments: dict[str, list[Number] | dict[str, Number]] = Field(
         default_factory=dict,
         description="one node per value: a list of numbers, or labels mapped to numbers (Walk(slow))",
     )
-    let: dict[str, ExprText] = Field(default_factory=dict, description="derived constants")
+    let: dict[str, Expr] = Field(default_factory=dict, description="derived constants")
     setpoint: Setpoint
     controller: Controller
     safe_set: list[SafetyFunction] = Field(default_factory=list)
     roa: ExplicitRoA
-    contacts: list[str] | None = Field(default=None, description="rigid bodies: feet in contact (default: all)")
+    contacts: list[Text] | None = Field(default=None, description="rigid bodies: feet in contact (default: all)")
     contact_schedule: list[ContactPhase] | None = Field(
         default=None, description="rigid bodies with contact_events: the contact set by the clock (gaits); "
                                   "feet joining a phase touch down with a plastic impact")
-    horizon: float | None = Field(default=None, gt=0)
+    horizon: Number | None = Field(default=None, gt=0)
     grid: Grid | None = None
-    description: str = ""
+    description: Text = ""
 
     @model_validator(mode="after")
     def _class_fields(self):

@@ -3,27 +3,33 @@ from __future__ import annotations
 
 from typing import Annotated, Literal, Union
 
-from pydantic import Discriminator, Field, Tag, field_validator
+from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
 from .base import Strict
 from .primitive import Grid, Primitive, SafetyFunction
-from .system import System
+from .system import Number, System, Text
 
 
 class OracleConfig(Strict):
     """Safety oracle settings (Definition 4) for all primitives of a project."""
 
-    horizon: float = Field(default=5.0, gt=0, description="T, seconds")
-    dt: float = Field(default=0.01, gt=0, description="fixed integration step, seconds")
-    method: str = Field(default="rk4", description="verifier backend name")
+    horizon: Number = Field(default=5.0, gt=0, description="T, seconds (finite)")
+    dt: Number = Field(default=0.01, gt=0, description="fixed integration step, seconds (finite)")
+    method: Text = Field(default="rk4", description="verifier backend name")
     accuracy: Literal["low", "medium", "high", "very_high"] = "medium"
-    h_tolerance: float = Field(default=0.0, ge=0, description="h >= -tol counts as safe")
+    h_tolerance: Number = Field(default=0.0, ge=0, description="h >= -tol counts as safe (finite)")
+
+    @model_validator(mode="after")
+    def _step_within_horizon(self):
+        if self.dt > self.horizon:
+            raise ValueError(f"dt ({self.dt:g}) must not exceed the horizon ({self.horizon:g})")
+        return self
     grid: Grid = Grid()
 
 
 class EdgeRef(Strict):
-    from_: str = Field(alias="from")
-    to: str
+    from_: Text = Field(alias="from")
+    to: Text
 
 
 class EdgeWithClass(EdgeRef):
@@ -39,9 +45,9 @@ class ForbidEdge(Strict):
 
 
 class PlanRef(Strict):
-    from_: str = Field(alias="from")
-    to: str
-    max_cost: float | None = None
+    from_: Text = Field(alias="from")
+    to: Text
+    max_cost: Number | None = None
     weight: Literal["duration", "peak_input", "hops"] = "duration"
 
 
@@ -50,7 +56,7 @@ class RequirePlan(Strict):
 
 
 class RequireReachable(Strict):
-    reachable_from: str
+    reachable_from: Text
 
 
 class RequireSimulation(Strict):
@@ -82,16 +88,16 @@ Assertion = Annotated[
 
 
 class GoalCommand(Strict):
-    t: float = Field(ge=0)
-    goal: str
+    t: Number = Field(ge=0)
+    goal: Text
 
 
 class Sequence(Strict):
     """A timed sequence of goal primitives (the paper's Table II), run naive and via the graph."""
 
-    start: str
+    start: Text
     commands: list[GoalCommand] = Field(min_length=1)
-    duration: float = Field(gt=0)
+    duration: Number = Field(gt=0)
 
     @field_validator("commands")
     @classmethod
@@ -104,8 +110,8 @@ class Sequence(Strict):
 class Project(Strict):
     """A system, its primitives, oracle settings and the CI assertions over the resulting graph."""
 
-    project: str
-    description: str = ""
+    project: Text
+    description: Text = ""
     system: Union[str, System]
     primitives: list[Union[str, Primitive]] = Field(min_length=1)
     safe_sets: dict[str, list[SafetyFunction]] = Field(default_factory=dict)
