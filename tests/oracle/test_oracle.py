@@ -323,3 +323,12 @@ def test_jit_and_virtual_machine_agree(tmp_path):
 def test_unknown_backend_is_a_usage_error(tmp_path):
     with pytest.raises(UsageError, match="unknown oracle method 'nope'"):
         SafetyOracle(one(tmp_path, GOAL), FAST.replace(method="nope"))
+
+
+def test_a_numerical_blow_up_is_inconclusive_not_a_safety_violation(tmp_path):
+    """p' = -1e4 p at dt 0.01: RK4 is unstable and the state explodes; that is no evidence that the
+    loop leaves C, so no `no_edge` assertion may pass on it."""
+    stiff = GOAL.replace("-2*(x - 1)", "-10000*(x - 1)") + '  safe_set:\n    - {name: band, h: "3 - abs(x)"}\n'
+    e = SafetyOracle(one(tmp_path, stiff, bounds=(-1e9, 1e9)), FAST.replace(horizon=1.0))(np.array([0.0]), 0.0)
+    assert (e.status, e.reason) == ("inconclusive", Reason.INCONCLUSIVE)
+    assert "decrease dt" in e.message and e.error_bound > 1e3 * abs(e.margin)
