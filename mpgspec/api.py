@@ -23,7 +23,7 @@ from .graph.build import build_graph
 from .graph.traces import edge_traces, failure_traces
 from .graph.transition import MotionPrimitiveGraph
 from .oracle.executors import Executor, InProcess
-from .oracle.oracle import CapabilityError, needs, require_capabilities
+from .oracle.oracle import CapabilityError, require_capabilities
 from .oracle.registry import get_backend
 from .plan.planner import lookup_table, shortest_plan
 from .report.build import build_report
@@ -231,7 +231,7 @@ def _check_capabilities(spec: ProjectSpec, settings: OracleSettings, prims: dict
             require_capabilities(backend, p)
         except CapabilityError as err:
             raise SpecError(str(err), location=spec.locate(("oracle", "method")), key="oracle.method",
-                            expected="a backend with the capabilities " + ", ".join(sorted(needs(p))),
+                            expected="a backend with the capabilities " + ", ".join(sorted(p.needs)),
                             found=repr(settings.method), code="MPG120") from None
 
 

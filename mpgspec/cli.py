@@ -17,6 +17,7 @@ import signal
 import sys
 
 from . import __version__, api
+from .streams import stdout_to_stderr
 from .errors import (EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, gh_command,
                      gh_plain)
 from .spec.yamlpos import format_context
@@ -50,36 +51,6 @@ def _signal_handlers():
     finally:
         for s, h in saved.items():
             signal.signal(s, h if h is not None else signal.SIG_DFL)
-
-
-@contextlib.contextmanager
-def _stdout_to_stderr():
-    """While the pipeline runs, everything written to stdout (Python prints of verifiers, C or Rust
-    solver logs, worker processes started meanwhile) goes to stderr; stdout carries only mpgspec's
-    own result (one JSON document with --format json)."""
-    sys.stdout.flush()
-    with contextlib.redirect_stdout(sys.stderr):
-        try:
-            saved = os.dup(1)
-        except OSError:
-            saved = None
-        if saved is not None:
-            try:
-                os.dup2(2, 1)
-            except OSError:
-                null = os.open(os.devnull, os.O_WRONLY)
-                os.dup2(null, 1)
-                os.close(null)
-        try:
-            yield
-        finally:
-            if saved is not None:
-                try:
-                    sys.stderr.flush()
-                except (OSError, ValueError):
-                    pass
-                os.dup2(saved, 1)
-                os.close(saved)
 
 
 def _line(text: str, fmt: str) -> str:
@@ -198,7 +169,7 @@ def cmd_verify(args) -> int:
     from .oracle.executors import make_executor
 
     _check_jobs(args.jobs)
-    with _stdout_to_stderr():
+    with stdout_to_stderr():  # solver logs and prints of the pipeline go to stderr
         executor = make_executor(args.jobs, args.dask or args.scheduler, cache=not args.no_cache)
         res = api.verify(args.paths, out_dir=None, overrides=overrides,
                          progress=None if args.quiet else _progress(sys.stderr, args.format), executor=executor,

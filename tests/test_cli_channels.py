@@ -60,7 +60,7 @@ def test_json_stdout_of_a_usage_error_is_one_document(capfd):
 
 def test_a_verbose_solver_prints_nothing_on_stdout(capfd):
     sos = pytest.importorskip("verifiers.sos")
-    from verifiers.roa_common import solver_output_to_stderr
+    from mpgspec.streams import stdout_to_stderr as solver_output_to_stderr
 
     p = {(2, 0): 1.0, (0, 2): 1.0, (1, 1): 0.5, (0, 0): 1.0}  # x^2 + xy + y^2 + 1 is SOS
     cert = sos.prove_sos(p, 2, solver_opts={"verbose": True})

@@ -84,13 +84,12 @@ class ScipyRunner:
 
     def one(self, x0: np.ndarray, t0: float, T: float) -> OracleEvidence:
         p = self.prim
-        nx = p.system.nx
 
         def rhs(s, x):
             return np.asarray(p.f_cl(x, t0 + s, s, x0)).ravel()
 
         def enter(s, x):  # inside E by more than the margin's error estimate (as the judge asks)
-            err = self.c_margin * np.linalg.norm(10 * (ATOL + RTOL * np.abs(x)))
+            err = self.c_margin * np.linalg.norm(_tolerance_error(x))
             return float(p.roa_margin(x, t0 + s)) - 2 * err - 1e-9
 
         enter.terminal, enter.direction = True, 1
@@ -127,7 +126,7 @@ class ScipyRunner:
     def _judge_arrays(self, X, s, t0, T, x0, failed) -> OracleEvidence:
         p = self.prim
         N = s.size
-        delta = 10 * (ATOL + RTOL * np.abs(np.nan_to_num(X, nan=np.inf)))
+        delta = _tolerance_error(np.nan_to_num(X, nan=np.inf))
         F = self._mapped(N)
         H, D, DH, UR, U = (np.asarray(v) for v in F(X, (t0 + s)[None, :], s[None, :], np.repeat(x0[:, None], N, axis=1), delta))
         M = np.array([float(p.roa_margin(X[:, i], t0 + s[i])) for i in range(N)]) if N < 64 else \
@@ -171,6 +170,11 @@ class ScipyRunner:
         ev = evidence(p, blk, c, d, 0, t0, self.c_margin, "solver failed" if failed else "")
         ev.steps = int(N)
         return ev
+
+
+def _tolerance_error(x: np.ndarray) -> np.ndarray:
+    """Error allowed on each state by the solver's tolerances, with a factor 10 for its accumulation."""
+    return 10 * (ATOL + RTOL * np.abs(x))
 
 
 def _active(p: CompiledPrimitive, t: np.ndarray) -> np.ndarray:

@@ -25,7 +25,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import linprog
 
-from .roa_common import solver_output_to_stderr, validate_gram
+from mpgspec.streams import stdout_to_stderr
+
+from .roa_common import validate_gram
 
 Poly = dict[tuple[int, ...], float]
 _OP_NAMES = {getattr(ca, a): a[3:].lower() for a in dir(ca) if a.startswith("OP_")}
@@ -246,7 +248,7 @@ class LevelSetProgram:
         self.rho.value = float(rho)
         t0 = time.perf_counter()
         try:
-            with warnings.catch_warnings(), solver_output_to_stderr():
+            with warnings.catch_warnings(), stdout_to_stderr():
                 warnings.simplefilter("ignore", UserWarning)
                 # never verbose: solver logs would end up in the report's stdout (see roa_common)
                 self.problem.solve(solver=self.solver, **{**self.solver_opts, "verbose": False})

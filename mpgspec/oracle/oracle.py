@@ -4,7 +4,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
-from ..spec.models import PrimitiveClass
 from ..settings import OracleSettings
 from .evidence import OracleEvidence
 from ..errors import UsageError
@@ -16,14 +15,9 @@ class CapabilityError(UsageError):
 
 
 
-def needs(prim: CompiledPrimitive) -> set[str]:
-    """Capabilities a backend must have to run this primitive's closed loop."""
-    return prim.needs
-
-
 def require_capabilities(backend, prim: CompiledPrimitive) -> None:
     """Refuse, with a message naming what is missing, a backend that cannot run the primitive."""
-    missing = needs(prim) - set(getattr(backend, "capabilities", ()))
+    missing = prim.needs - set(getattr(backend, "capabilities", ()))
     if missing:
         raise CapabilityError(
             f"oracle method {backend.name!r} cannot run primitive {prim.name!r}: it lacks the capability "
