@@ -31,6 +31,7 @@ class ControlContext:
     xdot: ca.SX | None = None  # open-loop xdot(x, u) of the primitive's dynamics mode
     contacts: tuple[str, ...] = ()
     info: dict = field(default_factory=dict)
+    mode: dict | None = None  # rigid bodies: foot -> 1 while held (constant, or a function of the clock)
 
 
 def cubic_profile(s, duration: float, p0, v0, pf, vf):
@@ -257,4 +258,10 @@ def idqp(c, ctx: ControlContext):
     return idqp_law(c, ctx)
 
 
-LAWS = {"expression": expression_law, "pd": pd_law, "lqr": lqr_law, "id_qp": idqp}
+def trot(c, ctx: ControlContext):
+    from .rigidbody.trot import trot_law
+
+    return trot_law(c, ctx)
+
+
+LAWS = {"expression": expression_law, "pd": pd_law, "lqr": lqr_law, "id_qp": idqp, "trot": trot}

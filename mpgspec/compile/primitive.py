@@ -183,6 +183,14 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     x = sys.x
     # clock seen by setpoint and windows: wrapped into one period for periodic primitives
     tc = t - period * ca.floor(t / period) if period is not None else t
+    trot = _trot_setup(inst, sys, ec, consts) if p.controller.type == "trot" else None
+    schedule = _schedule(inst, sys, trot)
+    mode = None  # the contact mode: foot -> 1 while held, a function of the clock under a schedule
+    if schedule is not None and not sys.events:
+        mode = _scheduled_mode(schedule, sys.model.contact_frames, tc)
+        loop = sys.scheduled_loop(mode)
+    elif sys.is_rigid_body:
+        mode = {f: ca.SX(1.0 if f in loop.contacts else 0.0) for f in sys.model.contact_frames}
     env: dict[str, object] = {**sys.env(), **consts, "t": tc, "s": s}  # t: the clock, within one period
     sp = p.setpoint
     if sp.named is not None:
@@ -228,7 +236,9 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         env[f"{n}_star"] = x_star[i]
         env[f"{n}_star_dot"] = x_star_dot[i]
     ctx = ControlContext(sys, t, s, x_sw, x_star, x_star_dot, setpoint, env, ec,
-                         fixed=p.class_ is PrimitiveClass.FIXED, xdot=loop.xdot, contacts=loop.contacts)
+                         fixed=p.class_ is PrimitiveClass.FIXED, xdot=loop.xdot, contacts=loop.contacts, mode=mode)
+    if trot is not None:
+        ctx.info["trot"] = {k: v for k, v in trot.items() if k != "gains"}
     if sys.is_rigid_body:  # rigid bodies: the feet the primitive's dynamics hold
         ctx.info["contacts"] = list(loop.contacts)
     u_raw = LAWS[p.controller.type](p.controller, ctx)
@@ -243,7 +253,8 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         path = ("safe_set", j)
         if sf.use is not None:
             try:
-                items = sys.builtin_safe_set(sf.use, loop.contacts)
+                items = sys.builtin_safe_set(sf.use, loop.contacts, *((mode, loop.env) if schedule is not None
+                                                                      and not sys.events else ()))
             except KeyError:
                 raise SpecError("this safe-set block does not apply to the system", location=inst.locate(path + ("use",)),
                                 key=f"primitive '{inst.name}': safe_set.{j}.use", expected="a block of the project or, "
@@ -263,7 +274,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
             hs.append(hv)
             names.append(name or f"h{j}")
     h_u = ca.Function("h_u", args + [sys.u], [ca.vertcat(*hs) if hs else ca.SX(0, 1)])
-    jump = _jump(inst, sys, tc, t)
+    jump = _jump(inst, sys, tc, t, schedule, mode, period)
     f_cl, control, h, loop_fn = _close_loop(ident, args, u_raw, f_u, h_u, sys)
     if any(w is not None for w in windows):
         h_raw = ca.Function("h_raw", args + [sys.u], [ca.vertcat(*hs_raw)])
@@ -292,19 +303,19 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         name=inst.name, cls=p.class_, system=sys, period=period, domain=domain, next=p.next, horizon=p.horizon,
         grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=radius,
         f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info, jump=jump,
-        loop=loop_fn, loop_raw=loop_raw, windows=windows, boundaries=_boundaries(windows, p, period, domain),
-        hybrid=sys.events or p.contact_schedule is not None,
+        loop=loop_fn, loop_raw=loop_raw, windows=windows, boundaries=_boundaries(windows, schedule, period, domain),
+        hybrid=sys.events or schedule is not None,
     )
 
 
-def _boundaries(windows, p, period, domain) -> tuple[float, ...]:
+def _boundaries(windows, schedule, period, domain) -> tuple[float, ...]:
     """Clock times at which the safe set or the contact mode switches: the oracle steps onto each.
 
     For a periodic primitive they are taken within one period (the clock wraps); a transient's end
     t_f is one, so its rollouts stop exactly at t_f.
     """
     times = {v for w in windows if w is not None for v in w}
-    times |= {float(ph.until) for ph in (p.contact_schedule or [])}
+    times |= {float(until) for until, _ in (schedule or [])}
     if domain is not None:
         times.add(float(domain[1]))
     if period is not None:
@@ -312,17 +323,57 @@ def _boundaries(windows, p, period, domain) -> tuple[float, ...]:
     return tuple(sorted(times))
 
 
-def _jump(inst: PrimitiveInstance, sys: CompiledSystem, tc: ca.SX, t: ca.SX) -> ca.Function:
-    """The discrete update after each step, given the step's input and the clock after it."""
-    u = ca.SX.sym("u", sys.nu)
-    x = sys.x
+def _trot_setup(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, consts: dict) -> dict:
+    """Speed, calibrated command, gains and the gait table's header of a trot controller."""
+    from .rigidbody.trot import check_quadruped, gains_of, gait_header, trot_inputs
+
+    c = inst.spec.controller
+    owner = f"primitive '{inst.name}'"
+    check_quadruped(type("Ctx", (), {"sys": sys, "ec": ec})())
+    speed = ec.number(c.speed, ("controller", "speed"), consts, finite=True)
+    out = {"speed": speed, "command": speed, "gait": None, "inputs": trot_inputs(c, sys, speed)}
+    if c.gait is not None:
+        from ..spec.paths import confine
+
+        raw = c.gait
+        for k, v in inst.argument.items():
+            raw = raw.replace("{" + k + "}", f"{v:g}")
+        where = inst.locate(("controller", "gait"))
+        path = confine(raw, inst.source.parent, inst.roots, where=where, key=f"{owner}: controller.gait") \
+            if inst.roots else (inst.source.parent / raw).resolve()
+        if not path.is_file():
+            raise SpecError("the gait table does not exist", location=where, key=f"{owner}: controller.gait",
+                            expected="a table written by `mpgspec gait`", found=str(raw), code="MPG110",
+                            hint="generate it with `mpgspec gait <project>/gaits.yaml`")
+        head = gait_header(path)
+        if head.get("inputs") != out["inputs"]:
+            raise SpecError("the gait table is stale: it was generated for other settings", location=where,
+                            key=f"{owner}: controller.gait", expected=f"inputs {out['inputs']}",
+                            found=f"inputs {head.get('inputs')}", code="MPG110",
+                            hint="regenerate it with `mpgspec gait <project>/gaits.yaml`")
+        try:
+            out["command"] = float(head["command"])
+        except (KeyError, ValueError):
+            raise SpecError("the gait table has no calibrated command", location=where,
+                            key=f"{owner}: controller.gait", expected="a header line '# command: <m/s>'",
+                            found=str(head.get("command")), code="MPG110") from None
+        out["gait"] = {k: head[k] for k in head}
+        out["gait_file"] = str(raw)
+    out["gains"] = gains_of(c, out["command"])
+    return out
+
+
+def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, trot: dict | None):
+    """(until, feet) over the clock: the spec's contact schedule, or the one the trot's timing implies."""
+    if trot is not None:
+        return [(u, tuple(f)) for u, f in trot["gains"].schedule(tuple(sys.model.contact_frames))]
     sched = inst.spec.contact_schedule
     if sched is None:
-        return ca.Function("jump", [x, u, t], [sys.project(x, u)])
-    if not sys.events:
-        raise SpecError("a contact schedule needs contact flags in the state", location=inst.locate(("contact_schedule",)),
-                        key=f"primitive '{inst.name}': contact_schedule", expected="system.contact_events: true",
-                        found="a system without contact events", code="MPG108")
+        return None
+    if not sys.is_rigid_body:
+        raise SpecError("a contact schedule needs a rigid-body system", location=inst.locate(("contact_schedule",)),
+                        key=f"primitive '{inst.name}': contact_schedule", expected="system kind rigid_body",
+                        found="an analytic system", code="MPG108")
     feet = sys.model.contact_frames
     for k, ph in enumerate(sched):
         bad = [f for f in ph.feet if f not in feet]
@@ -330,16 +381,56 @@ def _jump(inst: PrimitiveInstance, sys: CompiledSystem, tc: ca.SX, t: ca.SX) -> 
             raise SpecError("unknown contact frame", location=inst.locate(("contact_schedule", k, "feet")),
                             key=f"primitive '{inst.name}': contact_schedule.{k}.feet",
                             expected="one of " + ", ".join(feet), found=repr(bad[0]), code="MPG106")
-    flags = []
-    for f in feet:
-        val = ca.SX(1.0 if f in sched[-1].feet else 0.0)
-        for ph in reversed(sched[:-1]):
-            val = ca.if_else(tc < ph.until, 1.0 if f in ph.feet else 0.0, val)
-        flags.append(val)
-    from .rigidbody.hybrid import scheduled_contacts
+    return [(float(ph.until), tuple(ph.feet)) for ph in sched]
 
-    x_unit = ca.vertcat(sys.project(x)[: sys.model.nq], x[sys.model.nq:])
-    return ca.Function("jump", [x, u, t], [scheduled_contacts(sys, x_unit, ca.vertcat(*flags))])
+
+def _scheduled_mode(schedule, feet, tc) -> dict:
+    """foot -> 1 while the schedule holds it at clock tc, else 0 (after the last phase: the last phase)."""
+    mode = {}
+    for f in feet:
+        val = ca.SX(1.0 if f in schedule[-1][1] else 0.0)
+        for until, held in reversed(schedule[:-1]):
+            val = ca.if_else(tc < until, 1.0 if f in held else 0.0, val)
+        mode[f] = val
+    return mode
+
+
+def _jump(inst: PrimitiveInstance, sys: CompiledSystem, tc: ca.SX, t: ca.SX, schedule, mode,
+          period: float | None) -> ca.Function:
+    """The discrete update after each step, given the step's input and the clock after it.
+
+    Under a contact schedule, feet that join the mode at the step's end touch down with a plastic
+    impact; with contact flags in the state the flags are set to the scheduled mode.
+    """
+    u = ca.SX.sym("u", sys.nu)
+    x = sys.x
+    if schedule is None:
+        return ca.Function("jump", [x, u, t], [sys.project(x, u)])
+    from .rigidbody.hybrid import masked_impact, scheduled_contacts
+
+    feet = sys.model.contact_frames
+    if sys.events:
+        flags = ca.vertcat(*[mode_at(schedule, f, tc) for f in feet])
+        x_unit = ca.vertcat(sys.project(x)[: sys.model.nq], x[sys.model.nq:])
+        return ca.Function("jump", [x, u, t], [scheduled_contacts(sys, x_unit, flags)])
+    nq, nv = sys.model.nq, sys.model.nv
+    tb = tc - JUST_BEFORE  # the mode during the step that just ended
+    if period is not None:
+        tb = ca.if_else(tb < 0, tb + period, tb)
+    before = _scheduled_mode(schedule, feet, tb)
+    joined = sum(ca.logic_and(mode[f] > 0.5, before[f] < 0.5) for f in feet)
+    xu = sys.project(x)
+    c = ca.vertcat(*[mode[f] for f in feet])
+    v_new = ca.if_else(joined > 0, masked_impact(sys, xu[:nq], xu[nq:nq + nv], c), xu[nq:nq + nv])
+    return ca.Function("jump", [x, u, t], [ca.vertcat(xu[:nq], v_new, xu[nq + nv:])])
+
+
+JUST_BEFORE = 1e-7
+"""How far before a step's end the jump reads the mode the step ran in (steps are >= 1e-6 s)."""
+
+
+def mode_at(schedule, foot: str, tc) -> ca.SX:
+    return _scheduled_mode(schedule, (foot,), tc)[foot]
 
 
 def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) -> tuple[np.ndarray, np.ndarray]:
@@ -354,6 +445,8 @@ def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) ->
     where = inst.locate(("setpoint", "file"))
     key = f"primitive '{clip(inst.name, 60)}': setpoint.file"
     raw = inst.spec.setpoint.file
+    for k, v in inst.argument.items():  # one table per node: `{<argument>}` in the name takes its value
+        raw = raw.replace("{" + k + "}", f"{v:g}")
     if inst.roots:
         path = confine(raw, inst.source.parent, inst.roots, where=where, key=key)
     else:  # an instance built without the loader: no project folder known
@@ -364,18 +457,20 @@ def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) ->
         raise SpecError(msg, location=loc, key=key, expected=expected, found=found, code="MPG110")
 
     try:
-        lines = read_text_bounded(path, MAX_FILE_BYTES).splitlines()
+        lines = ["" if ln.startswith("#") else ln for ln in read_text_bounded(path, MAX_FILE_BYTES).splitlines()]
     except ReadProblem as p:
         fail(f"cannot read the setpoint table: {p.message}", p.expected or "a CSV file relative to the spec",
              f"{clip_repr(raw)} ({p.found})" if p.found else clip_repr(raw))
-    header = [h.strip() for h in lines[0].split(",")] if lines else []
+    first = next((k for k, ln in enumerate(lines) if ln.strip()), len(lines))  # after `# key: value` lines
+    header = [h.strip() for h in lines[first].split(",")] if first < len(lines) else []
     if not header or header[0] != "t":
-        fail("the first column must be the time", "a header 't,<state>,...'", clip_repr(lines[0] if lines else ""), 1)
+        fail("the first column must be the time", "a header 't,<state>,...'",
+             clip_repr(lines[first] if first < len(lines) else ""), first + 1)
     unknown = [h for h in header[1:] if h not in sys.state_names]
     if unknown:
-        fail("unknown state in the header", "state names of the system", clip_repr(unknown[0]), 1)
+        fail("unknown state in the header", "state names of the system", clip_repr(unknown[0]), first + 1)
     rows = []
-    for n, text in enumerate(lines[1:], start=2):
+    for n, text in enumerate(lines[first + 1:], start=first + 2):
         if not text.strip():
             continue
         try:

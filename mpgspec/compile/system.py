@@ -80,7 +80,8 @@ class CompiledSystem:
         """The discrete part of a step: back onto the state manifold, events (identity here)."""
         return x
 
-    def builtin_safe_set(self, name: str, contacts: tuple[str, ...]) -> list[tuple[str, ca.SX]]:
+    def builtin_safe_set(self, name: str, contacts: tuple[str, ...], mode: dict | None = None,
+                         env: dict | None = None) -> list[tuple[str, ca.SX]]:
         raise KeyError(name)
 
     def wrapped_error(self, dx: ca.SX) -> ca.SX:

@@ -124,8 +124,32 @@ class IDQPController(Strict):
     max_iter: int = Field(default=100, ge=1)
 
 
+class TrotController(Strict):
+    """A trot for point-foot quadrupeds (compile/rigidbody/trot.py): stance feet share the trunk wrench,
+    swing feet land at the Raibert point; the contact schedule follows from the timing."""
+
+    type: Literal["trot"]
+    speed: Expr = Field(description="commanded mean forward speed (m/s), usually the primitive's argument")
+    gait: Text | None = Field(default=None, description="gait table written by `mpgspec gait` (its header "
+                                                        "holds the calibrated command); `{<argument>}` is replaced")
+    pose: dict[Text, Number] = Field(default_factory=dict, description="joint angles of the nominal stance (others 0): "
+                                                                      "its CoM offsets and inertia shape the law")
+    swing: Number = Field(default=0.16, gt=0, description="swing time T_sw (s)")
+    double_support: Number = Field(default=0.02, gt=0, description="time with all four feet down T_ds (s)")
+    height: Number = Field(default=0.2586, gt=0, description="CoM height h_d (m)")
+    apex: Number = Field(default=0.07, gt=0, description="swing foot apex (m)")
+    touchdown_speed: Number = Field(default=0.3, ge=0, description="downward foot speed at touchdown (m/s)")
+    kv: Number = Field(default=10.0, ge=0, description="CoM velocity gain (1/s)")
+    raibert: Number = Field(default=0.08, ge=0, description="foot placement gain on the velocity error (s)")
+    kp_swing: Number = Field(default=3000.0, gt=0, description="swing foot stiffness (N/m)")
+    kd_swing: Number = Field(default=60.0, ge=0, description="swing foot damping (N s/m)")
+    k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
+    d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
+
+
 Controller = Annotated[
-    Union[ExpressionController, PDController, LQRController, IDQPController], Field(discriminator="type")
+    Union[ExpressionController, PDController, LQRController, IDQPController, TrotController],
+    Field(discriminator="type"),
 ]
 
 

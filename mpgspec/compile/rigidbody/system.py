@@ -194,14 +194,38 @@ class RigidBodyCompiledSystem(CompiledSystem):
                 out[self.state_names.index(f"contact_{f}")] = float(f in contacts)
         return out
 
-    def _when_in_contact(self, frame: str, h: ca.SX) -> ca.SX:
-        """With contact events, a contact condition binds only while the foot's flag is set."""
-        c = self.contact_flag(frame)
+    def _when_in_contact(self, frame: str, h: ca.SX, mode: dict | None = None) -> ca.SX:
+        """A contact condition binds only while the foot is held: by the scheduled mode, or with
+        contact events while the foot's flag is set."""
+        c = mode[frame] if mode is not None else self.contact_flag(frame)
         return h if c is None else ca.if_else(c > 0.5, h, 1e3)
 
-    def builtin_safe_set(self, name: str, contacts: tuple[str, ...], tol: float = 1e-3) -> list[tuple[str, ca.SX]]:
-        """The paper's common safe sets as lists of (name, h) with h >= 0 safe."""
-        env, m = self.extra_env, self.model
+    def scheduled_loop(self, mode: dict) -> OpenLoop:
+        """Constrained dynamics holding the feet whose mode is 1 (mode: foot -> 0/1 symbols of the clock)."""
+        from .hybrid import masked_contact_dynamics
+
+        m = self.model
+        xq, xv = self.x[:m.nq], self.x[m.nq:m.nq + m.nv]
+        c = ca.vertcat(*[mode[f] for f in m.contact_frames])
+        a, lam = masked_contact_dynamics(self, xq, xv, self.u, c)
+        xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(self.nx - m.nq - m.nv))
+        env = dict(self.extra_env)
+        for k, f in enumerate(m.contact_frames):
+            for j, ax in enumerate("xyz"):
+                env[f"{f}_f{ax}"] = lam[3 * k + j]
+        return OpenLoop(xdot, env, contacts=tuple(m.contact_frames))
+
+    def builtin_safe_set(self, name: str, contacts: tuple[str, ...], mode: dict | None = None,
+                         env: dict | None = None, tol: float = 1e-3) -> list[tuple[str, ca.SX]]:
+        """The paper's common safe sets as lists of (name, h) with h >= 0 safe.
+
+        Under a contact schedule (`mode` given, with the scheduled loop's `env`), the contact
+        conditions of every foot bind while the schedule holds it."""
+        m = self.model
+        if mode is not None:
+            contacts = tuple(m.contact_frames)
+        loop_env = env
+        env = self.extra_env
         out = []
         if name == "joint_limits":  # C_{q, qdot}
             lo, hi = m.position_limits
@@ -214,15 +238,16 @@ class RigidBodyCompiledSystem(CompiledSystem):
                         (f"qdot_max[{j}]", vmax[i] - ca.fabs(v))]
         elif name == "ground_contact":  # C_ground: feet on the ground and not moving
             for f in contacts:
-                out += [(f"on_ground[{f}]", self._when_in_contact(f, tol - ca.fabs(env[f"{f}_z"]))),
+                out += [(f"on_ground[{f}]", self._when_in_contact(f, tol - ca.fabs(env[f"{f}_z"]), mode)),
                         (f"foot_still[{f}]", self._when_in_contact(
-                            f, tol - ca.norm_2(ca.vertcat(*[env[f"{f}_v{a}"] for a in "xyz"]))))]
+                            f, tol - ca.norm_2(ca.vertcat(*[env[f"{f}_v{a}"] for a in "xyz"])), mode))]
         elif name == "no_slip":  # lambda in the friction cone, lambda_z >= 0
-            loop = self.open_loop(list(contacts))
+            forces = loop_env if loop_env is not None else self.open_loop(list(contacts)).env
             for f in contacts:
-                fx, fy, fz = (loop.env[f"{f}_f{a}"] for a in "xyz")
-                out += [(f"normal_force[{f}]", self._when_in_contact(f, fz)),
-                        (f"friction_cone[{f}]", self._when_in_contact(f, self.friction * fz - ca.sqrt(fx**2 + fy**2 + 1e-12)))]
+                fx, fy, fz = (forces[f"{f}_f{a}"] for a in "xyz")
+                out += [(f"normal_force[{f}]", self._when_in_contact(f, fz, mode)),
+                        (f"friction_cone[{f}]", self._when_in_contact(
+                            f, self.friction * fz - ca.sqrt(fx**2 + fy**2 + 1e-12), mode))]
         elif name == "aerial":  # C_aerial: no foot below the ground
             for f in m.contact_frames:  # a foot resting on the ground sits at 0 up to the contact drift
                 out.append((f"above_ground[{f}]", env[f"{f}_z"] + tol))

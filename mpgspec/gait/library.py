@@ -1,0 +1,145 @@
+"""The gait library: one table per trot node, written from the closed loop's own orbit.
+
+A gait file (e.g. specs/a1/gaits.yaml) names the project, the trot primitive and the step:
+
+    project: project.yaml
+    primitive: Walk
+    dt: 0.001
+
+`mpgspec gait specs/a1/gaits.yaml` compiles every node of the primitive, finds its orbit
+(mpgspec.gait.orbit) and writes the table its `controller.gait` and `setpoint.file` name: a header
+of `# key: value` lines (solver status, residual, calibrated command, Floquet multipliers, the hash
+of the inputs the table depends on) and one row per step of one period. `--check` regenerates
+into memory and compares with the tables on disk instead of writing.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydantic import Field
+
+from ..errors import SpecError
+from ..spec.base import Strict
+from .orbit import Orbit, StrideMap, find_orbit
+
+TOLERANCE = 1e-6  # tables agree when every state differs by less than this (the Newton tolerance is 1e-10)
+
+
+class GaitFile(Strict):
+    """What `mpgspec gait` generates."""
+
+    project: str = Field(description="the project file, relative to this file")
+    primitive: str = Field(description="the trot primitive (all of its nodes)")
+    dt: float = Field(default=0.001, gt=0, description="the oracle step the orbit is computed with (s)")
+
+
+@dataclass
+class GaitTable:
+    node: str
+    path: Path
+    orbit: Orbit
+    inputs: str
+
+    def text(self, state_names: list[str]) -> str:
+        o = self.orbit
+        head = {
+            "generator": "mpgspec gait (Newton shooting on the stride map of the closed loop)",
+            "node": self.node, "status": o.status, "residual": f"{o.residual:.3e}", "iterations": o.iterations,
+            "speed": f"{o.speed:g}", "command": repr(float(o.command)), "period": f"{o.period:g}", "dt": f"{o.dt:g}",
+            "mean_speed": f"{o.stats['mean_speed']:.6f}",
+            "spectral_radius": f"{o.spectral_radius:.6f}",
+            "multipliers": json.dumps([[round(float(m.real), 6), round(float(m.imag), 6)] for m in o.multipliers]),
+            "neutral": json.dumps({k: [round(v[0], 6), float(f"{v[1]:.2e}")] for k, v in o.neutral.items()}),
+            "peak_torque": f"{o.stats['peak_torque']:.4f}",
+            "least_normal_force": f"{o.stats['least_normal_force']:.4f}",
+            "least_cone_margin": f"{o.stats['least_cone_margin']:.4f}",
+            "largest_touchdown_gap": f"{o.stats['largest_touchdown_gap']:.3e}",
+            "inputs": self.inputs,
+        }
+        lines = [f"# {k}: {v}" for k, v in head.items()]
+        lines.append(",".join(["t", *state_names]))
+        for k, t in enumerate(o.t):
+            lines.append(",".join([f"{t:.6f}", *(f"{v:.12g}" for v in o.X[:, k])]))
+        return "\n".join(lines) + "\n"
+
+
+def load_gait_file(path: Path) -> GaitFile:
+    from ..spec.loader import _read
+
+    data, pos = _read(path)
+    try:
+        return GaitFile.model_validate(data)
+    except Exception as err:  # pydantic's ValidationError, located by the first failing key
+        errs = getattr(err, "errors", lambda: [])()
+        loc = tuple(errs[0]["loc"]) if errs else ()
+        raise SpecError("invalid gait file", location=pos.locate(loc), key=".".join(map(str, loc)) or "gait file",
+                        expected="keys project, primitive and dt", found=str(errs[0]["msg"] if errs else err)[:200],
+                        code="MPG104") from None
+
+
+def generate(path: str | Path, progress=print) -> list[GaitTable]:
+    """Find the orbit of every node of the gait file's primitive; return the tables (not yet written)."""
+    from ..compile.rigidbody.system import feet_on_ground
+    from ..compile.rigidbody.trot import trot_inputs
+    from ..compile.system import compile_system
+    from ..spec.loader import load_project
+
+    path = Path(path)
+    gf = load_gait_file(path)
+    spec = load_project(path.parent / gf.project)
+    sys = compile_system(spec)
+    nodes = [i for i in spec.primitives if i.base == gf.primitive]
+    if not nodes or nodes[0].spec.controller.type != "trot":
+        raise SpecError("no trot primitive of that name", location=None, key="primitive",
+                        expected="the name of a primitive with controller type trot", found=gf.primitive,
+                        code="MPG104")
+    ctrl = nodes[0].spec.controller
+    progress(f"compiling the stride map of {gf.primitive} (dt = {gf.dt:g} s)")
+    sm = StrideMap(sys, ctrl, gf.dt)
+    stand = sys.default_state()
+    for j, a in ctrl.pose.items():
+        stand[sys.state_names.index(j)] = float(a)
+    stand = feet_on_ground(sys, stand)
+    out = []
+    for inst in nodes:
+        speed = float(next(iter(inst.argument.values()))) if inst.argument else float(ctrl.speed)
+        orbit = find_orbit(sm, stand, speed)
+        raw = inst.spec.controller.gait or f"gaits/{gf.primitive.lower()}_{{speed}}.csv"
+        for k, v in inst.argument.items():
+            raw = raw.replace("{" + k + "}", f"{v:g}")
+        table = GaitTable(inst.name, (inst.source.parent / raw).resolve(), orbit, trot_inputs(ctrl, sys, speed))
+        progress(f"{inst.name}: {orbit.status} in {orbit.iterations} Newton steps, residual {orbit.residual:.1e}, "
+                 f"command {orbit.command:.4f} m/s for a mean speed of {orbit.stats['mean_speed']:.4f} m/s, "
+                 f"largest multiplier {orbit.spectral_radius:.4f} ({orbit.seconds:.1f} s)")
+        out.append(table)
+    return out
+
+
+def write(tables: list[GaitTable], state_names: list[str]) -> None:
+    from ..report.write import write_atomic
+
+    for t in tables:
+        t.path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(t.path, t.text(state_names))
+
+
+def compare(tables: list[GaitTable], state_names: list[str]) -> list[str]:
+    """Differences between the regenerated tables and those on disk (empty when they agree)."""
+    problems = []
+    for t in tables:
+        if not t.path.is_file():
+            problems.append(f"{t.node}: {t.path} is missing")
+            continue
+        rows = [ln for ln in t.path.read_text().splitlines() if ln and not ln.startswith("#")][1:]
+        old = np.array([[float(v) for v in r.split(",")] for r in rows]).T
+        new = np.vstack([t.orbit.t, t.orbit.X])
+        if old.shape != new.shape:
+            problems.append(f"{t.node}: {old.shape[1]} rows on disk, {new.shape[1]} regenerated")
+            continue
+        diff = float(np.abs(old - new).max())
+        if not diff <= TOLERANCE:
+            problems.append(f"{t.node}: states differ by up to {diff:.2e} (tolerance {TOLERANCE:g})")
+    return problems
