@@ -52,6 +52,10 @@ class FloquetVerifier:
 
     def estimate(self, problem: PeriodicProblem, options: dict | None = None) -> RoAResult:
         o = dict(options or {})
+        if getattr(problem, "source", None) is not None:  # the state jumps: the discrete flow's own map
+            from .floquet_hybrid import estimate
+
+            return estimate(problem, o, self.name)
         t_start = time.perf_counter()
         T = float(problem.period)
         m = monodromy(problem, float(o.get("t0", 0.0)), int(o.get("steps", 2000)))

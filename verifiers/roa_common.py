@@ -44,6 +44,7 @@ class PeriodicProblem:
     h: ca.Function | None = None  # (x, t) -> safety functions
     weights: np.ndarray | None = None
     name: str = ""
+    source: object = None  # the compiled primitive, for loops whose state jumps (contact schedules)
 
     @property
     def nx(self) -> int:
@@ -232,5 +233,5 @@ def from_primitive(prim, weights: np.ndarray | None = None, s: float = 1e6) -> R
     if cls == "periodic":
         return PeriodicProblem(ca.Function("f", [x, t], [prim.f_cl(x, t, s, xs0)]), prim.setpoint,
                                float(prim.period), ca.Function("h", [x, t], [prim.h(x, t, s, xs0)]), weights,
-                               prim.name)
+                               prim.name, prim if getattr(prim, "hybrid", False) else None)
     raise ValueError(f"no region-of-attraction problem for a {cls} primitive")

@@ -187,12 +187,13 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     schedule = _schedule(inst, sys, trot)
     mode = None  # the contact mode: foot -> 1 while held, a function of the clock under a schedule
     if schedule is not None and not sys.events:
-        mode = _scheduled_mode(schedule, sys.model.contact_frames, tc)
+        mode = scheduled_mode(schedule, sys.model.contact_frames, t, period)
         loop = sys.scheduled_loop(mode)
     elif sys.is_rigid_body:
         mode = {f: ca.SX(1.0 if f in loop.contacts else 0.0) for f in sys.model.contact_frames}
     env: dict[str, object] = {**sys.env(), **consts, "t": tc, "s": s}  # t: the clock, within one period
     sp = p.setpoint
+    table = None  # (times, samples, interpolation) of a tabulated setpoint
     if sp.named is not None:
         unknown = [k for k in sp.named if k not in sys.state_names]
         if unknown:
@@ -216,6 +217,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         x_star_t = ec.vector(sp.expr, ("setpoint", "expr"), {**consts, "t": t})
     elif sp.file is not None:
         ts, ys = _samples_from_csv(inst, sys, loop.contacts)
+        table = (ts, ys, sp.interpolation)
         interp = interp_cubic if sp.interpolation == "cubic" else interp_linear
         x_star_t = ca.vertcat(*[interp(t, ts, ys[:, i]) for i in range(sys.nx)])
     else:
@@ -225,6 +227,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
                             found=f"{sorted({len(r) for r in sp.samples})}", code="MPG106")
         ts = np.asarray(sp.times, float)
         ys = np.asarray(sp.samples, float)
+        table = (ts, ys, sp.interpolation)
         interp = interp_cubic if sp.interpolation == "cubic" else interp_linear
         x_star_t = ca.vertcat(*[interp(t, ts, ys[:, i]) for i in range(sys.nx)])
     x_star_raw = ca.Function("x_star_raw", [t], [x_star_t])
@@ -232,6 +235,8 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     x_star_dot = ca.jacobian(x_star_raw(t), t)
     x_star_dot = ca.substitute(x_star_dot, t, tc)
     setpoint = ca.Function(f"setpoint_{_ident(inst.name)}", [t], [x_star])
+    if table is not None and len(table[0]) > TABLE_KNOTS:  # a lookup, not a tree of thousands of branches
+        setpoint = _table_setpoint(f"setpoint_{_ident(inst.name)}", *table, period)
     for i, n in enumerate(sys.state_names):
         env[f"{n}_star"] = x_star[i]
         env[f"{n}_star_dot"] = x_star_dot[i]
@@ -239,6 +244,8 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
                          fixed=p.class_ is PrimitiveClass.FIXED, xdot=loop.xdot, contacts=loop.contacts, mode=mode)
     if trot is not None:
         ctx.info["trot"] = {k: v for k, v in trot.items() if k != "gains"}
+    if schedule is not None:
+        ctx.info["contact_schedule"] = [[float(u), list(f)] for u, f in schedule]
     if sys.is_rigid_body:  # rigid bodies: the feet the primitive's dynamics hold
         ctx.info["contacts"] = list(loop.contacts)
     u_raw = LAWS[p.controller.type](p.controller, ctx)
@@ -274,7 +281,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
             hs.append(hv)
             names.append(name or f"h{j}")
     h_u = ca.Function("h_u", args + [sys.u], [ca.vertcat(*hs) if hs else ca.SX(0, 1)])
-    jump = _jump(inst, sys, tc, t, schedule, mode, period)
+    jump = _jump(inst, sys, t, schedule, period)
     f_cl, control, h, loop_fn = _close_loop(ident, args, u_raw, f_u, h_u, sys)
     if any(w is not None for w in windows):
         h_raw = ca.Function("h_raw", args + [sys.u], [ca.vertcat(*hs_raw)])
@@ -384,8 +391,21 @@ def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, trot: dict | None):
     return [(float(ph.until), tuple(ph.feet)) for ph in sched]
 
 
-def _scheduled_mode(schedule, feet, tc) -> dict:
-    """foot -> 1 while the schedule holds it at clock tc, else 0 (after the last phase: the last phase)."""
+SNAP = 1e-9
+"""Clock times within SNAP before a switching time count as at it: a step that ends on a switch
+(up to rounding) runs the jump into the new mode, and the next step starts in it."""
+JUST_BEFORE = 1e-7
+"""How far before a step's end the jump reads the mode the step ran in (steps are >= 1e-6 s)."""
+
+
+def _wrap_clock(t, period):
+    return t - period * ca.floor(t / period) if period is not None else t
+
+
+def scheduled_mode(schedule, feet, t, period: float | None, before: bool = False) -> dict:
+    """foot -> 1 while the schedule holds it at clock t (the primitive's raw clock), else 0; after
+    the last phase, the last phase. With `before`, the mode just before t."""
+    tc = _wrap_clock(t - JUST_BEFORE if before else t + SNAP, period)
     mode = {}
     for f in feet:
         val = ca.SX(1.0 if f in schedule[-1][1] else 0.0)
@@ -395,9 +415,8 @@ def _scheduled_mode(schedule, feet, tc) -> dict:
     return mode
 
 
-def _jump(inst: PrimitiveInstance, sys: CompiledSystem, tc: ca.SX, t: ca.SX, schedule, mode,
-          period: float | None) -> ca.Function:
-    """The discrete update after each step, given the step's input and the clock after it.
+def _jump(inst: PrimitiveInstance, sys: CompiledSystem, t: ca.SX, schedule, period: float | None) -> ca.Function:
+    """The discrete update after each step, given the step's input and the clock t after it.
 
     Under a contact schedule, feet that join the mode at the step's end touch down with a plastic
     impact; with contact flags in the state the flags are set to the scheduled mode.
@@ -409,28 +428,17 @@ def _jump(inst: PrimitiveInstance, sys: CompiledSystem, tc: ca.SX, t: ca.SX, sch
     from .rigidbody.hybrid import masked_impact, scheduled_contacts
 
     feet = sys.model.contact_frames
+    mode = scheduled_mode(schedule, feet, t, period)
+    c = ca.vertcat(*[mode[f] for f in feet])
     if sys.events:
-        flags = ca.vertcat(*[mode_at(schedule, f, tc) for f in feet])
         x_unit = ca.vertcat(sys.project(x)[: sys.model.nq], x[sys.model.nq:])
-        return ca.Function("jump", [x, u, t], [scheduled_contacts(sys, x_unit, flags)])
+        return ca.Function("jump", [x, u, t], [scheduled_contacts(sys, x_unit, c)])
     nq, nv = sys.model.nq, sys.model.nv
-    tb = tc - JUST_BEFORE  # the mode during the step that just ended
-    if period is not None:
-        tb = ca.if_else(tb < 0, tb + period, tb)
-    before = _scheduled_mode(schedule, feet, tb)
+    before = scheduled_mode(schedule, feet, t, period, before=True)  # the mode the step ran in
     joined = sum(ca.logic_and(mode[f] > 0.5, before[f] < 0.5) for f in feet)
     xu = sys.project(x)
-    c = ca.vertcat(*[mode[f] for f in feet])
     v_new = ca.if_else(joined > 0, masked_impact(sys, xu[:nq], xu[nq:nq + nv], c), xu[nq:nq + nv])
     return ca.Function("jump", [x, u, t], [ca.vertcat(xu[:nq], v_new, xu[nq + nv:])])
-
-
-JUST_BEFORE = 1e-7
-"""How far before a step's end the jump reads the mode the step ran in (steps are >= 1e-6 s)."""
-
-
-def mode_at(schedule, foot: str, tc) -> ca.SX:
-    return _scheduled_mode(schedule, (foot,), tc)[foot]
 
 
 def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) -> tuple[np.ndarray, np.ndarray]:
@@ -526,8 +534,32 @@ def _close_loop(ident: str, args: list, u_raw, f_u: ca.Function, h_u: ca.Functio
     return f_cl, control, h, loop
 
 
+TABLE_KNOTS = 64
+"""Tabulated setpoints with more samples than this are evaluated by a linear lookup (CasADi's
+interpolant) in an MX Function instead of an SX expression tree."""
+
+
+def _table_setpoint(name: str, ts: np.ndarray, ys: np.ndarray, interpolation: str, period) -> ca.Function:
+    """t -> x*(t) from a table by linear lookup, held outside its range, wrapped into one period."""
+    if interpolation != "linear":
+        ts_f = np.linspace(ts[0], ts[-1], 8 * len(ts))  # cubic tables: sampled densely, then linear
+        from scipy.interpolate import CubicSpline
+
+        ys, ts = CubicSpline(ts, ys, axis=0)(ts_f), ts_f
+    lookup = ca.interpolant(name + "_lookup", "linear", [np.asarray(ts, float)],
+                            np.asarray(ys, float).ravel(order="C"))
+    t = ca.MX.sym("t")
+    tc = t - period * ca.floor(t / period) if period is not None else t
+    return ca.Function(name, [t], [lookup(ca.fmin(ca.fmax(tc, float(ts[0])), float(ts[-1])))])
+
+
 def _roa_margin(sys: CompiledSystem, setpoint: ca.Function, W: np.ndarray, radius: float, ident: str) -> ca.Function:
     """(x, t) -> r - ||x - x*(t)||_W, positive inside E; wrapped states measured the short way round."""
+    if not setpoint.is_a("SXFunction"):  # a table lookup: an MX Function
+        x, t = ca.MX.sym("x", sys.nx), ca.MX.sym("t")
+        dx = sys.wrapped_error(x - setpoint(t))
+        margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
+        return ca.Function(f"roa_{ident}", [x, t], [margin], ["x", "t"], ["margin"])
     t = ca.SX.sym("t")
     dx = sys.wrapped_error(sys.x - setpoint(t))
     margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))

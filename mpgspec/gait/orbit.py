@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ..compile.primitive import _jump, _scheduled_mode, saturate
+from ..compile.primitive import _jump, saturate, scheduled_mode
 from ..compile.rigidbody.symmetry import generators, lift_function, reduce_function
 from ..compile.rigidbody.trot import gains_of, nominal_geometry, trot_torque
 from ..oracle.integrator import compile_cached
@@ -66,8 +66,7 @@ class StrideMap:
         feet = tuple(sys.model.contact_frames)
         schedule = [(u, tuple(f)) for u, f in g.schedule(feet)]
         t = ca.SX.sym("t")
-        tc = t - g.period * ca.floor(t / g.period)
-        mode = _scheduled_mode(schedule, feet, tc)
+        mode = scheduled_mode(schedule, feet, t, g.period)
         loop = sys.scheduled_loop(mode)
         inertia, offsets = nominal_geometry(sys, dict(controller.pose))
         u = saturate(trot_torque(sys, g, t, mode, inertia, offsets), sys.u_lo, sys.u_hi)
@@ -77,9 +76,7 @@ class StrideMap:
         lam = ca.vertcat(*[loop.env[f"{ft}_f{a}"] for ft in feet for a in "xyz"])
         fz = ca.vertcat(*[sys.extra_env[f"{ft}_z"] for ft in feet])
         self.aux = ca.Function("aux", [x, t, c], [u, ca.substitute(lam, sys.u, u), ca.vertcat(*mode.values()), fz])
-        tj = ca.SX.sym("tj")
-        tcj = tj - g.period * ca.floor(tj / g.period)
-        jump = _jump(None, sys, tcj, tj, schedule, _scheduled_mode(schedule, feet, tcj), g.period)
+        jump = _jump(None, sys, ca.SX.sym("tj"), schedule, g.period)
         h = self.dt
         z = ca.MX.sym("z", sys.nx + 2)  # [x; t; c]: the RK4 stages call f, so its code is generated once
         xm, tm, cm = z[:sys.nx], z[sys.nx], z[sys.nx + 1]
@@ -111,11 +108,13 @@ class StrideMap:
         """States at every step of one stride, with the torques, held-foot forces and foot heights."""
         z = np.concatenate([x0, [0.0, command]])
         X, stats = [x0.copy()], {"peak_torque": 0.0, "least_normal_force": np.inf, "least_cone_margin": np.inf,
-                                 "largest_touchdown_gap": 0.0}
+                                 "largest_touchdown_gap": 0.0, "least_swing_foot_height": np.inf}
         mu = float(self.sys.friction)
         for k in range(self.steps):
             u, lam, held, fz = (np.array(v, float).ravel() for v in self.aux(z[:-2], k * self.dt, command))
             stats["peak_torque"] = max(stats["peak_torque"], float(np.abs(u).max()))
+            if (held < 0.5).any():
+                stats["least_swing_foot_height"] = min(stats["least_swing_foot_height"], float(fz[held < 0.5].min()))
             for i in np.flatnonzero(held > 0.5):
                 fx, fy, fzz = lam[3 * i:3 * i + 3]
                 stats["least_normal_force"] = min(stats["least_normal_force"], float(fzz))
@@ -125,7 +124,8 @@ class StrideMap:
                                                                                      command))
             joined = (held_next > 0.5) & (held < 0.5)
             if joined.any():  # the gap of a foot at its scheduled touchdown (before the impact stops it)
-                stats["largest_touchdown_gap"] = max(stats["largest_touchdown_gap"], float(np.abs(fz_next[joined]).max()))
+                stats["largest_touchdown_gap"] = max(stats["largest_touchdown_gap"], float(fz_next[joined].max()))
+                stats["least_swing_foot_height"] = min(stats["least_swing_foot_height"], float(fz_next[joined].min()))
             X.append(z[:-2].copy())
         t = np.arange(self.steps + 1) * self.dt
         return t, np.array(X).T, stats
@@ -146,7 +146,10 @@ def find_orbit(sm: StrideMap, x_stand: np.ndarray, speed: float, tol: float = 1e
     red = lambda x: np.array(sm.reduce(x), float).ravel()  # noqa: E731
     lift = lambda z: np.array(sm.lift(z), float).ravel()  # noqa: E731
     c = float(speed)
-    z = red(sm.run(lift(red(x_stand)), c, warmup))
+    z0 = red(x_stand)
+    z = red(sm.run(lift(z0), c, warmup))  # strides toward the orbit when it attracts ...
+    if not np.isfinite(z).all() or np.abs(z - z0).max() > 1.0:
+        z = z0  # ... else Newton's method from the stance, which finds unstable orbits as well
     nz = z.size
     status, it, res = "max_iter", 0, np.inf
     for it in range(1, max_iter + 1):
@@ -171,9 +174,13 @@ def find_orbit(sm: StrideMap, x_stand: np.ndarray, speed: float, tol: float = 1e
         cp, cm = XT[:, 2 * nz], XT[:, 2 * nz + 1]
         Jc = np.concatenate([(red(cp) - red(cm)) / (2 * FD), [(cp[0] - cm[0]) / (2 * FD) / T]])
         J = np.hstack([Jz, Jc[:, None]])
-        step = np.linalg.solve(J, -F)
+        step = np.linalg.lstsq(J, -F, rcond=None)[0]
         z, c = z + step[:nz], c + step[nz]
     x0 = lift(z)
+    if status != "converged":
+        nan = np.full(nz, np.nan)
+        return Orbit(speed, c, T, sm.dt, np.zeros(1), x0[:, None], status, res, it, nan, {}, {},
+                     time.perf_counter() - t0)
     # the reduced monodromy and the neutral multipliers along the symmetry's generators
     M = _monodromy(sm, x0, c, red, lift, z)
     mu = np.linalg.eigvals(M)

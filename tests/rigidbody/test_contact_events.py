@@ -19,7 +19,7 @@ def drop_spec(tmp_path_factory):
     shutil.copytree(SPEC, d)
     p = (d / "project.yaml").read_text()
     p = p.replace("  friction: 0.6\n", "  friction: 0.6\n  contact_events: true\n")
-    p = p.replace("  - primitives/stand.yaml\n", "")
+    p = p.replace("  - primitives/stand.yaml\n", "").replace("  - primitives/walk.yaml\n", "")
     p = p[: p.index("assertions:")]
     (d / "project.yaml").write_text(p)
     lie = (d / "primitives" / "lie.yaml").read_text()
@@ -75,7 +75,7 @@ def test_contact_schedule_sets_the_flags_by_the_clock(tmp_path):
     shutil.copytree(SPEC, d)
     p = (d / "project.yaml").read_text()
     p = p.replace("  friction: 0.6\n", "  friction: 0.6\n  contact_events: true\n")
-    p = p.replace("  - primitives/stand.yaml\n", "")
+    p = p.replace("  - primitives/stand.yaml\n", "").replace("  - primitives/walk.yaml\n", "")
     (d / "project.yaml").write_text(p[: p.index("assertions:")])
     lie = (d / "primitives" / "lie.yaml").read_text()
     lie = lie.replace("roa:\n", "contact_schedule:\n  - {until: 0.2, feet: [FL_foot, FR_foot, RL_foot, RR_foot]}\n"

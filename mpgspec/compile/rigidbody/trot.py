@@ -52,8 +52,8 @@ class TrotGains:
     d_tilt: float = 30.0  # roll/pitch damping (1/s)
     d_yaw: float = 10.0  # yaw-rate damping (1/s)
     raibert: float = 0.08  # placement gain on the velocity error (s)
-    kp_swing: float = 3000.0
-    kd_swing: float = 60.0
+    kp_swing: float = 12000.0
+    kd_swing: float = 200.0
     f_min: float = 10.0  # least normal force asked of a stance foot (N)
     regularization: float = 1e-4
     moment_weight: float = 10.0
