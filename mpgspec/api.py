@@ -1,7 +1,13 @@
 """Python API: everything the CLI does, callable from a notebook.
 
-    result = mpgspec.api.verify(["specs/"], out_dir="reports")
-    result.exit_code, result.projects[0].report
+    from mpgspec import api
+    res = api.verify("specs/pendulum")            # nothing written unless out_dir is given
+    p = res["pendulum"]                           # or res.projects[0]
+    p.status, p.report                            # 'pass' and the report dict (as report.json)
+    p.plan("Hang", "Balance")                     # the planner's shortest sequence, hop by hop
+    p.simulate("graph")                           # the goal sequence through the graph
+    p.graph                                       # networkx graph the planner searches
+    api.load_report("reports/pendulum")           # the same from what `mpgspec verify` wrote
 """
 from __future__ import annotations
 
@@ -27,15 +33,25 @@ from .oracle.oracle import CapabilityError, require_capabilities
 from .oracle.registry import get_backend
 from .plan.planner import lookup_table, shortest_plan
 from .report.build import build_report
+from .robust.check import check_uncertainty
+from .robust.graph import RobustResult, robust_stage
 from .settings import OracleSettings
 from .spec.loader import ProjectSpec, discover, load_project
+
+__all__ = ["verify", "load_report", "ProjectResult", "VerifyResult", "run_project", "compile_stage", "graph_stage",
+           "check_stage", "build", "settings_for", "compile_project", "load_project", "discover",
+           "CompiledProject", "VerifiedGraph", "Checks", "EXIT_OK", "EXIT_CHECK_FAILED", "EXIT_USAGE"]
 
 Progress = Callable[[str, str, int, int], None]
 
 
 @dataclass
 class ProjectResult:
-    """Outcome of one project: 'pass', 'fail' or 'error', with its report and written files."""
+    """Outcome of one project: 'pass', 'fail' or 'error', with its report and written files.
+
+    graph: the networkx DiGraph the planner searches (edges it may take; attributes `class`,
+    `duration`, `peak_input`, `hops`); mpg: the full MotionPrimitiveGraph with every oracle grid
+    (None for a result read back by load_report)."""
 
     path: Path
     name: str = ""
@@ -43,7 +59,83 @@ class ProjectResult:
     report: dict | None = None
     errors: list[dict] = field(default_factory=list)
     files: dict[str, str] = field(default_factory=dict)
-    graph: MotionPrimitiveGraph | None = None
+    mpg: MotionPrimitiveGraph | None = None
+    compiled: "CompiledProject | None" = field(default=None, repr=False)
+
+    @property
+    def graph(self):
+        """The planner's graph: the edges plans and the lookup table may use, edge class as `class`."""
+        if self.mpg is not None:
+            from .plan.planner import plan_graph
+
+            G = plan_graph(self.mpg).copy()
+            for _, _, d in G.edges(data=True):
+                d["class"] = d.pop("cls", d.get("class"))
+            for _, d in G.nodes(data=True):
+                if "cls" in d:
+                    d["class"] = d.pop("cls")
+            return G
+        if self.report is not None:
+            from .report.read import ReportGraph
+
+            return ReportGraph(self.report).planner_graph()
+        return None
+
+    def plan(self, source: str, goal: str, weight: str = "duration") -> dict:
+        """The shortest safe sequence from source to goal: path, cost and each hop with its class and
+        the t_A windows to wait for (Class 2); path None when the goal cannot be reached."""
+        from .report.read import ReportGraph, hops, shortest_path
+
+        G = self.graph
+        if G is None:
+            raise UsageError(f"{self.path}: no verified graph ({'; '.join(e.get('message', '') for e in self.errors)})")
+        for n in (source, goal):
+            if n not in G:
+                raise UsageError(f"unknown primitive {n!r}; expected one of {', '.join(G.nodes)}")
+        path, cost = shortest_path(G, source, goal, weight)
+        edge = self.mpg.edge if self.mpg is not None else ReportGraph(self.report).edge
+        return {"from": source, "to": goal, "weight": weight, "path": path, "cost": cost, "hops": hops(edge, path)}
+
+    def simulate(self, mode: str = "graph"):
+        """Run the project's goal sequence ('naive' or 'graph'); returns the SequenceRun (its
+        to_dict() is what the report stores)."""
+        if mode not in ("naive", "graph"):
+            raise UsageError(f"mode must be 'naive' or 'graph', not {mode!r}")
+        cp = self.compiled
+        if cp is None:
+            spec = load_project(self.path)
+            cp = compile_stage(spec, settings_for(spec))
+            self.compiled = cp
+        if cp.spec.project.sequence is None:
+            raise UsageError(f"{cp.spec.path}: the project has no 'sequence'")
+        if self.mpg is not None:
+            g, table = self.mpg, lookup_table(self.mpg, "duration")
+        else:
+            from .report.read import ReportGraph
+
+            g, table = ReportGraph(self.report), self.report["lookup_table"]["next"]
+        return simulate_sequence(cp.prims, g, table, cp.spec.project.sequence, cp.settings, mode)
+
+    def _repr_html_(self) -> str:
+        from html import escape
+
+        if self.report is None:
+            errs = "".join(f"<li>{escape(str(e.get('text', e.get('message', ''))))}</li>" for e in self.errors)
+            return f"<div><b>{escape(str(self.path))}</b>: ERROR<ul>{errs}</ul></div>"
+        r = self.report
+        warns = sum(c["status"] == "warn" for c in r.get("assumptions", []))
+        head = (f"<b>{escape(self.name)}</b>: <b>{escape(self.status.upper())}</b>"
+                f"{f' with {warns} warning' + ('s' if warns != 1 else '') if warns else ''} · "
+                f"{len(r['primitives'])} primitives · {len(r['edges'])} edges · "
+                f"{r.get('timing', {}).get('oracle_calls', '?')} oracle calls")
+        rows = "".join(f"<tr><td>{escape(e['from'])}</td><td>{escape(e['to'])}</td><td>{e['class']}</td>"
+                       f"<td>{'' if e.get('duration') is None else format(e['duration'], '.3g')}</td>"
+                       f"<td>{'yes' if e.get('usable', True) else 'no'}</td></tr>" for e in r["edges"])
+        bad = "".join(f"<li>{escape(a['status'].upper())} {escape(a['description'])}: {escape(a['message'])}</li>"
+                      for a in r["assertions"] if a["status"] != "pass")
+        files = f"<div>report: {escape(self.files['html'])}</div>" if self.files.get("html") else ""
+        return (f"<div>{head}{f'<ul>{bad}</ul>' if bad else ''}<table><tr><th>from</th><th>to</th><th>class</th>"
+                f"<th>duration (s)</th><th>planner</th></tr>{rows}</table>{files}</div>")
 
 
 @dataclass
@@ -54,6 +146,32 @@ class VerifyResult:
     def exit_code(self) -> int:
         st = {p.status for p in self.projects}
         return EXIT_USAGE if "error" in st else EXIT_CHECK_FAILED if "fail" in st else EXIT_OK
+
+    def __getitem__(self, key: int | str) -> ProjectResult:
+        """A project by position or by name."""
+        if isinstance(key, str):
+            for p in self.projects:
+                if p.name == key:
+                    return p
+            raise KeyError(key)
+        return self.projects[key]
+
+    def _repr_html_(self) -> str:
+        return "".join(p._repr_html_() for p in self.projects)
+
+
+def load_report(path) -> ProjectResult:
+    """A verified project read back from its report.json (or the folder holding it): report, status,
+    the planner's graph, plan(); simulate() compiles the project from the spec path in the report."""
+    from .report.read import load_report as read
+
+    p = Path(path)
+    report = read(p)
+    name = report.get("project", {}).get("name", "")
+    html = (p if p.is_dir() else p.parent) / "report.html"
+    return ProjectResult(Path(report.get("project", {}).get("path", "")), name, report.get("status", "error"), report,
+                         files={"json": str(p / "report.json" if p.is_dir() else p),
+                                **({"html": str(html)} if html.is_file() else {})})
 
 
 def settings_for(spec: ProjectSpec, overrides: dict | None = None) -> OracleSettings:
@@ -156,6 +274,7 @@ class Checks:
     assumptions: list
     status: str
     timing: dict
+    robust: RobustResult | None = None  # the robust graph when the project declares `uncertainty`
 
 
 def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
@@ -163,6 +282,9 @@ def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progres
     """Closed loops of every primitive, refused early when the backend cannot run them; E sized
     (memo: mpgspec.oracle.cache.Memo, to reuse the sizing of unchanged primitives)."""
     t0 = time.perf_counter()
+    check_uncertainty(spec)
+    if progress:
+        progress(spec.name, "compile (closed loops as CasADi functions)", 0, len(spec.primitives))
     prims = compile_project(spec)
     _check_capabilities(spec, settings, prims)
     t1 = time.perf_counter()
@@ -181,10 +303,14 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
     before = dict(getattr(executor, "stats", {}))
     t0 = time.perf_counter()
+    if progress:
+        progress(spec.name, "oracle (JIT-compiling the rollouts unless cached)", 0, 0)
     g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, executor)
     t1 = time.perf_counter()
     names = list(prims)
     pairs = [(a, b) for a in names for b in names if a != b]
+    if progress:
+        progress(spec.name, "traces of the edges and failed pairs", 0, 0)
     edges, failures = edge_traces(g, prims, settings), failure_traces(g, prims, settings, pairs)
     calls = sum(len(tr.t_A) * len(tr.t_B) for tr in g.transitions.values())
     timing = {"graph_s": t1 - t0, "oracle_calls": calls, "oracle_calls_per_s": calls / max(t1 - t0, 1e-9),
@@ -209,11 +335,19 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     checks = evaluate_assertions(spec.project.assertions, g, runs)
     checks += roa_requirements(spec, cp.roa, start=len(checks))
     t1 = time.perf_counter()
+    robust = robust_stage(cp, vg, progress, memo)
+    if robust is not None:
+        for a in robust.assertions:
+            a.index = len(checks)
+            checks.append(a)
+    t2 = time.perf_counter()
+    if progress:
+        progress(spec.name, "assumptions (Definition 1)", 0, len(prims))
     assumed = check_assumptions(prims, spec.project.assumptions, memo)
     st = [c.status for c in checks] + [a.status for a in assumed]
     status = "error" if "error" in st else "fail" if "fail" in st else "pass"
     return Checks(plans, table, runs, checks, assumed, status,
-                  {"plan_execute_s": t1 - t0, "assumptions_s": time.perf_counter() - t1})
+                  {"plan_execute_s": t1 - t0, "robust_s": t2 - t1, "assumptions_s": time.perf_counter() - t2}, robust)
 
 
 def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
@@ -279,6 +413,8 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
     """
     res = ProjectResult(Path(path))
     try:
+        if progress:
+            progress(Path(path).parent.name or str(path), "load", 0, 1)
         spec = load_project(path, allow_paths=allow_paths)
         res.name = spec.name
         settings = settings_for(spec, overrides)
@@ -290,7 +426,7 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
         res.errors = [e.to_dict() | {"text": e.format()} if isinstance(e, SpecError) else
                       {"code": e.code, "message": str(e), "text": f"{path}: {e.code} {e}"}]
         return res
-    res.graph = vg.graph
+    res.mpg = vg.graph
     try:
         return _finish_project(res, cp, vg, out_dir, formats, progress, executor)
     except MpgError as err:  # e.g. the reports could not be written: this project's error
@@ -304,6 +440,48 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
         return res
 
 
+def _digest(path) -> str | None:
+    from .spec.digest import spec_digest
+
+    try:
+        return spec_digest(path)
+    except OSError:
+        return None
+
+
+def _where(loc) -> dict | None:
+    if loc is None or not getattr(loc, "line", 0):
+        return None
+    return {"file": str(loc.file), "line": int(loc.line), "column": int(loc.column or 0)}
+
+
+def _locate_checks(spec: ProjectSpec, report: dict) -> None:
+    """The spec position of each assertion and assumption check (for CI annotations), as `location`."""
+    n = len(spec.project.assertions)
+
+    def prim(name, *key):
+        try:
+            return spec.primitive(name).locate(key)
+        except (KeyError, LookupError, TypeError, ValueError):
+            return None
+
+    for a in report["assertions"]:
+        loc = None
+        try:
+            if a["index"] < n:
+                loc = spec.locate(("assertions", a["index"]))
+            elif a["kind"] == "roa_level":
+                loc = prim(a["description"].removeprefix("E of ").rsplit(" is ", 1)[0], "roa")
+        except (KeyError, LookupError, TypeError, ValueError):
+            loc = None
+        if (w := _where(loc)) is not None:
+            a["location"] = w
+    for c in report.get("assumptions", []):
+        w = _where(prim(c["primitive"], "roa") if c["name"] == "roa_in_safe_set" else prim(c["primitive"]))
+        if w is not None:
+            c["location"] = w
+
+
 def _finish_project(res: ProjectResult, cp: CompiledProject, vg: VerifiedGraph, out_dir, formats,
                     progress: Progress | None, executor: Executor | None = None):
     """Checks and reports of a project whose graph is built."""
@@ -312,8 +490,10 @@ def _finish_project(res: ProjectResult, cp: CompiledProject, vg: VerifiedGraph, 
     report = build_report(spec=cp.spec, prims=cp.prims, graph=vg.graph, settings=cp.settings, plans=ch.plans,
                           table=ch.table, assertions=ch.assertions, runs=ch.runs, failures=vg.failure_traces,
                           timing=timing, status=ch.status, assumptions=ch.assumptions, roa=cp.roa,
-                          edge_series=vg.edge_traces)
-    res.status, res.report = ch.status, report
+                          edge_series=vg.edge_traces, digest=_digest(cp.spec.path),
+                          robust=ch.robust.to_dict() if ch.robust is not None else None)
+    _locate_checks(cp.spec, report)
+    res.status, res.report, res.compiled = ch.status, report, cp
     if out_dir is not None:
         from .report.files import write_reports
 
@@ -321,7 +501,7 @@ def _finish_project(res: ProjectResult, cp: CompiledProject, vg: VerifiedGraph, 
     return res
 
 
-def verify(paths, out_dir: str | Path | None = "reports", overrides: dict | None = None,
+def verify(paths, out_dir: str | Path | None = None, overrides: dict | None = None,
            progress: Progress | None = None, executor: Executor | None = None,
            allow_paths=None) -> VerifyResult:
     """Verify every project found under `paths`; reports go to out_dir (None: write nothing).

@@ -3,7 +3,10 @@
     mpgspec verify PATH [--out reports] [--format human|json|github]
     mpgspec plan PROJECT --from A --to B [--weight duration|peak_input|hops]
     mpgspec simulate PROJECT [--mode naive|graph|both]
-    mpgspec schema [--kind project|report]
+    mpgspec schema [--kind project|primitive|system|report]
+
+plan and simulate reuse what verify wrote (reports/<project>/report.json) while it matches the
+spec files, and rebuild otherwise.
 
 Exit codes: 0 all checks pass, 1 a check failed, 2 a spec or usage error.
 """
@@ -15,14 +18,28 @@ import json
 import os
 import signal
 import sys
+import time
+from pathlib import Path
 
-from . import __version__, api
+from . import __version__
 from .streams import stdout_to_stderr
-from .errors import (EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, gh_command,
-                     gh_plain)
+from .errors import (EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, UsageError,
+                     gh_command, gh_plain)
 from .spec.yamlpos import format_context
 
 MARK = {"pass": "PASS", "fail": "FAIL", "error": "ERROR", "warn": "WARN"}
+
+
+class _Api:
+    """mpgspec.api, imported on first use: plan from a verified report needs none of it."""
+
+    def __getattr__(self, name):
+        from . import api as module
+
+        return getattr(module, name)
+
+
+api = _Api()
 JOBS_PER_CORE = 4
 
 
@@ -59,16 +76,16 @@ def _line(text: str, fmt: str) -> str:
 
 
 def _progress(stream, fmt: str = "human"):
-    def cb(project: str, what: str, i: int, n: int):
-        print(_line(f"[{project}] {what} ({i}/{n})", fmt), file=stream, flush=True)
-    return cb
+    """Phases with elapsed time: live on a terminal (human format), plain lines otherwise."""
+    from .progress import Display
+
+    return Display(stream, live=None if fmt == "human" else False, line=lambda text: _line(text, fmt))
 
 
 def _print_errors(errors: list[dict], fmt: str):
     for e in errors:
         if fmt == "github":
-            print(gh_command("error", e.get("text", e.get("message")), file=e.get("file", ""),
-                             line=e.get("line", 0), col=e.get("column", 0), title=e.get("code", "")))
+            print(_annotation("error", e.get("text", e.get("message")), e, e.get("code", "") or None))
             continue
         print(e.get("text", e.get("message")), file=sys.stderr)
         if e.get("line"):
@@ -76,6 +93,57 @@ def _print_errors(errors: list[dict], fmt: str):
                 print(format_context(e["file"], e["line"], column=e.get("column", 0)), file=sys.stderr)
             except OSError:
                 pass
+
+
+def _rel(path) -> str:
+    """A path relative to the working folder when it lies below it (how GitHub names files)."""
+    try:
+        return os.path.relpath(path) if not os.path.relpath(path).startswith("..") else str(path)
+    except (ValueError, OSError):
+        return str(path)
+
+
+def _annotation(kind: str, message, where: dict | None, title: str | None = None, file=None) -> str:
+    """A GitHub workflow command; file, line and col only where they are known (never line=0)."""
+    where = where or {}
+    f = where.get("file") or file
+    line = where.get("line") or None
+    return gh_command(kind, message, file=_rel(f) if f else None, line=line,
+                      col=(where.get("column") or None) if line else None, title=title)
+
+
+def _step_summary(res) -> None:
+    """A Markdown table of the run appended to $GITHUB_STEP_SUMMARY (when set)."""
+    path = os.environ.get("GITHUB_STEP_SUMMARY")
+    if not path:
+        return
+
+    def cell(v) -> str:
+        return str(v).replace("|", "\\|").replace("\n", " ")
+
+    rows = ["| project | result | primitives | edges | oracle calls | assertions | warnings |",
+            "|---|---|---|---|---|---|---|"]
+    for p in res.projects:
+        if p.report is None:
+            why = "; ".join(e.get("message", "") for e in p.errors)[:300]
+            rows.append(f"| {cell(p.name or p.path)} | ERROR | {cell(why)} | | | | |")
+            continue
+        r = p.report
+        a = r.get("assertions", [])
+        warns = sum(c["status"] == "warn" for c in r.get("assumptions", []))
+        failed = [x for x in a if x["status"] != "pass"]
+        rows.append("| " + " | ".join(cell(v) for v in (
+            p.name or p.path, MARK.get(p.status, p.status.upper()), len(r.get("primitives", [])), len(r.get("edges", [])),
+            (r.get("timing") or {}).get("oracle_calls", "–"),
+            f"{len(a) - len(failed)}/{len(a)} pass" + (f" (failed: {'; '.join(x['description'] for x in failed)})"
+                                                        if failed else ""), warns)) + " |")
+        for e in p.errors:  # e.g. the reports could not be written
+            rows.append(f"| {cell(p.name or p.path)} | ERROR | {cell(e.get('message', ''))} | | | | |")
+    try:
+        with open(path, "a", encoding="utf-8") as f:
+            f.write("### mpgspec verify\n\n" + "\n".join(rows) + "\n\n")
+    except OSError as e:
+        print(f"mpgspec: cannot write the step summary {path}: {e}", file=sys.stderr)
 
 
 def _inconclusive(r: dict) -> str:
@@ -105,20 +173,28 @@ def _human(res: api.VerifyResult, fmt: str):
             continue
         r = p.report
         t = r["timing"]
+        total = sum(v for k, v in t.items() if k.endswith("_s") and not k.endswith("per_s")
+                    and isinstance(v, (int, float)))
         out(f"{MARK[p.status]} {p.name}: {len(r['primitives'])} primitives, {len(r['edges'])} edges, "
             f"{t['oracle_calls']} oracle calls (simulated) in {_num(t['graph_s'], '.2f')} s"
-            f"{_inconclusive(r)}{_cached(t)}")
+            f"{_inconclusive(r)}{_cached(t)}; {_num(total, '.1f')} s for the project")
         for e in r["edges"]:
             out(f"    {e['from']} -> {e['to']}  class {e['class']}  duration {_num(e.get('duration') or 0)} s")
         for a in r["assertions"]:
             if fmt == "github" and a["status"] != "pass":
-                print(gh_command("error", f"{a['description']}: {a['message']}", file=p.path,
-                                 title="mpgspec assertion"))
+                print(_annotation("error", f"{a['description']}: {a['message']}", a.get("location"),
+                                  "mpgspec assertion", file=p.path))
             else:
                 out(f"  {MARK[a['status']]:5} {a['description']}: {a['message']}")
         for c in r.get("assumptions", []):
-            if c["status"] != "pass":
-                out(f"  {c['status'].upper():5} assumption {c['name']} of {c['primitive']}: {c['message']}")
+            if c["status"] == "pass":
+                continue
+            text = f"assumption {c['name']} of {c['primitive']}: {c['message']}"
+            if fmt == "github":
+                print(_annotation("warning" if c["status"] == "warn" else "error", text, c.get("location"),
+                                  "mpgspec assumption", file=p.path))
+            else:
+                out(f"  {c['status'].upper():5} {text}")
         for k, path in p.files.items():
             out(f"  wrote {k}: {path}")
         _print_errors(p.errors, fmt)
@@ -127,11 +203,11 @@ def _human(res: api.VerifyResult, fmt: str):
 def _check_jobs(jobs: int) -> None:
     cores = os.cpu_count() or 1
     if not 1 <= jobs <= JOBS_PER_CORE * cores:
-        raise api.UsageError(f"--jobs must be between 1 and {JOBS_PER_CORE * cores} "
+        raise UsageError(f"--jobs must be between 1 and {JOBS_PER_CORE * cores} "
                              f"({JOBS_PER_CORE} per core, {cores} cores), not {jobs}")
 
 
-def _write(res: api.VerifyResult, out_dir: str) -> None:
+def _write(res: api.VerifyResult, out_dir: str, progress=None) -> None:
     """Each project's report set into out_dir/<project>/ as a unit; a failure to write makes the
     project an error (exit 2) with the reason, never a PASS."""
     from .report.files import ReportWriteError, write_project_reports
@@ -139,6 +215,8 @@ def _write(res: api.VerifyResult, out_dir: str) -> None:
     for p in res.projects:
         if p.report is None:
             continue
+        if progress is not None:
+            progress(p.name, "report (JSON, HTML, graph files)", 0, 1)
         try:
             p.files = write_project_reports(p.report, out_dir, p.report["project"]["name"])
         except ReportWriteError as e:
@@ -156,7 +234,7 @@ def _json_doc(res: api.VerifyResult | None, errors=(), code: int = EXIT_USAGE) -
 
     doc = {"exit_code": res.exit_code if res is not None else code, "projects": [] if res is None else [
         {"path": str(p.path), "name": p.name, "status": p.status, "errors": p.errors, "files": p.files,
-         "assertions": p.report["assertions"] if p.report else []} for p in res.projects]}
+         "assertions": p.report["assertions"] if p.report else [], "report": p.report} for p in res.projects]}
     if errors:
         doc["errors"] = list(errors)
     return json.dumps(finite_json(doc), indent=1, allow_nan=False, default=str)
@@ -168,19 +246,30 @@ def cmd_verify(args) -> int:
         overrides["method"] = args.method
     from .oracle.executors import make_executor
 
+    from .progress import summary
+
     _check_jobs(args.jobs)
-    with stdout_to_stderr():  # solver logs and prints of the pipeline go to stderr
-        executor = make_executor(args.jobs, args.dask or args.scheduler, cache=not args.no_cache)
-        res = api.verify(args.paths, out_dir=None, overrides=overrides,
-                         progress=None if args.quiet else _progress(sys.stderr, args.format), executor=executor,
-                         allow_paths=args.allow_path or None)
-        if not args.no_write:
-            _write(res, args.out)
+    t0 = time.perf_counter()
+    show = None if args.quiet else _progress(sys.stderr, args.format)
+    try:
+        with stdout_to_stderr():  # solver logs and prints of the pipeline go to stderr
+            executor = make_executor(args.jobs, args.dask or args.scheduler, cache=not args.no_cache)
+            res = api.verify(args.paths, out_dir=None, overrides=overrides, progress=show, executor=executor,
+                             allow_paths=args.allow_path or None)
+            if not args.no_write:
+                _write(res, args.out, show)
+    finally:
+        if show is not None:
+            show.close()
     args.exit_code = res.exit_code
     if args.format == "json":
         print(_json_doc(res))
     else:
         _human(res, args.format)
+        if len(res.projects) > 1 or not args.quiet:
+            print(_line(summary(res.projects, time.perf_counter() - t0), args.format))
+    if args.format == "github":
+        _step_summary(res)
     return res.exit_code
 
 
@@ -194,83 +283,241 @@ def cmd_cache(args) -> int:
     return EXIT_OK
 
 
-def _one_project(path):
-    files = api.discover(path)
+def _load_one(path):
+    """The one project at path (file or folder), loaded but not compiled."""
+    from .spec.loader import discover, load_project
+
+    files = discover(path)
     if len(files) != 1:
-        raise api.UsageError(f"{path}: expected one project, found {len(files)}")
-    spec = api.load_project(files[0])
+        raise UsageError(f"{path}: expected one project, found {len(files)}")
+    return load_project(files[0])
+
+
+def _quick_report(project: str, out: str, rebuild: bool) -> dict | None:
+    """The report `verify` wrote for the project at `project` when it matches the spec files, found
+    without loading the spec (its name is read from project.yaml); None otherwise."""
+    if rebuild:
+        return None
+    from .report.read import report_status
+    from .spec.yamlpos import parse_yaml
+
+    f = Path(project)
+    f = f / "project.yaml" if f.is_dir() else f
+    try:
+        data = parse_yaml(f.read_text(encoding="utf-8"), str(f))[0] if f.is_file() else None
+    except (OSError, ValueError, MpgError):
+        return None
+    name = data.get("project") if isinstance(data, dict) else None
+    if not isinstance(name, str) or not name.strip() or Path(name).name != name or name.startswith("."):
+        return None
+    return report_status(Path(out) / name / "report.json", f)[0]
+
+
+def _verified(spec, out: str, rebuild: bool, quiet: bool = False):
+    """The project's report from `verify` when it matches the spec files, else None (saying why
+    on stderr, unless quiet)."""
+    from .report.read import report_status
+
+    if rebuild:
+        return None
+    report, why = report_status(Path(out) / spec.name / "report.json", spec.path)
+    if report is None and not quiet:
+        print(f"mpgspec: {why}; rebuilding the graph (run `mpgspec verify` to store it)", file=sys.stderr)
+    return report
+
+
+def _build(spec):
     settings = api.settings_for(spec)
-    cp, vg = api.build(spec, settings)
-    return spec, settings, cp.prims, vg.graph
+    executor = _cached_executor()
+    cp, vg = api.build(spec, settings, executor=executor)
+    return settings, cp.prims, vg.graph
+
+
+def _build_robust(spec):
+    """The robust graph of a project that declares `uncertainty`."""
+    if spec.project.uncertainty is None:
+        raise UsageError(f"{spec.name} declares no `uncertainty`: there is no robust graph to plan on")
+    settings = api.settings_for(spec)
+    cp, vg = api.build(spec, settings, executor=_cached_executor())
+    return api.robust_stage(cp, vg).graph
+
+
+def _cached_executor():
+    from .oracle.executors import make_executor
+
+    return make_executor(1, None, cache=True)
+
+
+def _window_text(ws) -> str:
+    return ", ".join(f"[{_num(a, '.4g')}, {_num(b, '.4g')}]" for a, b in ws)
 
 
 def cmd_plan(args) -> int:
-    from .plan.planner import shortest_plan
+    from .report.read import ReportGraph, hops, shortest_path
 
-    spec, _, prims, g = _one_project(args.project)
+    report = _quick_report(args.project, args.out, args.rebuild)
+    spec = None if report is not None else _load_one(args.project)
+    name = report["project"]["name"] if report is not None else spec.name
+    names = [p["name"] for p in report["primitives"]] if report is not None else [p.name for p in spec.primitives]
     for n in (args.source, args.goal):
-        if n not in prims:
-            raise api.UsageError(f"unknown primitive {n!r}; expected one of {', '.join(prims)}")
-    plan = shortest_plan(g, args.source, args.goal, args.weight)
-    args.exit_code = EXIT_OK if plan.found else EXIT_CHECK_FAILED
+        if n not in names:
+            raise UsageError(f"unknown primitive {n!r}; expected one of {', '.join(names)}")
+    if report is None:
+        report = _verified(spec, args.out, args.rebuild, quiet=args.format == "json")
+    if report is not None:
+        if args.robust:
+            from .robust.plan import robust_report_graph
+
+            g = robust_report_graph(report)
+        else:
+            g = ReportGraph(report)
+        path, cost = shortest_path(g.planner_graph(), args.source, args.goal, args.weight)
+        edge, source = g.edge, str(Path(args.out) / name / "report.json")
+    else:
+        from .plan.planner import shortest_plan
+
+        with stdout_to_stderr():
+            if args.robust:
+                graph = _build_robust(spec)
+            else:
+                _, _, graph = _build(spec)
+        plan = shortest_plan(graph, args.source, args.goal, args.weight)
+        path, cost, edge, source = plan.path, plan.cost, graph.edge, "rebuilt"
+    steps = hops(edge, path)
+    found = path is not None
+    args.exit_code = EXIT_OK if found else EXIT_CHECK_FAILED
     if args.format == "json":
-        print(json.dumps(plan.to_dict(), indent=1))
-    elif plan.found:
-        print(" -> ".join(plan.path) + f"   ({args.weight} {plan.cost:.4g})")
+        print(json.dumps({"from": args.source, "to": args.goal, "weight": args.weight, "path": path, "cost": cost,
+                          "hops": steps, "source": source}, indent=1))
+    elif found:
+        print(" -> ".join(path) + f"   ({args.weight} {cost:.4g})")
+        for h in steps:
+            wait = (f"wait until t_A of {h['from']} is in {_window_text(h['windows'])} s" if h["class"] == 2
+                    else "switch at any t_A")
+            print(f"  {h['from']} -> {h['to']}: class {h['class']}, {_num(h['duration'], '.3g')} s; {wait}")
     else:
         print(f"no safe transition sequence from {args.source} to {args.goal}")
-    return EXIT_OK if plan.found else EXIT_CHECK_FAILED
+    return args.exit_code
+
+
+def _expected(spec) -> dict[str, bool]:
+    """mode -> the simulation_safe expectation of the project (safe when not asserted)."""
+    out = {}
+    for a in spec.project.assertions:
+        mode = getattr(a, "simulation_safe", None)
+        if isinstance(mode, str):
+            out[mode] = bool(getattr(a, "expect", True))
+    return out
 
 
 def cmd_simulate(args) -> int:
     from .execute.sequence import simulate_sequence
-    from .plan.planner import lookup_table
 
-    spec, settings, prims, g = _one_project(args.project)
+    spec = _load_one(args.project)
     if spec.project.sequence is None:
-        raise api.UsageError(f"{spec.path}: the project has no 'sequence'")
-    table = lookup_table(g)
-    modes = ("naive", "graph") if args.mode == "both" else (args.mode,)
-    runs = {m: simulate_sequence(prims, g, table, spec.project.sequence, settings, m) for m in modes}
-    args.exit_code = EXIT_OK if all(r.safe for r in runs.values()) else EXIT_CHECK_FAILED
+        raise UsageError(f"{spec.path}: the project has no 'sequence'")
+    report = _verified(spec, args.out, args.rebuild, quiet=args.format == "json")
+    with stdout_to_stderr():
+        if report is not None:
+            from .report.read import ReportGraph
+
+            settings = api.settings_for(spec)
+            cp = api.compile_stage(spec, settings, memo=getattr(_cached_executor(), "memo", None))
+            prims, g, table = cp.prims, ReportGraph(report), report["lookup_table"]["next"]
+        else:
+            from .plan.planner import lookup_table
+
+            settings, prims, g = _build(spec)
+            table = lookup_table(g)
+        modes = ("naive", "graph") if args.mode == "both" else (args.mode,)
+        runs = {m: simulate_sequence(prims, g, table, spec.project.sequence, settings, m) for m in modes}
+    expect = _expected(spec)
+    ok = {m: r.safe == expect.get(m, True) for m, r in runs.items()}
+    args.exit_code = EXIT_OK if all(ok.values()) else EXIT_CHECK_FAILED
     if args.format == "json":
-        print(json.dumps({m: {k: v for k, v in r.to_dict().items() if k in ("mode", "safe", "switches", "violations",
-                                                                             "final_primitive", "failed")}
-                          for m, r in runs.items()}, indent=1))
+        print(json.dumps({m: {**{k: v for k, v in r.to_dict().items() if k in (
+            "mode", "safe", "switches", "violations", "final_primitive", "failed")},
+            "expected_safe": expect.get(m, True), "as_expected": ok[m]} for m, r in runs.items()}, indent=1))
     else:
         for m, r in runs.items():
-            print(f"{m}: {'safe' if r.safe else 'UNSAFE'}; ends in {r.final_primitive}")
-            for s in r.switches:
-                print(f"    t = {s['t']:7.3f} s  -> {s['to']} (clock {s['clock']:.3f}; {s['reason']})")
+            note = "as expected" if ok[m] else f"NOT as expected: the project expects it to be " \
+                                                f"{'safe' if expect.get(m, True) else 'unsafe'}"
+            print(f"{m}: {'safe' if r.safe else 'UNSAFE'}; ends in {r.final_primitive} ({note})")
+            for sw in r.switches:
+                print(f"    t = {sw['t']:7.3f} s  -> {sw['to']} (clock {sw['clock']:.3f}; {sw['reason']})")
             if r.violations:
                 v = r.violations[0]
                 print(f"    first violation: {v['h']} of {v['primitive']} at t = {v['t']:.3f} s ({v['value']:.3g})")
-    return EXIT_OK if all(r.safe for r in runs.values()) else EXIT_CHECK_FAILED
+    return args.exit_code
 
 
 def cmd_schema(args) -> int:
     if args.kind == "report":
-        from importlib.resources import files
+        from .report.schema import schema_path
 
-        print(files("mpgspec.report").joinpath("schema/report-v1.json").read_text())
+        print(schema_path().read_text(encoding="utf-8"), end="")
     else:
-        from .spec.models import Project
+        from .spec.schema import spec_schema
 
-        print(json.dumps(Project.model_json_schema(by_alias=True), indent=1))
+        print(json.dumps(spec_schema(args.kind), indent=1, ensure_ascii=False))
     return EXIT_OK
 
 
+def cmd_gait(args) -> int:
+    """Generate (or with --check, compare) the gait tables of a gait file."""
+    from .compile.system import compile_system
+    from .gait.library import compare, generate, load_gait_file, write
+    from .spec.loader import load_project
+
+    path = Path(args.file)
+    say = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
+    tables = generate(path, progress=say)
+    gf = load_gait_file(path)
+    names = compile_system(load_project(path.parent / gf.project)).state_names
+    bad = [t.node for t in tables if t.orbit.status != "converged" or not t.orbit.spectral_radius < 1]
+    if args.check:
+        problems = compare(tables, names)
+        for p_ in problems:
+            print(f"stale: {p_}")
+        if not problems:
+            print(f"{len(tables)} gait tables match their regeneration")
+        return EXIT_CHECK_FAILED if problems or bad else EXIT_OK
+    write(tables, names)
+    for t in tables:
+        print(f"wrote {t.path}")
+    for n in bad:
+        print(f"{n}: no stable orbit (see the table's header)")
+    return EXIT_CHECK_FAILED if bad else EXIT_OK
+
+
+def _sub(sub, name: str, help: str, examples: str):
+    return sub.add_parser(name, help=help, description=help[0].upper() + help[1:] + ".",
+                          epilog="examples:\n" + examples, formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
 def parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="mpgspec", description="Verify safe transitions between motion primitives.")
+    ap = argparse.ArgumentParser(
+        prog="mpgspec", description="Verify safe transitions between motion primitives.",
+        epilog="exit codes: 0 every assertion holds, 1 an assertion failed, 2 a spec or usage error\n"
+               "run `mpgspec COMMAND --help` for a command's options and examples",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--version", action="version", version=f"mpgspec {__version__}")
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    v = sub.add_parser("verify", help="build the motion primitive graph, check assertions, write reports")
-    v.add_argument("paths", nargs="+", help="a project.yaml, a project folder, or a folder of projects")
-    v.add_argument("--out", default="reports", help="report folder (default: reports)")
+    sub = ap.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+    v = _sub(sub, "verify", "build the motion primitive graph, check assertions, write reports",
+             "  mpgspec verify specs/                      every project below specs/\n"
+             "  mpgspec verify specs/pendulum -j 2         oracle calls in 2 processes\n"
+             "  mpgspec verify specs/ --format github      annotations and a step summary in GitHub Actions\n"
+             "  mpgspec verify specs/cart --format json --no-write > result.json")
+    v.add_argument("paths", nargs="+", metavar="PATH", help="a project.yaml, a project folder, or a folder of projects")
+    v.add_argument("--out", default="reports", metavar="DIR",
+                   help="report folder; each project gets DIR/<project>/ (default: reports)")
     v.add_argument("--no-write", action="store_true", help="write no report files")
-    v.add_argument("--format", choices=("human", "json", "github"), default="human")
-    v.add_argument("--method", help="oracle backend (default: the project's, usually rk4)")
-    v.add_argument("-j", "--jobs", type=int, default=1, help="local worker processes for oracle calls (default 1)")
+    v.add_argument("--format", choices=("human", "json", "github"), default="human",
+                   help="human: text (default); json: the whole result on stdout; github: workflow annotations "
+                        "at the spec lines, plus a table in $GITHUB_STEP_SUMMARY when it is set")
+    v.add_argument("--method", metavar="NAME", help="oracle backend, e.g. rk4 or scipy (default: the project's)")
+    v.add_argument("-j", "--jobs", type=int, default=1, metavar="N",
+                   help="local worker processes for oracle calls (default 1)")
     v.add_argument("--dask", metavar="local|ADDRESS",
                    help="run oracle calls on Dask: 'local' starts a LocalCluster of max(jobs, 2) workers, "
                         "or the address of a running scheduler (needs the 'dask' extra)")
@@ -279,26 +526,57 @@ def parser() -> argparse.ArgumentParser:
                    help="a folder outside the project that specs may name files in (repeatable)")
     v.add_argument("--no-cache", action="store_true",
                    help="run every oracle call, ignoring and not storing results in the cache")
-    v.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    v.add_argument("-q", "--quiet", action="store_true", help="no progress display")
     v.set_defaults(fn=cmd_verify)
-    p = sub.add_parser("plan", help="shortest safe transition sequence between two primitives")
-    p.add_argument("project")
-    p.add_argument("--from", dest="source", required=True)
-    p.add_argument("--to", dest="goal", required=True)
-    p.add_argument("--weight", choices=("duration", "peak_input", "hops"), default="duration")
-    p.add_argument("--format", choices=("human", "json"), default="human")
+    p = _sub(sub, "plan", "shortest safe transition sequence between two primitives",
+             "  mpgspec plan specs/pendulum --from Hang --to Balance\n"
+             "  mpgspec plan specs/pendulum --from SwingUp --to Hang --weight hops --format json")
+    p.add_argument("project", metavar="PROJECT", help="a project.yaml or its folder")
+    p.add_argument("--from", dest="source", required=True, metavar="A", help="the primitive to start from")
+    p.add_argument("--to", dest="goal", required=True, metavar="B", help="the primitive to reach")
+    p.add_argument("--weight", choices=("duration", "peak_input", "hops"), default="duration",
+                   help="what the plan minimises: summed transition duration (default), peak input, or hops")
+    p.add_argument("--format", choices=("human", "json"), default="human",
+                   help="human: the path and each hop with its class and waiting window; json: the same as JSON")
+    p.add_argument("--out", default="reports", metavar="DIR",
+                   help="where `verify` wrote its reports; its graph is used while it matches the specs "
+                        "(default: reports)")
+    p.add_argument("--rebuild", action="store_true", help="build the graph again instead of reading the report")
+    p.add_argument("--robust", action="store_true",
+                   help="use only the edges that withstood the project's `uncertainty` (the robust graph)")
     p.set_defaults(fn=cmd_plan)
-    s = sub.add_parser("simulate", help="run the project's goal sequence naive and through the graph")
-    s.add_argument("project")
-    s.add_argument("--mode", choices=("naive", "graph", "both"), default="both")
-    s.add_argument("--format", choices=("human", "json"), default="human")
+    s = _sub(sub, "simulate", "run the project's goal sequence naive and through the graph",
+             "  mpgspec simulate specs/pendulum              both runs; exit 0 when each is as the project expects\n"
+             "  mpgspec simulate specs/pendulum --mode graph --format json")
+    s.add_argument("project", metavar="PROJECT", help="a project.yaml or its folder")
+    s.add_argument("--mode", choices=("naive", "graph", "both"), default="both",
+                   help="naive: switch to each goal at once; graph: follow the lookup table and wait for "
+                        "verified windows; both (default)")
+    s.add_argument("--format", choices=("human", "json"), default="human",
+                   help="human: switches and the first violation of each run; json: the runs as JSON")
+    s.add_argument("--out", default="reports", metavar="DIR",
+                   help="where `verify` wrote its reports; its graph and lookup table are used while they "
+                        "match the specs (default: reports)")
+    s.add_argument("--rebuild", action="store_true", help="build the graph again instead of reading the report")
     s.set_defaults(fn=cmd_simulate)
-    k = sub.add_parser("cache", help="show or clear stored oracle results and compiled chunks")
-    k.add_argument("action", choices=("info", "clear"))
+    k = _sub(sub, "cache", "show or clear stored oracle results and compiled chunks",
+             "  mpgspec cache info\n  mpgspec cache clear")
+    k.add_argument("action", choices=("info", "clear"), help="info: what is stored; clear: remove it all")
     k.set_defaults(fn=cmd_cache)
-    c = sub.add_parser("schema", help="print the JSON Schema of project specs (or of reports)")
-    c.add_argument("--kind", choices=("project", "report"), default="project")
+    c = _sub(sub, "schema", "print a JSON Schema: of project, primitive or system spec files, or of report.json",
+             "  mpgspec schema > project.schema.json\n"
+             "  mpgspec schema --kind primitive > primitive.schema.json\n"
+             "  then, first line of a spec file: # yaml-language-server: $schema=project.schema.json")
+    c.add_argument("--kind", choices=("project", "primitive", "system", "report"), default="project",
+                   help="project.yaml (default), a primitive file, a system file, or report.json")
     c.set_defaults(fn=cmd_schema)
+    g = _sub(sub, "gait", "generate the gait tables of trot primitives: each node's orbit, command and multipliers",
+             "  mpgspec gait specs/a1/gaits.yaml            write specs/a1/gaits/*.csv\n"
+             "  mpgspec gait specs/a1/gaits.yaml --check    exit 1 when the tables on disk are stale")
+    g.add_argument("file", metavar="GAITS", help="a gait file (project, primitive, dt)")
+    g.add_argument("--check", action="store_true", help="regenerate in memory and compare with the tables on disk")
+    g.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    g.set_defaults(fn=cmd_gait)
     return ap
 
 

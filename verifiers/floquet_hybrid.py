@@ -26,7 +26,7 @@ class HybridFlow:
     """Compiled steps, periods and tubes of a compiled primitive's discrete flow."""
 
     def __init__(self, prim, dt: float):
-        from mpgspec.oracle.integrator import compile_cached
+        from mpgspec.oracle.integrator import LEFT, compile_cached
 
         self.prim, self.dt = prim, float(dt)
         T = float(prim.period)
@@ -42,7 +42,7 @@ class HybridFlow:
         k1 = f(x, t)
         k2 = f(x + h / 2 * k1, t + h / 2)
         k3 = f(x + h / 2 * k2, t + h / 2)
-        k4 = f(x + h * k3, t + h)
+        k4 = f(x + h * k3, t + h - LEFT)  # inside the step: its own contact mode
         u = prim.control(x, t, S_LONG, xs0)[1]
         xn = prim.jump(x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), u, t + h)
         hv = prim.h(xn, t + h, S_LONG, xs0)

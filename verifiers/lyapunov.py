@@ -7,6 +7,8 @@ then {V <= rho} is invariant, safe and attracted to x*, and E is the largest W-b
 Each part is certified by a checked SOS certificate (sos.py) when its polynomial is exact (the
 closed loop, or h_i, read as a polynomial from CasADi); otherwise it is estimated by dense
 sampling plus local optimisation and labelled 'empirical'. The result's level is the weakest.
+With `degree` > 2 (polynomial loops and h only) V is a polynomial of that degree found by V-rho
+alternation from y'Py (polyv.py).
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ import cvxpy as cp
 import numpy as np
 from scipy.optimize import minimize
 
-from . import sos
+from . import polyv, sos
 from .roa_common import (RoAProblem, RoAResult, ball_radius, batch, bisect, linearise, lyapunov_P, unit_sphere,
                          weakest)
 
@@ -70,6 +72,13 @@ class LyapunovVerifier:
             return RoAResult(0.0, "failed", method, ev, f"no certificate possible: {why}")
         if o.get("polynomial") and isinstance(fpoly, str):
             return RoAResult(0.0, "failed", method, ev, f"closed loop declared polynomial but {fpoly}")
+        degree = o.get("degree", 2)
+        if degree != 2 or isinstance(degree, bool):
+            why = fpoly if isinstance(fpoly, str) else next((p for p in hpoly if isinstance(p, str)), None)
+            if why is not None:
+                return RoAResult(0.0, "failed", method, ev, f"degree {degree} needs polynomial loop and h: {why}")
+            return polyv.estimate(problem, {k: v for k, v in o.items() if k != "rho"}, fpoly, [hp[0] for hp in hpoly],
+                                  P, A, ev, method, _certified)
         Vp = sos.quadratic(P)
         scale = float(np.linalg.eigvalsh(P).max())
         cap = float(o.get("rho_max", 1e4 * scale))
@@ -142,7 +151,8 @@ def _vdot_poly(f: list[sos.Poly], P: np.ndarray, n: int, sign: float) -> sos.Pol
 def _certified(p: sos.Poly, V: sos.Poly, n: int, hi: float, guess: float, cap: float, o: dict):
     """Largest rho <= min(hi, cap) with a validated certificate of p >= 0 on {V <= rho}."""
     prog = sos.LevelSetProgram(p, V, n, o.get("mult_half_degree"), o.get("solver", "CLARABEL"),
-                               o.get("solver_opts"), o.get("tol_eig", 1e-8), o.get("tol_res", 1e-6))
+                               o.get("solver_opts"), o.get("tol_eig", 1e-8), o.get("tol_res", 1e-6),
+                               interior=bool(o.get("interior", False)))
     last = {"ok": None, "bad": None}
     solve_s = 0.0
 

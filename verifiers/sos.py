@@ -198,12 +198,14 @@ class LevelSetProgram:
     """Certificates of p(y) >= 0 on {V(y) <= rho}, compiled once with rho as a cvxpy Parameter.
 
     lam gets monomials of degree ceil(mindeg(p)/2) .. half of deg(p) - deg(V) (rounded up), so
-    lam(0) = 0 whenever p(0) = 0. With V = None it certifies p SOS.
+    lam(0) = 0 whenever p(0) = 0. With V = None it certifies p SOS. `interior` maximises the least
+    eigenvalue of Q0 instead of taking any feasible point, for programs whose feasible Gram matrices
+    are nearly singular (higher-degree V), so that the float64 check has room.
     """
 
     def __init__(self, p: Poly, V: Poly | None, n: int, mult_half_degree: int | None = None,
                  solver: str = "CLARABEL", solver_opts: dict | None = None, tol_eig: float = 1e-8,
-                 tol_res: float = 1e-6, newton: bool = True):
+                 tol_res: float = 1e-6, newton: bool = True, interior: bool = False):
         self.p, self.V, self.n = p, V or {}, n
         self.solver, self.solver_opts = solver, dict(solver_opts or {})
         self.tol_eig, self.tol_res = tol_eig, tol_res * max(1.0, max(map(abs, p.values()), default=1.0))
@@ -229,7 +231,13 @@ class LevelSetProgram:
         if self.B1:
             q1 = cp.vec(self.Q1, order="F")
             lhs = lhs - self.rho * (self._gram_map(self.B1, {}) @ q1) + self._gram_map(self.B1, self.V) @ q1
-        self.problem = cp.Problem(cp.Minimize(0), [lhs == 0])
+        if interior:
+            tau = cp.Variable()
+            top = max(map(abs, p.values()), default=1.0)
+            self.problem = cp.Problem(cp.Maximize(tau), [lhs == 0, self.Q0 - tau * np.eye(len(self.B0)) >> 0,
+                                                         tau <= top])
+        else:
+            self.problem = cp.Problem(cp.Minimize(0), [lhs == 0])
 
     def _gram_map(self, basis, mult: Poly) -> sp.csr_matrix:
         """Sparse map vec(Q) -> coefficients of (z'Qz) * mult (mult = {} means 1)."""

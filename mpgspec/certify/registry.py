@@ -4,27 +4,24 @@ A verifier has `name`, `description`, `is_installed()` and `estimate(problem, op
 (see verifiers/roa_common.py); third parties add theirs with an entry point of their package. A
 verifier may list the keys of `roa.options` it reads in an `options` attribute; the spec's options
 are then checked against it (unknown keys are spec errors). The built-in verifiers' keys are listed
-here.
+here; `sos` and `lyapunov` also type their values (certify/options.py).
 """
 from __future__ import annotations
 
 from functools import lru_cache
 
 from ..plugins import load_plugins
+from .options import OPTION_MODELS
 
 GROUP = "mpgspec.roa"
 _BUILTIN = {"lyapunov": "verifiers.lyapunov:verifier", "sos": "verifiers.sos:verifier",
             "floquet": "verifiers.floquet:verifier", "sampling": "verifiers.sampling:verifier"}
 
 _SEARCH = ("r0", "r_max", "rtol", "confirm_rounds", "samples", "seed", "conv", "dt")
-_LEVEL_SET = ("P", "Q", "rho", "rho_max", "rtol", "eps", "equilibrium_tol", "polynomial", "samples", "radial",
-              "local_starts", "boundary_tol", "empirical_margin", "seed", "mult_half_degree", "solver",
-              "solver_opts", "tol_eig", "tol_res")
 BUILTIN_OPTIONS: dict[str, frozenset[str]] = {
-    "lyapunov": frozenset(_LEVEL_SET + ("require_certified",)),
-    "sos": frozenset(_LEVEL_SET),
+    **{name: frozenset(model.model_fields) for name, model in OPTION_MODELS.items()},
     "sampling": frozenset(_SEARCH + ("horizon",)),
-    "floquet": frozenset(_SEARCH + ("t0", "steps", "tol", "orbit_tol", "periods", "steps_per_period")),
+    "floquet": frozenset(_SEARCH + ("t0", "steps", "tol", "orbit_tol", "periods", "steps_per_period", "neutral")),
 }
 """Keys of `roa.options` each built-in verifier reads (verifiers/*.py)."""
 
@@ -33,6 +30,15 @@ BUILTIN_OPTIONS: dict[str, frozenset[str]] = {
 def roa_verifiers() -> dict[str, object]:
     """Installed RoA verifiers by name (entry points override the built-in table)."""
     return load_plugins(GROUP, _BUILTIN)
+
+
+def option_model(name: str):
+    """The pydantic model of the built-in verifier `name`'s options, when it has one (not a plug-in's)."""
+    verifier = roa_verifiers().get(name)
+    builtin = _BUILTIN.get(name, "").partition(":")[0]
+    if verifier is not None and builtin and type(verifier).__module__ == builtin:
+        return OPTION_MODELS.get(name)
+    return None
 
 
 def accepted_options(name: str) -> frozenset[str] | None:

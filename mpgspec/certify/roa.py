@@ -13,11 +13,12 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from pydantic import ValidationError
 
 from ..compile.primitive import CompiledPrimitive
 from ..errors import SpecError, SpecErrors
 from ..spec.loader import ProjectSpec
-from .registry import accepted_options, roa_verifiers
+from .registry import accepted_options, option_model, roa_verifiers
 
 RANK = {"certified": 3, "empirical": 2, "given": 1, "failed": 0}
 
@@ -54,9 +55,26 @@ def _did_you_mean(word: str, choices) -> str:
     return f"did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
 
 
+def _check_values(model, inst, owner: str, roa, errors: dict) -> None:
+    """Type and range of each known option of a built-in verifier, as located spec errors (MPG104)."""
+    try:
+        model.model_validate({k: v for k, v in roa.options.items() if k in model.model_fields})
+    except ValidationError as e:
+        for x in e.errors():
+            key = str(x["loc"][0]) if x["loc"] else ""
+            field = model.model_fields.get(key)
+            err = SpecError(f"invalid option of the {roa.method} verifier: {x['msg']}",
+                            location=inst.locate(("roa", "options", key) if key else ("roa", "options")),
+                            key=f"{owner}: roa.options.{key}",
+                            expected=(field.description or str(field.annotation)) if field else "",
+                            found=repr(roa.options.get(key))[:60], code="MPG104")
+            errors.setdefault(err.format(), err)
+
+
 def check_roa_specs(spec: ProjectSpec) -> None:
-    """Every `roa.method` names an installed verifier (or 'given') and every `roa.options` key is one
-    the verifier reads; raises SpecErrors naming each wrong value, with a suggestion."""
+    """Every `roa.method` names an installed verifier (or 'given'), every `roa.options` key is one
+    the verifier reads and, for verifiers with typed options, every value has its type and range;
+    raises SpecErrors naming each wrong value, with a suggestion."""
     verifiers = roa_verifiers()
     methods = sorted({"given", *verifiers})
     errors: dict[str, SpecError] = {}
@@ -72,6 +90,9 @@ def check_roa_specs(spec: ProjectSpec) -> None:
         accepted = frozenset() if roa.method == "given" else accepted_options(roa.method)
         if accepted is None:
             continue
+        model = None if roa.method == "given" else option_model(roa.method)
+        if model is not None:
+            _check_values(model, inst, owner, roa, errors)
         for key in roa.options:
             if key in accepted:
                 continue

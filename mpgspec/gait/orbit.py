@@ -22,7 +22,7 @@ import numpy as np
 from ..compile.primitive import _jump, saturate, scheduled_mode
 from ..compile.rigidbody.symmetry import generators, lift_function, reduce_function
 from ..compile.rigidbody.trot import gains_of, nominal_geometry, trot_torque
-from ..oracle.integrator import compile_cached
+from ..oracle.integrator import LEFT, compile_cached
 
 FD = 1e-6
 
@@ -83,7 +83,7 @@ class StrideMap:
         k1 = f(xm, tm, cm)
         k2 = f(xm + h / 2 * k1, tm + h / 2, cm)
         k3 = f(xm + h / 2 * k2, tm + h / 2, cm)
-        k4 = f(xm + h * k3, tm + h, cm)
+        k4 = f(xm + h * k3, tm + h - LEFT, cm)  # inside the step: its own contact mode
         xn = jump(xm + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), k_u(xm, tm, cm), tm + h)
         body = ca.Function("body", [z], [ca.vertcat(xn, tm + h, cm)])
         one = ca.Function("gait_step", [z], [body(z)])

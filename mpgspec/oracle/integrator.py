@@ -162,6 +162,11 @@ def _with_cse(f: ca.Function) -> ca.Function:
     return ca.Function(f.name(), a, f.call(a), f.name_in(), f.name_out(), {"cse": True})
 
 
+LEFT = 1e-8
+"""The last RK4 stage and the end sample of a step are taken this long before the step's end, so a
+step that ends on a contact switch runs wholly in its own mode (modes switch 1e-9 s early, SNAP);
+the jump then applies the new mode at the end."""
+
 FD_STEP = 1e-6
 """Time step of the forward differences that give the rates of h along the flow in large loops."""
 
@@ -224,8 +229,9 @@ def _step_length(prim: CompiledPrimitive, dt: float, tc):
     if not B:
         return ca.DM(dt)
     eps = 1e-9
-    if prim.period is not None:
-        nxt = [ca.if_else(b > tc + eps, b, b + prim.period) for b in (*B, prim.period)]
+    if prim.period is not None:  # the next b + k T ahead of tc (tc may sit within eps below T)
+        P = prim.period
+        nxt = [ca.if_else(b > tc + eps, b, ca.if_else(b + P > tc + eps, b + P, b + 2 * P)) for b in (*B, P)]
     else:
         nxt = [ca.if_else(b > tc + eps, b, ca.inf) for b in B]
     gap = nxt[0]
@@ -252,9 +258,11 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
     k1, h0, d0, u_raw, u = start(x, t, s, xs)
     k2 = f(x + h / 2 * k1, t + h / 2, s + h / 2, xs)
     k3 = f(x + h / 2 * k2, t + h / 2, s + h / 2, xs)
-    k4 = f(x + h * k3, t + h, s + h, xs)
+    # under a contact schedule, the step's end is seen from inside it: a mode switching there is not yet on
+    te = h - ca.fmin(LEFT, h / 2) if prim.info.get("contact_schedule") else h
+    k4 = f(x + h * k3, t + te, s + te, xs)
     x_end = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    _k5, h1, d1, dh, e = end(x_end, t + h, s + h, xs, k4, h)
+    _k5, h1, d1, dh, e = end(x_end, t + te, s + te, xs, k4, h)
     act = _active(prim, _wrap(prim, t + h / 2))  # a step lies inside or outside each window: judge at its middle
     L = ca.fmax(ca.fmax(ca.fabs(d0), ca.fabs(d1)), ca.fabs(h1 - h0) / h)
     lb = (h0 + h1) / 2 - L * h / 2  # least value of a function with |dh/dt| <= L taking h0 and h1 at the ends

@@ -8,8 +8,9 @@ import numpy as np
 
 from .. import __version__
 from ..compile.primitive import CompiledPrimitive
+from .compact import REASONS, STATUS, compact_cells, compact_run, compact_series, rnd
 
-SCHEMA_VERSION = "1.0"
+SCHEMA_VERSION = "2.0"
 
 
 def _f(v):
@@ -45,7 +46,7 @@ def primitive_entry(p: CompiledPrimitive, spec, roa=None) -> dict:
         "domain": list(p.domain) if p.domain else None, "next": p.next,
         "controller": c.type, "safety_functions": p.h_names, "roa_radius": _f(p.radius),
         "roa_method": rec["method"], "roa_level": rec["level"], "roa_message": rec["message"],
-        "roa_evidence": rec["evidence"], "horizon": _f(p.horizon), "setpoint_t0": [float(v) for v in p.x_star(p.t_range[0])],
+        "roa_evidence": rnd(finite_json(rec["evidence"])), "horizon": _f(p.horizon), "setpoint_t0": [float(v) for v in p.x_star(p.t_range[0])],
         "description": spec.description.strip(), "info": p.info,
     }
 
@@ -56,7 +57,8 @@ def _round(v, digits: int = 6):
 
 
 def transition_entry(tr, h_names: list[str]) -> dict:
-    """One ordered pair's grid; each cell's least margins are listed in the order of h_names."""
+    """One ordered pair's grid, its cells by field (see compact.py); each cell's least margins are
+    listed in the order of h_names."""
     ev = tr.evidence
     cells = [[{"verdict": e.verdict, "status": e.status, "reason": e.reason.value, "t_stop": _round(e.t_stop),
                "t_enter": _round(e.t_enter), "violated": e.violated, "checked": e.checked, "refined": e.refined,
@@ -69,7 +71,7 @@ def transition_entry(tr, h_names: list[str]) -> dict:
     return {
         "from": tr.source, "to": tr.target, "class": int(tr.cls), "method": "simulated", "h_names": h_names,
         "t_A": [float(t) for t in tr.t_A], "t_B": [float(t) for t in tr.t_B],
-        "verdicts": tr.verdicts.tolist(), "cells": cells,
+        "verdicts": tr.verdicts.tolist(), "cells": compact_cells(cells, h_names),
         "windows": [list(w) for w in tr.windows], "best_t_B": tr.best_t_B, "weights": tr.weights,
         "counts": {"safe": sum(e.verdict for e in flat), "total": len(flat),
                    "inconclusive": sum(e.status == "inconclusive" for e in flat),
@@ -84,9 +86,31 @@ def verdict_counts(graph) -> dict:
             "refined": sum(e.refined for e in flat), "errors": sum(e.reason.value == "error" for e in flat)}
 
 
+def edge_entries(graph) -> list[dict]:
+    """Every verified edge with its weights and whether the planner may take it (a transient hands
+    over only to its `next`, at the end of its domain)."""
+    from ..plan.planner import plan_graph
+
+    usable = plan_graph(graph)
+    out = []
+    for a, b, d in graph.G.edges(data=True):
+        e = {"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in ("duration", "peak_input", "hops") if k in d}}
+        e["usable"] = usable.has_edge(a, b)
+        if not e["usable"]:
+            nd = graph.G.nodes[a]
+            e["unusable_reason"] = (f"{a} is transient: it hands over only to {nd.get('next')} at the end of its "
+                                    f"domain" if nd.get("cls") == "transient" else "not executable")
+            if b == nd.get("next"):
+                e["unusable_reason"] = f"{a} is transient and this switch is not safe from the end of its domain"
+        out.append(e)
+    return out
+
+
 def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs, failures, timing,
-                 status: str, assumptions=(), roa=None, edge_series=()) -> dict:
-    """The report dict; see mpgspec/report/schema/report-v1.json."""
+                 status: str, assumptions=(), roa=None, edge_series=(), digest: str | None = None,
+                 robust: dict | None = None) -> dict:
+    """The report dict; see mpgspec/report/schema/report-v2.json. digest: of the spec files (see
+    mpgspec.spec.digest), so that readers can tell whether the report is up to date."""
     sysm = spec.system
     csys = next(iter(prims.values())).system
     bounds = {n: [float(lo), float(hi)] for n, lo, hi in zip(csys.input_names, csys.u_lo, csys.u_hi)
@@ -95,7 +119,9 @@ def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs
         "schema_version": SCHEMA_VERSION,
         "mpgspec_version": __version__,
         "generated_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "project": {"name": spec.name, "path": str(spec.path), "description": spec.project.description.strip()},
+        "project": {"name": spec.name, "path": str(spec.path), "description": spec.project.description.strip(),
+                    "digest": digest},
+        "codes": {"status": list(STATUS), "reason": list(REASONS)},
         "status": status,
         "settings": asdict(settings),
         "system": {"name": sysm.name, "kind": sysm.kind, "states": list(csys.state_names),
@@ -103,19 +129,26 @@ def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs
         "primitives": [primitive_entry(prims[i.name], i.spec, (roa or {}).get(i.name)) for i in spec.primitives],
         "transitions": [transition_entry(tr, prims[tr.target].h_names) for tr in graph.transitions.values()],
         "verdicts": verdict_counts(graph),
-        "edges": [{"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in ("duration", "peak_input", "hops") if k in d}}
-                  for a, b, d in graph.G.edges(data=True)],
-        "failures": failures,
-        "edge_traces": list(edge_series),
+        "edges": edge_entries(graph),
+        "failures": [_traced(f) for f in failures],
+        "edge_traces": [_traced(f) for f in edge_series],
         "plans": [p.to_dict() for p in plans],
         "lookup_table": table,
         "assertions": [a.to_dict() for a in assertions],
-        "assumptions": [a.to_dict() for a in assumptions],
+        "assumptions": rnd(finite_json([a.to_dict() for a in assumptions])),
         "sequence": None if spec.project.sequence is None else {
             "start": spec.project.sequence.start, "duration": spec.project.sequence.duration,
             "commands": [{"t": c.t, "goal": c.goal} for c in spec.project.sequence.commands],
             "state_names": list(csys.state_names),
-            "runs": {m: r.to_dict() for m, r in runs.items()},
+            "runs": {m: compact_run(finite_json(r.to_dict())) for m, r in runs.items()},
         },
         "timing": timing,
+        "robust": None if robust is None else rnd(finite_json(robust)),
     }
+
+
+def _traced(f: dict) -> dict:
+    """A failure or edge trace with its rollout rounded for pictures."""
+    f = finite_json(f)
+    return {**rnd({k: v for k, v in f.items() if k != "series"}),
+            "series": compact_series(f.get("series") or {}, f.get("t_stop"))}

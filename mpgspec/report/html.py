@@ -1,10 +1,12 @@
 """Render the self-contained HTML report from the JSON report dict alone (no pipeline objects).
 
 The template lives in templates/report.html.j2 and is loaded from the installed package; all text
-is autoescaped, and the pictures are inline SVG built by svg.py.
+is autoescaped, and the pictures are inline SVG built by svg.py (the graph laid out by Graphviz's
+`dot` when it is installed). The page has no scripts and works offline.
 """
 from __future__ import annotations
 
+import re
 from collections import Counter
 from functools import lru_cache
 
@@ -12,6 +14,7 @@ import jinja2
 from markupsafe import Markup
 
 from . import svg
+from .compact import readable
 
 SYMBOLS = {"fixed": "□", "periodic": "○", "transient": "◇"}
 EVIDENCE = (("certified", "a checked certificate"),
@@ -44,27 +47,128 @@ def _period(p: dict) -> str:
     return "–"
 
 
-def _transitions(report: dict) -> list[dict]:
+class Anchors:
+    """Element ids of primitives, grids, traces and failures (by position, so any name is safe)."""
+
+    def __init__(self, report: dict):
+        self.index = {p["name"]: i for i, p in enumerate(report["primitives"])}
+
+    def prim(self, name) -> str:
+        return f"prim-{self.index.get(name, 'x')}"
+
+    def pair(self, kind: str, a, b) -> str:
+        return f"{kind}-{self.index.get(a, 'x')}-{self.index.get(b, 'x')}"
+
+
+def _transitions(report: dict, ids: Anchors) -> list[dict]:
     """Every ordered pair in primitive order, with its grid picture."""
-    order = {p["name"]: i for i, p in enumerate(report["primitives"])}
+    order = ids.index
     trs = sorted(report["transitions"], key=lambda t: (order.get(t["from"], 1e9), order.get(t["to"], 1e9)))
-    return [{"tr": t, "has_edge": t["class"] in (1, 2), "svg": Markup(svg.grid_svg(t))} for t in trs]
+    return [{"tr": t, "has_edge": t["class"] in (1, 2), "svg": Markup(svg.grid_svg(t)),
+             "id": ids.pair("grid", t["from"], t["to"])} for t in trs]
 
 
-def _failures(report: dict, key: str = "failures") -> list[dict]:
+def _pair_in(text: str, report: dict) -> tuple[str, str] | None:
+    """The ordered pair 'A -> B' named in an assertion's description (the longest match)."""
+    names = sorted((p["name"] for p in report["primitives"]), key=len, reverse=True)
+    best = None
+    for a in names:
+        for b in names:
+            if a != b and f"{a} -> {b}" in text and (best is None or len(a) + len(b) > len(best[0]) + len(best[1])):
+                best = (a, b)
+    return best
+
+
+def assertion_link(a: dict, report: dict, ids: Anchors) -> str:
+    """Where the evidence of an assertion is shown in the page."""
+    kind, text = a.get("kind", ""), a.get("description", "")
+    if kind in ("edge", "no_edge"):
+        pair = _pair_in(text, report)
+        if pair:
+            return "#" + ids.pair("grid", *pair)
+        return "#grids"
+    if kind == "simulation_safe":
+        mode = next((m for m in ("naive", "graph") if text.startswith(m)), None)
+        return f"#run-{mode}" if mode else "#sequence"
+    if kind == "roa_level":
+        m = re.match(r"E of (.+) is \w+$", text)
+        return "#" + ids.prim(m.group(1)) if m else "#primitives"
+    return {"plan": "#plans", "reachable_from": "#lookup", "max_inconclusive": "#edges"}.get(kind, "#assertions")
+
+
+def _summary(report: dict, ids: Anchors) -> dict:
+    """The verdict line, the counts and every FAIL, ERROR and WARN with a link to its evidence."""
+    asserts, assumed = report["assertions"], report.get("assumptions", [])
+    problems = []
+    for a in asserts:
+        if a["status"] != "pass":
+            problems.append({"status": a["status"], "what": "assertion", "text": f"{a['description']}: {a['message']}",
+                             "href": assertion_link(a, report, ids), "row": f"#assertion-{a['index']}"})
+    for k, c in enumerate(assumed):
+        if c["status"] != "pass":
+            problems.append({"status": c["status"], "what": f"assumption of {c['primitive']}",
+                             "text": f"{c['name']}: {c['message']}", "href": "#" + ids.prim(c["primitive"]),
+                             "row": f"#assumption-{k}"})
+    runs = ((report.get("sequence") or {}).get("runs") or {})
+    warns = sum(p["status"] == "warn" for p in problems)
+    status = report["status"]
+    label = status.upper() + (f" with {warns} warning{'s' if warns != 1 else ''}" if warns and status == "pass" else "")
+    edges = report["edges"]
+    return {
+        "label": label, "warns": warns, "problems": problems,
+        "counts": [
+            ("primitives", len(report["primitives"]), ""),
+            ("edges", len(edges), f"{sum(e['class'] == 1 for e in edges)} Class 1, "
+                                  f"{sum(e['class'] == 2 for e in edges)} Class 2"
+                                  + (f", {sum(e.get('usable') is False for e in edges)} not usable by the planner"
+                                     if any(e.get("usable") is False for e in edges) else "")),
+            ("oracle calls", (report.get("verdicts") or {}).get("total", "–"),
+             ", ".join(f"{(report.get('verdicts') or {}).get(k, 0)} {k}" for k in ("safe", "unsafe", "inconclusive"))),
+            ("assertions", len(asserts), _counts(asserts)),
+            ("assumption checks", len(assumed), _counts(assumed)),
+            *([("sequence runs", len(runs), ", ".join(f"{m} {'safe' if r.get('safe') else 'unsafe'}"
+                                                       for m, r in runs.items()))] if runs else []),
+        ],
+    }
+
+
+def _counts(items) -> str:
+    c = Counter(x["status"] for x in items)
+    return ", ".join(f"{c[k]} {k}" for k in ("pass", "warn", "fail", "error") if c.get(k))
+
+
+def _floquet(p: dict) -> dict | None:
+    """Floquet multipliers of a periodic primitive's orbit, from its region-of-attraction evidence."""
+    ev = p.get("roa_evidence") or {}
+    mus = ev.get("multipliers")
+    if not isinstance(mus, list) or not mus:
+        return None
+    trivial = ev.get("trivial_multiplier")
+    rows = []
+    for k, z in enumerate(mus):
+        re_, im = (z + [0.0, 0.0])[:2] if isinstance(z, list) else (z, 0.0)
+        mod = (re_ ** 2 + im ** 2) ** 0.5 if isinstance(re_, (int, float)) and isinstance(im, (int, float)) else None
+        rows.append({"re": re_, "im": im, "mod": mod, "trivial": k == trivial})
+    neutral = [n for n in ev.get("neutral") or [] if isinstance(n, dict)]
+    return {"rows": rows, "rho": ev.get("spectral_radius"), "verdict": ev.get("verdict"), "neutral": neutral}
+
+
+def _failures(report: dict, ids: Anchors, key: str = "failures") -> list[dict]:
     out = []
     for f in report.get(key, []):
         s = f["series"]
         title = f"h of {f['to']} after switching from {f['from']} at t_A = {_num(f['t_A'], 3)} s"
-        series, shade = (dict(s["h"]) if "t" in s else {}), True
+        series, shade, mark = (dict(s["h"]) if "t" in s else {}), True, None
         if key == "edge_traces" and "t" in s:  # the safety margin and the approach to E, not every h
             rows = list(s["h"].values())
             least = [min((r[k] for r in rows if r[k] is not None), default=None) for k in range(len(s["t"]))]
             series = {"least h (safety margin)": least, "E margin r - ||x - x*||": s["roa_margin"]}
             shade, title = "least h (safety margin)", f"{f['to']} after switching from {f['from']} at t_A = {_num(f['t_A'], 3)} s"
+            mark = (f.get("t_stop"), "enters E")
         pic = Markup(svg.series_svg(s["t"], series, title=title, shade_negative=shade, ylabel="margin"
-                                    if key == "edge_traces" else "h")) if "t" in s else None
-        out.append({"f": f, "svg": pic, "error": s.get("error")})
+                                    if key == "edge_traces" else "h", mark=mark)) if "t" in s else None
+        kind = "trace" if key == "edge_traces" else "fail"
+        out.append({"f": f, "svg": pic, "error": s.get("error"), "id": ids.pair(kind, f["from"], f["to"])})
     return out
 
 
@@ -72,29 +176,41 @@ def _sequence(report: dict) -> dict | None:
     seq = report.get("sequence")
     if seq is None:
         return None
-    runs = [{"name": name, "run": run, "svg": Markup(svg.trajectory_svg(run, seq["state_names"], seq["commands"]))}
+    lims = svg.run_limits(seq["runs"].values(), len(seq["state_names"]))
+    runs = [{"name": name, "run": run,
+             "svg": Markup(svg.trajectory_svg(run, seq["state_names"], seq["commands"], limits=lims))}
             for name, run in seq["runs"].items()]
     return {"seq": seq, "runs": runs}
 
 
 def view(report: dict) -> dict:
     """Everything the template shows, derived from the report dict."""
+    report = readable(report)
     names = [p["name"] for p in report["primitives"]]
+    ids = Anchors(report)
     trs = {(t["from"], t["to"]): t for t in report["transitions"]}
-    edges = [{"e": e, "tr": trs.get((e["from"], e["to"]))} for e in report["edges"]]
+    edges = [{"e": e, "tr": trs.get((e["from"], e["to"])), "grid": ids.pair("grid", e["from"], e["to"]),
+              "trace": ids.pair("trace", e["from"], e["to"])} for e in report["edges"]]
     edge_methods = Counter(x["tr"]["method"] if x["tr"] else "unknown" for x in edges)
+    graph = svg.graphviz_svg(report)
     return {
+        "ids": ids,
+        "summary": _summary(report, ids),
+        "assertion_links": {a["index"]: assertion_link(a, report, ids) for a in report["assertions"]},
+        "floquet": {p["name"]: _floquet(p) for p in report["primitives"]},
+        "graph_engine": "Graphviz dot" if graph else "built-in layout",
+        "unusable": [x["e"] for x in edges if x["e"].get("usable") is False],
         "symbols": SYMBOLS,
         "evidence": EVIDENCE,
         "edge_methods": dict(edge_methods),
         "roa_methods": dict(Counter(p["roa_method"] for p in report["primitives"])),
         "all_simulated": bool(edges) and set(edge_methods) == {"simulated"},
-        "graph_svg": Markup(svg.graph_svg(report)),
+        "graph_svg": Markup(graph or svg.graph_svg(report)),
         "periods": {p["name"]: _period(p) for p in report["primitives"]},
         "edges": edges,
-        "transitions": _transitions(report),
-        "failures": _failures(report),
-        "edge_traces": _failures(report, "edge_traces"),
+        "transitions": _transitions(report, ids),
+        "failures": _failures(report, ids),
+        "edge_traces": _failures(report, ids, "edge_traces"),
         "names": names,
         "sequence": _sequence(report),
         "assert_counts": dict(Counter(a["status"] for a in report["assertions"])),
@@ -104,4 +220,4 @@ def view(report: dict) -> dict:
 
 def render_html(report: dict) -> str:
     """The report as one self-contained HTML page (inline CSS and SVG, no scripts)."""
-    return _env().get_template("report.html.j2").render(r=report, v=view(report))
+    return _env().get_template("report.html.j2").render(r=readable(report), v=view(report))

@@ -1,7 +1,8 @@
-"""Pydantic models of the JSON report (schema version 1), its JSON Schema, and a validator.
+"""Pydantic models of the JSON report (schema version 2), its JSON Schema, and a validator.
 
-The committed file schema/report-v1.json is generated from these models; regenerate it with
-`python -m mpgspec.report.schema` whenever the report changes.
+The committed file schema/report-v2.json is generated from these models; regenerate it with
+`python -m mpgspec.report.schema` whenever the report changes. Version 2 stores oracle cells and
+sequence runs by column and rounds floats (see compact.py).
 """
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-SCHEMA_FILE = "schema/report-v1.json"
+SCHEMA_FILE = "schema/report-v2.json"
+SCHEMA_ID = "https://mpgspec.invalid/schema/report-v2.json"
 Num = float | None  # non-finite numbers are written as null
 Reason = Literal["entered_E", "left_C", "horizon_reached", "integration_failed", "inconclusive", "error"]
 Method = Literal["certified", "simulated", "empirical"]
@@ -27,6 +29,15 @@ class Project(_Strict):
     name: str
     path: str
     description: str
+    digest: str | None = Field(default=None, description="sha256 of the project's spec files when verified; "
+                                                         "plan and simulate reuse the report only while it matches")
+
+
+class Codes(_Strict):
+    """Meaning of the digit codes in oracle cells."""
+
+    status: list[str]
+    reason: list[str]
 
 
 class Settings(BaseModel):
@@ -65,26 +76,30 @@ class Primitive(_Strict):
     info: dict[str, Any] = Field(description="free-form data from the controller (e.g. LQR gains)")
 
 
-class Cell(_Strict):
-    """One oracle call O_B(x_A*(t_A), t_B) with its evidence."""
+Grid = list[list[Num]]
+Digits = list[str]
 
-    verdict: Literal[0, 1]
-    status: Literal["safe", "unsafe", "inconclusive"] = Field(
-        default=None, description="safe only when every margin exceeds its numerical error bound")
-    reason: Reason
-    t_stop: Num
-    t_enter: Num
-    violated: str | None
-    checked: bool
-    refined: bool
-    margin: Num = Field(default=None, description="least sampled value of any active safety function")
-    error_bound: Num = Field(default=None, description="what the numerics may hide below margin")
-    peak_input: list[Num] = Field(description="largest |u| applied, after saturation")
-    peak_demand: list[Num] = Field(default_factory=list, description="largest |u| asked for, before saturation")
-    saturated: bool
-    min_margins: list[Num] = Field(description="least value of each safety function, in the order of h_names")
-    best_roa_margin: Num
-    message: str
+
+class Cells(_Strict):
+    """The oracle calls O_B(x_A*(t_A), t_B) of one pair, one grid per field ([i_A][i_B]); the verdict of
+    a cell is the transition's verdicts[i_A][i_B]."""
+
+    status: Digits = Field(description="one string per t_A row, a digit per t_B: index into codes.status "
+                                       "(safe only when every margin exceeds its numerical error bound)")
+    reason: Digits = Field(description="one string per t_A row, a digit per t_B: index into codes.reason")
+    violated: list[list[int | None]] = Field(description="index into h_names of the violated safety function, or null")
+    t_stop: Grid
+    t_enter: Grid
+    margin: Grid = Field(description="least sampled value of any active safety function")
+    error_bound: Grid = Field(description="what the numerics may hide below margin (3 significant digits)")
+    best_roa_margin: Grid
+    peak_input: list[Grid] = Field(description="per input: largest |u| applied, after saturation")
+    peak_demand: list[Grid] = Field(description="per input: largest |u| asked for, before saturation")
+    min_margins: list[Grid] = Field(description="per safety function (order of h_names): its least value")
+    checked: Digits = Field(description="one string per t_A row: 1 where every active h was evaluated")
+    refined: Digits = Field(description="one string per t_A row: 1 where the verdict was refined with a finer step")
+    saturated: Digits = Field(description="one string per t_A row: 1 where an input saturated")
+    messages: list[tuple[int, int, str]] = Field(description="[i_A, i_B, text] of the cells with a message")
 
 
 class Counts(_Strict):
@@ -117,7 +132,7 @@ class Transition(_Strict):
     t_A: list[float]
     t_B: list[float]
     verdicts: list[list[Literal[0, 1]]]
-    cells: list[list[Cell]]
+    cells: Cells
     windows: list[tuple[float, float]]
     best_t_B: list[Num]
     weights: dict[str, float]
@@ -126,9 +141,17 @@ class Transition(_Strict):
     @model_validator(mode="after")
     def _grid_shape(self):
         shape = (len(self.t_A), len(self.t_B))
-        for name, grid in (("verdicts", self.verdicts), ("cells", self.cells)):
+        c = self.cells
+        grids = [("verdicts", self.verdicts)] + [(k, getattr(c, k)) for k in (
+            "status", "reason", "violated", "t_stop", "t_enter", "margin", "error_bound", "best_roa_margin",
+            "checked", "refined", "saturated")] + [(f"{k}[{m}]", g) for k in ("peak_input", "peak_demand", "min_margins")
+                                                   for m, g in enumerate(getattr(c, k))]
+        for name, grid in grids:
             if len(grid) != shape[0] or any(len(row) != shape[1] for row in grid):
                 raise ValueError(f"{name} of {self.from_} -> {self.to} is not len(t_A) x len(t_B) = {shape}")
+        for name in ("status", "reason", "checked", "refined", "saturated"):
+            if any(not row.isdigit() for row in getattr(c, name) if row):
+                raise ValueError(f"{name} of {self.from_} -> {self.to} must be strings of digits")
         if len(self.best_t_B) != shape[0]:
             raise ValueError(f"best_t_B of {self.from_} -> {self.to} has {len(self.best_t_B)} entries, not {shape[0]}")
         return self
@@ -141,6 +164,9 @@ class Edge(_Strict):
     duration: Num = None
     peak_input: Num = None
     hops: Num = None
+    usable: bool = Field(default=True, description="whether the planner may take the edge (a transient hands over "
+                                                   "only to its next primitive, at the end of its domain)")
+    unusable_reason: str | None = None
 
 
 class Series(_Strict):
@@ -181,12 +207,21 @@ class LookupTable(_Strict):
     next: dict[str, dict[str, str | None]] = Field(description="next[current][goal] = primitive to switch to")
 
 
+class Where(_Strict):
+    """A position in a spec file (1-based line and column)."""
+
+    file: str
+    line: int
+    column: int = 0
+
+
 class Assertion(_Strict):
     index: int
     kind: str
     description: str
     status: Status
     message: str
+    location: Where | None = Field(default=None, description="where the assertion is written")
 
 
 class AssumptionCheck(_Strict):
@@ -198,6 +233,7 @@ class AssumptionCheck(_Strict):
     level: Literal["certified", "computed", "empirical", "none"]
     message: str
     numbers: dict[str, Any]
+    location: Where | None = Field(default=None, description="the primitive (or its roa) in the spec")
 
 
 class Command(_Strict):
@@ -221,14 +257,16 @@ class Violation(_Strict):
 
 
 class Run(_Strict):
+    """One execution of the sequence; samples decimated for pictures, switches and violations in full."""
+
     mode: str
     safe: bool
     switches: list[Switch]
     violations: list[Violation]
     t: list[float]
-    x: list[list[Num]]
+    x: list[list[Num]] = Field(description="x[k][i]: state k (order of state_names) at t[i]")
     min_h: list[Num]
-    active: list[str]
+    active: list[tuple[str, int]] = Field(description="the active primitive as runs [name, samples]")
     final_primitive: str
     failed: str
 
@@ -244,11 +282,12 @@ class Sequence(_Strict):
 class Report(_Strict):
     """One project's verification report; the HTML, DOT and GraphML files are rendered from it."""
 
-    model_config = ConfigDict(extra="forbid", populate_by_name=True, title="mpgspec report v1")
-    schema_version: str = Field(pattern=r"^1\.\d+$")
+    model_config = ConfigDict(extra="forbid", populate_by_name=True, title="mpgspec report v2")
+    schema_version: str = Field(pattern=r"^2\.\d+$")
     mpgspec_version: str
     generated_at: str
     project: Project
+    codes: Codes
     status: Status
     settings: Settings
     system: System
@@ -264,6 +303,8 @@ class Report(_Strict):
     assumptions: list[AssumptionCheck] = Field(default_factory=list)
     sequence: Sequence | None
     timing: dict[str, float]
+    robust: dict | None = Field(default=None, description="the robust graph (mpgspec.robust): edges that "
+                                "withstood the project's uncertainty in every scenario tried; empirical, not proof")
 
 
 def validate_report(d: dict) -> None:
@@ -273,7 +314,8 @@ def validate_report(d: dict) -> None:
 
 def report_schema() -> dict:
     """JSON Schema of the report (by alias: 'from', 'class')."""
-    return {"$schema": "https://json-schema.org/draft/2020-12/schema", **Report.model_json_schema(by_alias=True)}
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": SCHEMA_ID,
+            **Report.model_json_schema(by_alias=True)}
 
 
 def schema_path() -> Path:

@@ -10,13 +10,17 @@ from html import escape
 
 import networkx as nx
 
-PALETTE = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2")
-CELL_COLORS = {"safe": "#3a9d4a", "left_C": "#d64541", "horizon_reached": "#a0a0a0", "inconclusive": "#f0b429",
-               "integration_failed": "#111111", "error": "#111111"}
+# Okabe-Ito colours: distinguishable with the common colour-vision deficiencies.
+BLUE, ORANGE, VERMILLION, SKY, GREEN, YELLOW, PURPLE, BLACK = ("#0072B2", "#E69F00", "#D55E00", "#56B4E9",
+                                                               "#009E73", "#F0E442", "#CC79A7", "#000000")
+PALETTE = (BLUE, VERMILLION, GREEN, PURPLE, ORANGE, SKY, "#7f7f7f", YELLOW)
+CELL_COLORS = {"safe": BLUE, "left_C": VERMILLION, "horizon_reached": "#bbbbbb", "inconclusive": ORANGE,
+               "integration_failed": BLACK, "error": BLACK}
+UNUSABLE = "#9a9a9a"
 CELL_LABELS = (("safe", "safe (entered E)"), ("left_C", "left C"), ("horizon_reached", "horizon reached"),
                ("inconclusive", "inconclusive (margin within error bound)"), ("error", "integration failed / error"))
 SHAPES = {"fixed": "box", "periodic": "ellipse", "transient": "diamond"}
-NODE_FILL = {"fixed": "#dbe9f6", "periodic": "#dff0d8", "transient": "#fbe5c8"}
+NODE_FILL = {"fixed": "#d6e8f5", "periodic": "#e4f1fa", "transient": "#fbe6c6"}
 ARROW_ID = "mpg-arrow"
 DASH = "6 4"
 
@@ -159,15 +163,17 @@ def _intervals(t: list, flags: list[bool]) -> list[tuple[float, float]]:
 
 
 def _band(p: _Panel, a: float, b: float) -> str:
-    """Red shading over [a, b]: times when some h < 0, i.e. the state was outside C."""
-    return _el("rect", x=p.px(a), y=p.y0, width=max(p.px(b) - p.px(a), 1.5), height=p.h, fill="#d64541",
+    """Vermillion shading over [a, b]: times when some h < 0, i.e. the state was outside C."""
+    return _el("rect", x=p.px(a), y=p.y0, width=max(p.px(b) - p.px(a), 1.5), height=p.h, fill=VERMILLION,
                fill_opacity=0.15)
 
 
 def series_svg(t, series: dict, *, title: str = "", ylabel: str = "h", zero_line: bool = True,
-               shade_negative: bool | str = True, width: int = 560, height: int = 220, max_points: int = 400) -> str:
+               shade_negative: bool | str = True, width: int = 560, height: int = 220, max_points: int = 400,
+               mark: tuple[float, str] | None = None) -> str:
     """Line plot of named series over t; None breaks a line, times where any value < 0 are shaded
-    (or, when shade_negative names a series, where that one is < 0)."""
+    (or, when shade_negative names a series, where that one is < 0); mark = (t, label) draws a
+    labelled vertical line (e.g. where the flow enters E)."""
     t = [_num(v) for v in t]
     data = {str(k): [_num(v) for v in vs] + [None] * (len(t) - len(vs)) for k, vs in series.items()}
     ts = [v for v in t if v is not None]
@@ -184,26 +190,38 @@ def series_svg(t, series: dict, *, title: str = "", ylabel: str = "h", zero_line
     idx = _decimate(len(t), max_points)
     body += [p.line([t[i] for i in idx], [vs[i] for i in idx], PALETTE[k % len(PALETTE)])
              for k, vs in enumerate(data.values())]
+    if mark is not None and mark[0] is not None and ts and p.xlim[0] <= mark[0] <= p.xlim[1]:
+        body += [p.vline(float(mark[0]), GREEN, "5 3"),
+                 _text(p.px(float(mark[0])) - 3, p.y0 + 11, mark[1], 10, "end", fill="#00664a")]
     if not ts or all(v is None for vs in data.values() for v in vs):
         body.append(_text(p.x0 + p.w / 2, p.y0 + p.h / 2, "no data", 12))
     return _svg(width, height, body + _legend(p.x0 + p.w + 10, top + 6, data), title)
 
 
+def run_limits(runs, n_states: int) -> tuple[tuple[float, float], tuple[float, float]]:
+    """y ranges (states, min h) covering every run, so that runs drawn one above the other compare."""
+    runs = list(runs)
+    xs = [_num(row[k]) for r in runs for row in r.get("x", []) for k in range(min(n_states, len(row)))]
+    return _limits(xs), _limits([_num(v) for r in runs for v in r.get("min_h", [])], True)
+
+
 def trajectory_svg(run: dict, state_names, commands=(), *, width: int = 760, max_points: int = 500,
-                   max_markers: int = 200) -> str:
-    """States and min h of one sequence run; switches labelled by the new primitive, violations marked."""
+                   max_markers: int = 200, limits=None) -> str:
+    """States and min h of one sequence run; switches labelled by the new primitive, violations marked.
+    limits: (state y range, min h y range), e.g. run_limits of all runs, to share the y axes."""
     t = [_num(v) for v in run.get("t", [])]
     cols = [[_num(row[k]) if k < len(row) else None for row in run.get("x", [])] for k in range(len(state_names))]
     min_h = [_num(v) for v in run.get("min_h", [])] + [None] * (len(t) - len(run.get("min_h", [])))
     ts = [v for v in t if v is not None] or [0.0]
     xlim = (min(ts), max(ts) if max(ts) > min(ts) else min(ts) + 1.0)
     events = sorted([(float(c["t"]), f"goal {c['goal']}", "#777") for c in commands] +
-                    [(float(s["t"]), f"→ {s['to']}", "#1f5fa8") for s in run.get("switches", [])], key=lambda e: e[0])
+                    [(float(s["t"]), f"→ {s['to']}", BLUE) for s in run.get("switches", [])], key=lambda e: e[0])
     pw = width - 90 - 6 * max(map(len, state_names), default=0)
-    rows = _rows([(_Panel(48, 0, pw, 1, xlim, (0, 1)).px(te), 8 + 5.8 * len(lab)) for te, lab, _ in events])
+    rows = _rows([(_Panel(48, 0, pw, 1, xlim, (0, 1)).px(te), 8 + 5.8 * len(lab)) for te, lab, _ in events], 6)
     head = 12 + 13 * (max(rows) + 1 if rows else 0)
-    top = _Panel(48, head, pw, 170, xlim, _limits([v for c in cols for v in c]))
-    bot = _Panel(48, head + 182, pw, 90, xlim, _limits(min_h, True))
+    ylim, hlim = limits or (_limits([v for c in cols for v in c]), _limits(min_h, True))
+    top = _Panel(48, head, pw, 170, xlim, ylim)
+    bot = _Panel(48, head + 182, pw, 90, xlim, hlim)
     idx = _decimate(len(t), max_points)
     body = [_band(bot, a, b) for a, b in _intervals(t, [x is not None and v is not None and v < 0
                                                          for x, v in zip(t, min_h)])]
@@ -219,7 +237,7 @@ def trajectory_svg(run: dict, state_names, commands=(), *, width: int = 760, max
         x, y = bot.px(float(v["t"])), bot.py(min(max(float(v["value"]), bot.ylim[0]), bot.ylim[1]))
         tip = f"t = {fmt(v['t'], 4)} s: {v['h']} of {v['primitive']} = {fmt(v['value'])}"
         body.append(_el("path", _tip(tip), d=f"M{_n(x - 3)} {_n(y - 3)}L{_n(x + 3)} {_n(y + 3)}M{_n(x - 3)} "
-                        f"{_n(y + 3)}L{_n(x + 3)} {_n(y - 3)}", stroke="#d62728", stroke_width=1.5))
+                        f"{_n(y + 3)}L{_n(x + 3)} {_n(y - 3)}", stroke=VERMILLION, stroke_width=1.5))
     body += _legend(top.x0 + pw + 10, top.y0 + 6, state_names)
     title = f"{run.get('mode', '')}: {'safe' if run.get('safe') else 'unsafe'}, {len(viol)} violation samples"
     return _svg(width, bot.y0 + bot.h + 34, body, title)
@@ -300,12 +318,99 @@ def _size(shape: str, name: str) -> tuple[float, float]:
     return {"box": (w, 15.0), "diamond": (w + 16, 22.0)}.get(shape, (max(w + 4, 22.0), 20.0))
 
 
+def windows_text(ws, limit: int = 3) -> str:
+    """t_A windows as '[a, b], [c, d]' (at most limit of them, then the count of the others)."""
+    ws = list(ws or [])
+    txt = ", ".join(f"[{fmt(a)}, {fmt(b)}]" for a, b in ws[:limit])
+    return txt + (f" and {len(ws) - limit} more" if len(ws) > limit else "")
+
+
+def edge_views(report: dict) -> list[dict]:
+    """Each edge with what the pictures show: label, tooltip, whether the planner may use it."""
+    trs = {(t["from"], t["to"]): t for t in report.get("transitions", [])}
+    out = []
+    for e in report.get("edges", []):
+        tr = trs.get((e["from"], e["to"]))
+        ws = tr.get("windows", []) if tr and e["class"] == 2 else []
+        usable = e.get("usable", True) is not False
+        label = f" {fmt(e.get('duration'))} s " if e.get("duration") is not None else ""
+        if ws:
+            label += f"\nt_A ∈ {windows_text(ws, 1)}"
+        tip = (f"{e['from']} → {e['to']}: Class {e['class']}, duration {fmt(e.get('duration'))} s, "
+               f"peak input {fmt(e.get('peak_input'))}")
+        if ws:
+            tip += f"; safe only from t_A in {windows_text(ws, 8)} s"
+        if not usable:
+            tip += f"; not used by the planner: {e.get('unusable_reason') or 'not executable'}"
+        out.append({"e": e, "label": label, "tip": tip, "usable": usable})
+    return out
+
+
+def graph_dot(report: dict) -> str:
+    """DOT text laid out for the report (Graphviz `dot`): shapes by class, dashed Class 2, grey edges
+    the planner cannot use, labels beside the edges."""
+    def q(v) -> str:
+        return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+
+    lines = ["digraph mpg {", '  graph [rankdir=TB, newrank=true, nodesep=0.3, ranksep=0.4, pad=0.15, bgcolor="transparent", '
+             'fontname="Helvetica,Arial,sans-serif"];',
+             '  node [fontname="Helvetica,Arial,sans-serif", fontsize=12, style=filled, color="#333333", '
+             'penwidth=1.2, margin="0.12,0.05"];',
+             '  edge [fontname="Helvetica,Arial,sans-serif", fontsize=11, color="#333333", arrowsize=0.7];']
+    for p in report.get("primitives", []):
+        shape = {"fixed": "box", "periodic": "ellipse", "transient": "diamond"}.get(p["class"], "ellipse")
+        lines.append(f"  {q(p['name'])} [shape={shape}, fillcolor={q(NODE_FILL.get(p['class'], '#eeeeee'))}, "
+                     f"tooltip={q(p['name'] + ': ' + p['class'])}];")
+    for v in edge_views(report):
+        e = v["e"]
+        if e["from"] == e["to"]:
+            continue
+        color = "#333333" if v["usable"] else UNUSABLE
+        attrs = [f"style={'dashed' if e['class'] == 2 else 'solid'}", f"color={q(color)}", f"fontcolor={q(color)}",
+                 f"label={q(v['label'])}", f"tooltip={q(v['tip'])}", f"labeltooltip={q(v['tip'])}"]
+        lines.append(f"  {q(e['from'])} -> {q(e['to'])} [{', '.join(attrs)}];")
+    lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+def graphviz_svg(report: dict, timeout: float = 10.0) -> str | None:
+    """The graph laid out by Graphviz's `dot` (None when dot is missing, fails or takes too long, or
+    MPGSPEC_GRAPHVIZ=0)."""
+    import os
+    import re
+    import shutil
+    import subprocess
+
+    exe = shutil.which("dot")
+    if exe is None or os.environ.get("MPGSPEC_GRAPHVIZ", "1") == "0":
+        return None
+    try:
+        out = subprocess.run([exe, "-Tsvg"], input=graph_dot(report).encode("utf-8"), capture_output=True,
+                             timeout=timeout, check=True).stdout.decode("utf-8")
+    except (OSError, subprocess.SubprocessError, UnicodeDecodeError):
+        return None
+    start = out.find("<svg")
+    if start < 0:
+        return None
+    out = out[start:]
+    out = re.sub(r"<!--.*?-->", "", out, flags=re.S)
+    m = re.match(r'<svg width="([\d.]+)pt" height="([\d.]+)pt"', out)
+    if m:  # pt -> px, so the picture has its natural size and shrinks on small screens
+        w, h = (float(v) * 4 / 3 for v in m.groups())
+        out = f'<svg width="{_n(w)}" height="{_n(h)}"' + out[m.end():]
+    out = out.replace("<svg ", '<svg role="img" class="mpg-graph" ', 1)
+    return out
+
+
 def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str = "circular") -> str:
-    """The motion primitive graph: box fixed, ellipse periodic, diamond transient; solid Class 1, dashed Class 2."""
+    """The motion primitive graph: box fixed, ellipse periodic, diamond transient; solid Class 1, dashed Class 2,
+    grey edges the planner cannot use; duration labels beside the edges (hand-made layout)."""
     prims = report.get("primitives", [])
     node = {p["name"]: (SHAPES.get(p["class"], "ellipse"), *_size(SHAPES.get(p["class"], "ellipse"), p["name"]))
             for p in prims}
-    edges = [e for e in report.get("edges", []) if e["from"] in node and e["to"] in node and e["from"] != e["to"]]
+    views = [v for v in edge_views(report) if v["e"]["from"] in node and v["e"]["to"] in node
+             and v["e"]["from"] != v["e"]["to"]]
+    edges = [v["e"] for v in views]
     G = nx.DiGraph()
     G.add_nodes_from(node)
     G.add_edges_from((e["from"], e["to"]) for e in edges)
@@ -314,9 +419,13 @@ def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str 
     gh, m = height - 44, 12 + max((s[1] for s in node.values()), default=20)
     P = {k: (width / 2 + float(v[0]) * (width / 2 - m), gh / 2 - float(v[1]) * (gh / 2 - 34)) for k, v in pos.items()}
     body = [f'<defs><marker id="{ARROW_ID}" viewBox="0 0 10 10" refX="9" refY="5" markerWidth="7" markerHeight="7" '
-            f'orient="auto"><path d="M0 0L10 5L0 10z" fill="#333"/></marker></defs>']
+            f'orient="auto"><path d="M0 0L10 5L0 10z" fill="#333"/></marker>'
+            f'<marker id="{ARROW_ID}-grey" viewBox="0 0 10 10" refX="9" refY="5" markerWidth="7" markerHeight="7" '
+            f'orient="auto"><path d="M0 0L10 5L0 10z" fill="{UNUSABLE}"/></marker></defs>']
     labels = []
-    for e in edges:
+    for v in views:
+        e = v["e"]
+        color, arrow = ("#333", ARROW_ID) if v["usable"] else (UNUSABLE, ARROW_ID + "-grey")
         (ax, ay), (bx, by) = P[e["from"]], P[e["to"]]
         cx, cy = (ax + bx) / 2 - 0.15 * (by - ay), (ay + by) / 2 + 0.15 * (bx - ax)  # bend: A->B and B->A part
         ends = []
@@ -324,15 +433,20 @@ def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str 
             d = math.hypot(cx - px, cy - py) or 1.0
             r = _reach(*node[nm], (cx - px) / d, (cy - py) / d) + gap
             ends.append(f"{_n(px + (cx - px) / d * r)} {_n(py + (cy - py) / d * r)}")
-        tip = (f"{e['from']} → {e['to']}: Class {e['class']}, duration {fmt(e.get('duration'))} s, "
-               f"peak input {fmt(e.get('peak_input'))}")
-        body.append(_el("path", _tip(tip), d=f"M{ends[0]}Q{_n(cx)} {_n(cy)} {ends[1]}", fill="none", stroke="#333",
-                        stroke_width=1.2, stroke_dasharray=DASH if e["class"] == 2 else "",
-                        marker_end=f"url(#{ARROW_ID})"))
-        if e.get("duration") is not None:
-            mx, my, lab = (ax + 2 * cx + bx) / 4, (ay + 2 * cy + by) / 4 + 3, f"{fmt(e['duration'])} s"
-            labels += [_text(mx, my, lab, 9, stroke="#fff", stroke_width=3, stroke_linejoin="round"),
-                       _text(mx, my, lab, 9, fill="#333")]
+        body.append(_el("path", _tip(v["tip"]), d=f"M{ends[0]}Q{_n(cx)} {_n(cy)} {ends[1]}", fill="none",
+                        stroke=color, stroke_width=1.2, stroke_dasharray=DASH if e["class"] == 2 else "",
+                        marker_end=f"url(#{arrow})"))
+        if v["label"]:
+            # beside the curve: from its midpoint, outwards along the bend's normal
+            mx, my = (ax + 2 * cx + bx) / 4, (ay + 2 * cy + by) / 4
+            nx_, ny_ = cx - (ax + bx) / 2, cy - (ay + by) / 2
+            d = math.hypot(nx_, ny_) or 1.0
+            lab = v["label"].split("\n")[0].strip() + (" ⧗" if e["class"] == 2 else "")
+            lx, ly = mx + nx_ / d * 9, my + ny_ / d * 9 + 3
+            anchor = "middle" if abs(nx_ / d) < 0.4 else ("start" if nx_ > 0 else "end")
+            labels += [_text(lx, ly, lab, 10, anchor, stroke="#fff", stroke_width=3, stroke_linejoin="round"),
+                       _el("text", _tip(v["tip"]) + escape(lab), x=float(lx), y=float(ly), font_size=10,
+                           text_anchor=anchor, fill=color)]
     for p in prims:
         (x, y), (shape, a, b) = P[p["name"]], node[p["name"]]
         body += [_node(shape, x, y, a, b, NODE_FILL.get(p["class"], "#eee")), _text(x, y + 4, p["name"])]

@@ -10,6 +10,7 @@ inside the project folder, the data folder of a `share:` package or a folder pas
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -146,6 +147,7 @@ def _validation_errors(err: ValidationError, positions: PositionMap, prefix: tup
         out.append(
             SpecError(msg, location=positions.locate(data_loc), key=key, expected=expected, found=found_s, code=code)
         )
+    _suggest_keys(out, errs, prefix, data)
     # one union branch usually explains the problem best; keep distinct locations
     seen, unique = set(), []
     for s in out:
@@ -154,6 +156,49 @@ def _validation_errors(err: ValidationError, positions: PositionMap, prefix: tup
             seen.add(k)
             unique.append(s)
     return unique
+
+
+@lru_cache(maxsize=1)
+def _spec_keys() -> tuple[str, ...]:
+    """Every key the spec language knows (property names of the project, primitive and system schemas)."""
+    from .schema import spec_schema
+
+    names: set[str] = set()
+
+    def walk(node):
+        if isinstance(node, dict):
+            names.update((node.get("properties") or {}).keys())
+            for v in node.values():
+                walk(v)
+        elif isinstance(node, list):
+            for v in node:
+                walk(v)
+
+    for kind in ("project", "primitive", "system"):
+        walk(spec_schema(kind))
+    return tuple(sorted(names))
+
+
+def _suggest_keys(out: list[SpecError], errs, prefix: tuple, data) -> None:
+    """'did you mean' for unknown keys: a required key missing next to it, else a known key."""
+    import difflib
+
+    missing: dict[tuple, list[str]] = {}
+    for e in errs:
+        if e["type"] == "missing":
+            loc = _data_path(data, prefix + tuple(e["loc"]))
+            if loc and isinstance(loc[-1], str):
+                missing.setdefault(tuple(loc[:-1]), []).append(loc[-1])
+    for s in out:
+        if s.code != "MPG102" or s.hint:
+            continue
+        parts = s.key.split(".")
+        word = parts[-1]
+        parent = tuple(int(x) if x.isdigit() else x for x in parts[:-1])
+        near = difflib.get_close_matches(word, missing.get(parent, []), n=1, cutoff=0.6) or \
+            difflib.get_close_matches(word, _spec_keys(), n=1, cutoff=0.8)
+        if near:
+            s.hint = f"did you mean {near[0]!r}?"
 
 
 def _at(pos: PositionMap, loc: tuple, offset: int | None) -> Location:

@@ -141,8 +141,8 @@ class TrotController(Strict):
     touchdown_speed: Number = Field(default=0.3, ge=0, description="downward foot speed at touchdown (m/s)")
     kv: Number = Field(default=10.0, ge=0, description="CoM velocity gain (1/s)")
     raibert: Number = Field(default=0.08, ge=0, description="foot placement gain on the velocity error (s)")
-    kp_swing: Number = Field(default=3000.0, gt=0, description="swing foot stiffness (N/m)")
-    kd_swing: Number = Field(default=60.0, ge=0, description="swing foot damping (N s/m)")
+    kp_swing: Number = Field(default=12000.0, gt=0, description="swing foot stiffness (N/m)")
+    kd_swing: Number = Field(default=200.0, ge=0, description="swing foot damping (N s/m)")
     k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
     d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
 

@@ -8,6 +8,7 @@ from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 from .base import Strict
 from .primitive import Grid, Primitive, SafetyFunction
 from .system import Number, System, Text
+from .uncertainty import Uncertainty as UncertaintyModel
 
 
 class OracleConfig(Strict):
@@ -107,6 +108,12 @@ class Sequence(Strict):
         return v
 
 
+class Uncertainty(UncertaintyModel):
+    """Uncertainty and disturbances, with assertions on the robust graph (same kinds as the project's)."""
+
+    assertions: list[Assertion] = Field(default_factory=list)
+
+
 class Project(Strict):
     """A system, its primitives, oracle settings and the CI assertions over the resulting graph."""
 
@@ -122,3 +129,5 @@ class Project(Strict):
     ] = Field(default_factory=dict, description="what a failed assumption check does (default: fail)")
     assertions: list[Assertion] = Field(default_factory=list)
     sequence: Sequence | None = None
+    uncertainty: Uncertainty | None = Field(default=None, description="parameter ranges, disturbances and "
+                                            "initial-state error the robust graph is checked against")

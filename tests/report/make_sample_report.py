@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 
 from mpgspec import api
+from mpgspec.report.compact import compact_cells, expand_cells
 from mpgspec.report.schema import validate_report
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -35,12 +36,15 @@ def _round(x):
 
 def _grid(tr: dict) -> None:
     ia, ib = _every(len(tr["t_A"]), MAX_GRID), _every(len(tr["t_B"]), MAX_GRID)
+    cells = expand_cells(tr)
     tr["t_A"], tr["t_B"] = [tr["t_A"][i] for i in ia], [tr["t_B"][j] for j in ib]
     tr["verdicts"] = [[tr["verdicts"][i][j] for j in ib] for i in ia]
-    tr["cells"] = [[tr["cells"][i][j] | {"message": tr["cells"][i][j]["message"][:80]} for j in ib] for i in ia]
+    cells = [[cells[i][j] | {"message": cells[i][j]["message"][:80]} for j in ib] for i in ia]
+    tr["cells"] = compact_cells(cells, tr["h_names"])
     tr["best_t_B"] = [tr["best_t_B"][i] for i in ia]
-    flat = [e for row in tr["cells"] for e in row]
+    flat = [e for row in cells for e in row]
     tr["counts"] = {"safe": sum(e["verdict"] for e in flat), "total": len(flat),
+                    "inconclusive": sum(e["status"] == "inconclusive" for e in flat),
                     "refined": sum(e["refined"] for e in flat), "errors": sum(e["reason"] == "error" for e in flat)}
 
 
@@ -69,7 +73,16 @@ def shrink(report: dict) -> dict:
         if "t" in f["series"]:
             _series(f["series"], MAX_POINTS // 2, ("roa_margin",), ("u", "x"), ("h",))
     for run in (r["sequence"] or {}).get("runs", {}).values():
-        _series(run, MAX_POINTS, ("x", "min_h", "active"))
+        active = [name for name, k in run["active"] for _ in range(k)]
+        run["active"] = active
+        _series(run, MAX_POINTS, ("min_h", "active"), ("x",))
+        out = []
+        for name in run["active"]:
+            if out and out[-1][0] == name:
+                out[-1][1] += 1
+            else:
+                out.append([name, 1])
+        run["active"] = out
         run["violations"] = run["violations"][:MAX_VIOLATIONS]
     r["project"]["path"] = "specs/pendulum/project.yaml"
     return _round(r)

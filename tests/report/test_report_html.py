@@ -50,3 +50,85 @@ def test_without_sequence_or_failures(sample_text):
     report["failures"] = [{**json.loads(sample_text)["failures"][0], "series": {"error": "diverged"}}]
     html = render_html(report)
     assert "diverged" in html and 'id="sequence"' not in html
+
+
+def test_summary_names_every_warning_and_links_it(sample_text):
+    report = json.loads(sample_text)
+    html = render_html(report)
+    warns = [c for c in report["assumptions"] if c["status"] == "warn"]
+    assert warns and f"PASS with {len(warns)} warning" in html
+    k = report["assumptions"].index(warns[0])
+    assert f'href="#assumption-{k}"' in html and f'id="assumption-{k}"' in html
+
+
+def test_a_failed_assertion_links_to_its_grid(sample_text):
+    report = json.loads(sample_text)
+    a = next(a for a in report["assertions"] if a["kind"] == "edge")
+    a["status"], report["status"] = "fail", "fail"
+    html = render_html(report)
+    names = [p["name"] for p in report["primitives"]]
+    src, dst = (n for n in a["description"].removeprefix("edge ").split(" of class")[0].split(" -> "))
+    grid = f"grid-{names.index(src)}-{names.index(dst)}"
+    assert f'<a href="#{grid}">' in html and f'<details id="{grid}">' in html
+    assert "FAIL" in html.split('id="summary"')[1].split("</section>")[0]
+
+
+def test_grids_and_switches_are_folded_and_tables_scroll(sample_text):
+    html = render_html(json.loads(sample_text))
+    grids = html.split('id="grids"')[1].split("</section>")[0]
+    assert "<details" in grids and "<details open" not in grids and "details open" not in html
+    assert html.count('<div class="scroll">') >= 5 and "@media (max-width" in html and "@media print" in html
+    assert "position: sticky" in html
+
+
+def test_unusable_edges_are_grey_and_explained(sample_text, monkeypatch):
+    report = json.loads(sample_text)
+    bad = [e for e in report["edges"] if e.get("usable") is False]
+    assert bad
+    monkeypatch.setenv("MPGSPEC_GRAPHVIZ", "0")  # the built-in layout
+    html = render_html(report)
+    assert "built-in layout" in html and "#9a9a9a" in html
+    assert "not usable by the planner" in html and bad[0]["unusable_reason"] in html
+
+
+def test_graphviz_layout_when_dot_is_installed(sample_text):
+    import shutil
+
+    if shutil.which("dot") is None:
+        pytest.skip("Graphviz dot is not installed")
+    report = json.loads(sample_text)
+    html = render_html(report)
+    assert "Layout: Graphviz dot" in html and 'class="mpg-graph"' in html
+    c2 = next(e for e in report["edges"] if e["class"] == 2)
+    assert "t_A ∈ [" in html and "safe only from t_A in" in html  # Class 2 windows on label and tooltip
+    assert c2["from"] in html
+
+
+def test_graphviz_failure_falls_back(sample_text, monkeypatch):
+    import subprocess
+
+    def boom(*a, **k):
+        raise subprocess.TimeoutExpired("dot", 10)
+
+    monkeypatch.setattr(subprocess, "run", boom)
+    assert "built-in layout" in render_html(json.loads(sample_text))
+
+
+def test_floquet_multipliers_are_tabulated(sample_text):
+    report = json.loads(sample_text)
+    p = next(p for p in report["primitives"] if p["roa_method"] == "floquet")
+    p["roa_evidence"]["neutral"] = [{"name": "phase", "multiplier": 1.0}]
+    html = render_html(report)
+    assert f"Floquet multipliers of {p['name']}" in html and "Neutral directions: phase" in html
+
+
+def test_sequence_runs_share_their_y_axes(sample_text):
+    from mpgspec.report.compact import run_rows
+    from mpgspec.report.svg import run_limits
+
+    seq = json.loads(sample_text)["sequence"]
+    runs = [run_rows(r) for r in seq["runs"].values()]
+    both = run_limits(runs, len(seq["state_names"]))
+    for r in runs:
+        one = run_limits([r], len(seq["state_names"]))
+        assert both[0][0] <= one[0][0] and both[0][1] >= one[0][1]

@@ -38,8 +38,11 @@ def test_free_form_info_and_settings_accept_extra_keys(sample):
     lambda r: r.__setitem__("status", "maybe"),
     lambda r: r["primitives"][0].__setitem__("class", "looping"),
     lambda r: r["edges"][0].__setitem__("class", 0),
-    lambda r: r["transitions"][0]["cells"][0][0].__setitem__("reason", "unknown"),
-    lambda r: r["transitions"][0]["cells"].pop(),
+    lambda r: r["transitions"][0]["cells"]["reason"].__setitem__(0, "x"),
+    lambda r: r["transitions"][0]["cells"]["margin"].pop(),
+    lambda r: r["transitions"][0]["cells"]["min_margins"][0][0].append(1.0),
+    lambda r: r["transitions"][0]["cells"].pop("status"),
+    lambda r: r.__setitem__("schema_version", "1.0"),
     lambda r: r["transitions"][0].__setitem__("method", "guessed"),
 ])
 def test_mismatch_raises(sample, mutate):
@@ -50,5 +53,6 @@ def test_mismatch_raises(sample, mutate):
 
 def test_schema_uses_report_keys():
     s = report_schema()
+    assert s["$id"].endswith("report-v2.json") and "$schema" in s
     assert "from" in s["$defs"]["Edge"]["properties"] and "class" in s["$defs"]["Edge"]["properties"]
     assert s["additionalProperties"] is False

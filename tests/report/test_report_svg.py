@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from mpgspec.report.svg import graph_svg, grid_svg, series_svg, trajectory_svg
+from mpgspec.report.compact import expand_cells, run_rows
+from mpgspec.report.svg import VERMILLION, graph_svg, grid_svg, series_svg, trajectory_svg
 
 SAMPLE = Path(__file__).with_name("data") / "sample_report.json"
 NS = "{http://www.w3.org/2000/svg}"
@@ -28,7 +29,7 @@ def test_series_breaks_lines_at_none():
     root = _parse(series_svg([0.0, 1.0, 2.0, 3.0, 4.0], {"h1": [1.0, None, 0.5, -0.5, None], "h2": [None] * 5}))
     paths = [p.get("d") for p in root.iter(NS + "path")]
     assert len(paths) == 1 and paths[0].count("M") == 2  # h1 in two pieces, h2 has no line
-    assert any(r.get("fill") == "#d64541" for r in root.iter(NS + "rect"))  # h < 0 is shaded
+    assert any(r.get("fill") == VERMILLION for r in root.iter(NS + "rect"))  # h < 0 is shaded
 
 
 def test_series_all_missing_and_nan():
@@ -61,11 +62,11 @@ def test_graph_shapes(sample):
 
 def test_grid_and_trajectory(sample):
     tr = next(t for t in sample["transitions"] if t["class"] == 2)
-    tr["cells"][0][0]["refined"] = True
-    root = _parse(grid_svg(tr))
+    tr["cells"]["refined"][0] = "1" + tr["cells"]["refined"][0][1:]
+    root = _parse(grid_svg({**tr, "cells": expand_cells(tr)}))
     assert root.find(f".//{NS}circle") is not None
     seq = sample["sequence"]
     for run in seq["runs"].values():
-        root = _parse(trajectory_svg(run, seq["state_names"], seq["commands"]))
+        root = _parse(trajectory_svg(run_rows(run), seq["state_names"], seq["commands"]))
         labels = "".join(root.itertext())
         assert all(f"→ {s['to']}" in labels for s in run["switches"])

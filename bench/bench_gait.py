@@ -1,0 +1,71 @@
+"""The A1 walks: cost of a gait (orbit by Newton shooting), of the hybrid Floquet verifier, and of an
+oracle call into a walk, each as a ratio to an oracle call into Stand's neighbour Lie in the same
+process; and the oracle's summed local-error bound along one stride against the tube radius.
+
+    python bench/bench_gait.py
+"""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.common import med_ratio, rounds  # noqa: E402
+from mpgspec.api import compile_project, settings_for  # noqa: E402
+from mpgspec.compile.rigidbody.system import feet_on_ground  # noqa: E402
+from mpgspec.compile.system import compile_system  # noqa: E402
+from mpgspec.gait.orbit import StrideMap, find_orbit  # noqa: E402
+from mpgspec.oracle.integrator import build_chunk, initial_state  # noqa: E402
+from mpgspec.oracle.oracle import SafetyOracle  # noqa: E402
+from mpgspec.spec.loader import load_project  # noqa: E402
+
+A1 = Path(__file__).resolve().parents[1] / "specs" / "a1" / "walks.yaml"
+
+
+def main() -> None:
+    spec = load_project(A1)
+    s = settings_for(spec)
+    t = time.perf_counter()
+    prims = compile_project(spec)
+    print(f"compile the six primitives: {time.perf_counter() - t:.1f} s")
+    sys_ = compile_system(spec)
+    inst = next(i for i in spec.primitives if i.name == "Walk(slow)")
+    ctrl = inst.spec.controller
+    x = sys_.default_state()
+    for j, a in ctrl.pose.items():
+        x[sys_.state_names.index(j)] = a
+    x = feet_on_ground(sys_, x)
+    t = time.perf_counter()
+    sm = StrideMap(sys_, ctrl, 0.001)
+    print(f"stride map build and JIT (cached after the first run): {time.perf_counter() - t:.1f} s")
+    lie, walk = SafetyOracle(prims["Lie"], s), SafetyOracle(prims["Walk(slow)"], s)
+    x_stand = prims["Stand"].x_star(0.0)
+    lie(x_stand, 0.0), walk(x_stand, 0.0)  # compile
+    times = rounds({"lie_call": lambda: lie(x_stand, 0.0), "walk_call": lambda: walk(x_stand, 0.0),
+                    "orbit": lambda: find_orbit(sm, x, 0.2)}, 3)
+    med = {k: float(np.median(v)) for k, v in times.items()}
+    print(f"oracle call into Lie (baseline): {med['lie_call'] * 1e3:.0f} ms")
+    print(f"oracle call into Walk(slow), 2.5 s horizon: {med['walk_call'] * 1e3:.0f} ms, "
+          f"{med_ratio(times['walk_call'], times['lie_call']):.2f}x Lie")
+    print(f"orbit of Walk(slow) by Newton shooting: {med['orbit']:.2f} s, "
+          f"{med_ratio(times['orbit'], times['lie_call']):.1f}x a Lie call")
+    p = prims["Walk(slow)"]
+    for dt in (0.001, 0.0005):
+        ch = build_chunk(p, dt, 64, True, s.jit_flags)
+        z = initial_state(p, p.x_star(0.0), 0.0)
+        e = []
+        for _ in range(int(round(p.period / dt / 64)) + 1):
+            zf, out = ch.run(z[:, None])
+            e.append(out[ch.rows.err].ravel())
+            z = zf[:, 0]
+        e = np.concatenate(e)[: int(round(p.period / dt))]
+        print(f"summed local-error bound over one stride at dt = {dt:g}: {e.sum():.3g} "
+              f"(largest step {e.max():.3g}, median {np.median(e):.2g})")
+
+
+if __name__ == "__main__":
+    main()

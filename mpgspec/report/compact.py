@@ -1,0 +1,178 @@
+"""The compact forms report.json uses (schema 2): columnar oracle cells and sequence runs, rounded
+floats, and the functions that turn them back into one dict per cell or one row per sample.
+
+- A transition's `cells` holds one grid per field (`cells["margin"][i_A][i_B]`); per-input and
+  per-safety-function fields hold one grid per component (`cells["min_margins"][k][i_A][i_B]`,
+  k in the order of `h_names`); `status`, `reason` and the flags `checked`, `refined`,
+  `saturated` are one string of digits per t_A row (a character per t_B: the index into STATUS
+  or REASONS, 0/1 for flags), `violated` an index into `h_names` (or null), and non-empty
+  messages are listed sparsely as `[i_A, i_B, text]`; the verdict of a cell is the transition's
+  `verdicts[i_A][i_B]`.
+- A sequence run stores at most MAX_RUN samples, its states by column (`x[k]` is state k over
+  `t`) and the active primitive as runs `[[name, samples], ...]`; switches and violations are
+  kept in full.
+- Floats keep 6 significant digits (oracle evidence, times; error bounds 3); plotted traces keep 4
+  and at most MAX_TRACE samples (every k-th, the last, and the first at or after the decision).
+"""
+from __future__ import annotations
+
+import math
+
+STATUS = ("safe", "unsafe", "inconclusive")
+REASONS = ("entered_E", "left_C", "horizon_reached", "integration_failed", "inconclusive", "error")
+CELL_NUMBERS = ("t_stop", "t_enter", "margin", "error_bound", "best_roa_margin")
+CELL_VECTORS = ("peak_input", "peak_demand", "min_margins")
+CELL_FLAGS = ("checked", "refined", "saturated")
+DIGITS, TRACE_DIGITS, BOUND_DIGITS = 6, 4, 3
+MAX_TRACE, MAX_RUN = 200, 600
+
+
+def rnd(v, digits: int = DIGITS):
+    """v with every float rounded to `digits` significant digits (non-finite -> None), recursively."""
+    if isinstance(v, bool) or v is None or isinstance(v, (str, int)) and not isinstance(v, float):
+        return v
+    if isinstance(v, float):
+        return float(f"{v:.{digits}g}") if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: rnd(x, digits) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [rnd(x, digits) for x in v]
+    try:  # numpy scalars
+        return rnd(float(v), digits)
+    except (TypeError, ValueError):
+        return v
+
+
+def compact_cells(rows: list[list[dict]], h_names: list[str]) -> dict:
+    """One grid per field from a grid of cell dicts (see the module docstring)."""
+    hidx = {h: k for k, h in enumerate(h_names)}
+    def code(v, table, other):
+        return str(table.index(v) if v in table else table.index(other))
+
+    out: dict = {
+        "status": ["".join(code(c["status"], STATUS, "unsafe") for c in row) for row in rows],
+        "reason": ["".join(code(c["reason"], REASONS, "error") for c in row) for row in rows],
+        "violated": [[hidx.get(c["violated"]) if c.get("violated") is not None else None for c in row] for row in rows],
+    }
+    for k in CELL_NUMBERS:
+        out[k] = [[rnd(c.get(k), BOUND_DIGITS if k == "error_bound" else DIGITS) for c in row] for row in rows]
+    for k in CELL_VECTORS:
+        n = max((len(c.get(k) or []) for row in rows for c in row), default=0)
+        out[k] = [[[rnd((c.get(k) or [])[m]) if m < len(c.get(k) or []) else None for c in row] for row in rows]
+                  for m in range(n)]
+    for k in CELL_FLAGS:
+        out[k] = ["".join("1" if c.get(k) else "0" for c in row) for row in rows]
+    out["messages"] = [[i, j, c["message"]] for i, row in enumerate(rows) for j, c in enumerate(row) if c.get("message")]
+    return out
+
+
+def expand_cells(tr: dict) -> list[list[dict]]:
+    """A transition's cells as a grid of dicts (verdict, status, reason, ... message)."""
+    c = tr.get("cells")
+    if isinstance(c, list):  # already one dict per cell
+        return c
+    if not c:
+        return [[{"verdict": v, "status": "safe" if v else "unsafe", "reason": "entered_E" if v else "left_C"}
+                 for v in row] for row in tr.get("verdicts", [])]
+    h_names, verdicts = tr.get("h_names", []), tr.get("verdicts", [])
+    msgs = {(i, j): m for i, j, m in c.get("messages", [])}
+    rows = []
+    for i, vrow in enumerate(verdicts):
+        row = []
+        for j, v in enumerate(vrow):
+            s, r, h = c["status"][i][j], c["reason"][i][j], c["violated"][i][j]
+            cell = {"verdict": v, "status": STATUS[int(s)], "reason": REASONS[int(r)],
+                    "violated": h_names[h] if h is not None and h < len(h_names) else None}
+            for k in CELL_NUMBERS:
+                cell[k] = c[k][i][j]
+            for k in CELL_VECTORS:
+                cell[k] = [comp[i][j] for comp in c[k]]
+            for k in CELL_FLAGS:
+                cell[k] = c[k][i][j] == "1"
+            cell["message"] = msgs.get((i, j), "")
+            row.append(cell)
+        rows.append(row)
+    return rows
+
+
+def _every(n: int, m: int) -> list[int]:
+    idx = list(range(0, n, max(1, math.ceil(n / m))))
+    return idx + [n - 1] if n and idx[-1] != n - 1 else idx
+
+
+def compact_series(s: dict, t_keep=None) -> dict:
+    """A dense rollout for pictures: at most MAX_TRACE samples (keeping the first at or after
+    t_keep), values rounded to TRACE_DIGITS (times to DIGITS)."""
+    if "t" not in s:
+        return dict(s)
+    t = list(s["t"])
+    n = len(t)
+    idx = _every(n, MAX_TRACE)
+    if t_keep is not None:
+        k = next((i for i, v in enumerate(t) if v is not None and v >= t_keep - 1e-9), None)
+        if k is not None and k not in idx:
+            idx = sorted(idx + [k])
+
+    def pick(v):
+        return [v[i] for i in idx if i < len(v)]
+
+    out = {}
+    for key, v in s.items():
+        if key == "t":
+            out[key] = rnd(pick(v))
+        elif isinstance(v, dict):
+            out[key] = {name: rnd(pick(c), TRACE_DIGITS) for name, c in v.items()}
+        elif isinstance(v, list) and v and isinstance(v[0], list):
+            out[key] = [rnd(pick(c), TRACE_DIGITS) for c in v]
+        elif isinstance(v, list):
+            out[key] = rnd(pick(v), TRACE_DIGITS)
+        else:
+            out[key] = v
+    return out
+
+
+def compact_run(run: dict) -> dict:
+    """A sequence run with its states by column and the active primitive run-length encoded."""
+    out = dict(run)
+    idx = _every(len(run.get("t") or []), MAX_RUN)
+    x = [run["x"][i] for i in idx if i < len(run.get("x") or [])]
+    n = max((len(r) for r in x), default=0)
+    out["x"] = [rnd([r[k] if k < len(r) else None for r in x], TRACE_DIGITS) for k in range(n)]
+    out["t"] = rnd([run["t"][i] for i in idx])
+    out["min_h"] = rnd([run["min_h"][i] for i in idx if i < len(run.get("min_h") or [])], TRACE_DIGITS)
+    active: list = []
+    for name in [run["active"][i] for i in idx if i < len(run.get("active") or [])]:
+        if active and active[-1][0] == name:
+            active[-1][1] += 1
+        else:
+            active.append([name, 1])
+    out["active"] = active
+    out["switches"] = rnd(run.get("switches") or [])
+    out["violations"] = rnd(run.get("violations") or [])
+    return out
+
+
+def run_rows(run: dict) -> dict:
+    """A sequence run with `x` as one row per sample and `active` one name per sample."""
+    out = dict(run)
+    x = run.get("x") or []
+    n = len(run.get("t") or [])
+    out["x"] = [[col[i] if i < len(col) else None for col in x] for i in range(n)] if x else []
+    act = run.get("active") or []
+    if act and isinstance(act[0], list):
+        out["active"] = [name for name, k in act for _ in range(int(k))]
+    return out
+
+
+def readable(report: dict) -> dict:
+    """A copy of a report (schema 1 or 2) with one dict per oracle cell and one row per sample of
+    each sequence run: the form the HTML and pictures are drawn from."""
+    major = str(report.get("schema_version", "1")).split(".")[0]
+    if major == "1":
+        return report
+    out = dict(report)
+    out["transitions"] = [{**t, "cells": expand_cells(t)} for t in report.get("transitions", [])]
+    seq = report.get("sequence")
+    if seq:
+        out["sequence"] = {**seq, "runs": {m: run_rows(r) for m, r in (seq.get("runs") or {}).items()}}
+    return out

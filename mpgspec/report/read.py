@@ -1,0 +1,131 @@
+"""Read verified results back: a report.json, whether it still belongs to the specs, and the
+planner's graph rebuilt from it (only the edges the planner may take, with their weights).
+
+Kept light (json and networkx) so that `mpgspec plan` answers from a report in well under a second.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import networkx as nx
+
+WEIGHTS = ("duration", "peak_input", "hops")
+
+
+def load_report(path) -> dict:
+    """A report.json (or the folder holding one) as a dict."""
+    p = Path(path)
+    if p.is_dir():
+        p = p / "report.json"
+    with open(p, encoding="utf-8") as f:
+        return json.load(f)
+
+
+def report_status(report_path, project_file) -> tuple[dict | None, str]:
+    """(report, '') when the report at report_path was verified from the project's current spec
+    files, else (None, why not)."""
+    from ..spec.digest import spec_digest
+
+    p = Path(report_path)
+    if not p.is_file():
+        return None, f"no verified results at {p}"
+    try:
+        report = load_report(p)
+    except (OSError, ValueError) as e:
+        return None, f"{p} cannot be read ({e})"
+    if not str(report.get("schema_version", "")).startswith("2."):
+        return None, f"{p} has report schema {report.get('schema_version')!r}, not 2.x"
+    stored = (report.get("project") or {}).get("digest")
+    if not stored or stored != spec_digest(project_file):
+        return None, f"{p} is stale: the spec files changed since it was verified"
+    return report, ""
+
+
+@dataclass
+class ReportTransition:
+    """What execution needs of a verified transition: its grid times and switch-in clocks."""
+
+    source: str
+    target: str
+    cls: int
+    t_A_list: list
+    best_t_B: list
+    windows: list
+    weights: dict = field(default_factory=dict)
+
+    @cached_property
+    def t_A(self):
+        """The t_A grid as a numpy array."""
+        import numpy as np
+
+        return np.asarray(self.t_A_list, float)
+
+    def switch_clock(self, t_A: float) -> float | None:
+        """The verified t_B for a grid time t_A, None where no transition starts."""
+        import numpy as np
+
+        i = int(np.argmin(np.abs(self.t_A - t_A)))
+        return self.best_t_B[i] if abs(self.t_A[i] - t_A) < 1e-9 else None
+
+
+class ReportGraph:
+    """The motion primitive graph of a report: G holds every verified edge (attribute `class`),
+    planner_graph() the ones the planner may take; edge(a, b) as MotionPrimitiveGraph.edge."""
+
+    def __init__(self, report: dict):
+        self.report = report
+        self.G = nx.DiGraph()
+        for p in report.get("primitives", []):
+            self.G.add_node(p["name"], **{"class": p["class"], "period": p.get("period"), "domain": p.get("domain"),
+                                          "next": p.get("next")})
+        trs = {(t["from"], t["to"]): t for t in report.get("transitions", [])}
+        self.transitions: dict[tuple[str, str], ReportTransition] = {}
+        for e in report.get("edges", []):
+            t = trs.get((e["from"], e["to"]), {})
+            self.G.add_edge(e["from"], e["to"], **{"class": e["class"], "usable": e.get("usable", True),
+                                                   **{k: e[k] for k in WEIGHTS if e.get(k) is not None}})
+            self.transitions[(e["from"], e["to"])] = ReportTransition(
+                e["from"], e["to"], e["class"], list(t.get("t_A", [])), list(t.get("best_t_B", [])),
+                [tuple(w) for w in t.get("windows", [])], {k: e[k] for k in WEIGHTS if e.get(k) is not None})
+
+    @property
+    def nodes(self) -> list[str]:
+        return list(self.G.nodes)
+
+    def edge(self, a: str, b: str) -> ReportTransition | None:
+        return self.transitions.get((a, b))
+
+    def planner_graph(self) -> nx.DiGraph:
+        G = nx.DiGraph()
+        G.add_nodes_from(self.G.nodes(data=True))
+        G.add_edges_from((a, b, d) for a, b, d in self.G.edges(data=True) if d.get("usable", True))
+        return G
+
+
+def shortest_path(G: nx.DiGraph, source: str, goal: str, weight: str = "duration") -> tuple[list[str] | None, float | None]:
+    """Dijkstra on the planner's graph, as mpgspec.plan.planner.shortest_plan."""
+    if weight not in WEIGHTS:
+        raise ValueError(f"unknown weight {weight!r}; expected one of {', '.join(WEIGHTS)}")
+    if source == goal:
+        return [source], 0.0
+    try:
+        cost, path = nx.single_source_dijkstra(G, source, goal, weight=weight)
+    except (nx.NetworkXNoPath, nx.NodeNotFound):
+        return None, None
+    return path, float(cost)
+
+
+def hops(edge, path: list[str] | None) -> list[dict]:
+    """Each hop of a path: from, to, class, duration and the t_A windows to wait for (Class 2).
+    edge(a, b) returns an object with cls, windows and weights (a ReportTransition or a Transition)."""
+    out = []
+    for a, b in zip(path or [], (path or [])[1:]):
+        tr = edge(a, b)
+        cls = int(tr.cls) if tr is not None else None
+        out.append({"from": a, "to": b, "class": cls,
+                    "duration": (tr.weights or {}).get("duration") if tr is not None else None,
+                    "windows": [list(w) for w in tr.windows] if tr is not None and cls == 2 else []})
+    return out

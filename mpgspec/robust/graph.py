@@ -1,0 +1,258 @@
+"""The robust graph: each nominal edge's switch cells re-run under the project's uncertainty.
+
+For every nominal transition A -> B, up to `cells` t_A rows that have a verified t_B are taken
+(the t_B the plan would switch in at). Each such cell is run for a set of scenarios: the corners
+of the box of uncertain parameters and start errors (at most `corners` of them, seeded), its
+centre, `samples` seeded random points, each with the disturbance at 0, +bound and -bound; then
+`search` rounds of an adversarial bang-bang disturbance from the worst scenario (the sign of the
+gradient, through CasADi, of the binding h sample before entry and of the RoA margin at entry).
+A cell is robust-safe when every scenario is safe; the robust transition keeps only those cells
+and is classified like the nominal one. This is falsification: a robust edge withstood every
+scenario tried, it is not proven to withstand the whole set.
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..check.assertions import AssertionResult, evaluate_assertions
+from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
+from ..plan.planner import lookup_table
+from .rollout import RobustRollout, judge, plant
+from .sequence import HOLD, DisturbedSequences
+
+LABEL = "empirical"
+NOTE = ("falsification, not proof: a robust edge withstood every scenario tried (parameter-box corners, seeded "
+        "samples and an adversarial disturbance search); no certificate backs it")
+
+
+@dataclass
+class RobustResult:
+    """The robust graph, what each nominal edge withstood, and the robust assertions."""
+
+    graph: MotionPrimitiveGraph
+    edges: list[dict]
+    assertions: list[AssertionResult]
+    scenarios: dict
+    timing: dict = field(default_factory=dict)
+    sequence: dict | None = None  # safe fraction of the goal sequence per mode under sampled uncertainty
+
+    def to_dict(self) -> dict:
+        survive = [e for e in self.edges if e["survives"]]
+        return {"level": LABEL, "note": NOTE, "scenarios": self.scenarios,
+                "summary": {"nominal_edges": len(self.edges), "robust_edges": len(survive),
+                            "nominal_only": [f"{e['from']} -> {e['to']}" for e in self.edges if not e["survives"]]},
+                "edges": self.edges, "assertions": [a.to_dict() for a in self.assertions], "sequence": self.sequence,
+                "timing": self.timing}
+
+
+def _scenarios(unc, sys, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """(theta (S, P), start error (S, nx), disturbance sign (S,), kind) of every scenario of a cell."""
+    names = list(unc.parameters)
+    lo = [unc.parameters[n].range[0] for n in names]
+    hi = [unc.parameters[n].range[1] for n in names]
+    nom = [sys.parameters[n] for n in names]
+    states = [sys.state_names.index(s) for s in unc.initial_state]
+    eb = [float(unc.initial_state[s]) for s in unc.initial_state]
+    lo, hi = np.array(lo + [-b for b in eb], float), np.array(hi + eb, float)
+    centre = np.array(nom + [0.0] * len(eb), float)
+    dim = len(lo)
+    pts, kinds = [centre], ["nominal"]
+    if dim:
+        if 2 ** dim <= unc.corners:
+            corners = np.array(list(itertools.product((0, 1), repeat=dim)), float)
+        else:
+            corners = rng.integers(0, 2, (unc.corners, dim)).astype(float)
+        pts += list(lo + corners * (hi - lo))
+        kinds += ["corner"] * len(corners)
+        pts += list(lo + rng.random((unc.samples, dim)) * (hi - lo))
+        kinds += ["sample"] * unc.samples
+    pts = np.array(pts, float).reshape(-1, dim)
+    signs = [0.0, 1.0, -1.0] if unc.disturbance is not None else [0.0]
+    th, err, sg, kd = [], [], [], []
+    for sgn in signs:
+        for p, k in zip(pts, kinds):
+            th.append(p[: len(names)])
+            e = np.zeros(sys.nx)
+            e[states] = p[len(names):]
+            err.append(e)
+            sg.append(sgn)
+            kd.append(k if sgn == 0 else f"{k}, constant disturbance {'+' if sgn > 0 else '-'}bound")
+    return np.array(th).reshape(-1, len(names)), np.array(err), np.array(sg), kd
+
+
+def _rows(tr: Transition, m: int) -> list[int]:
+    avail = np.flatnonzero(tr.available)
+    if len(avail) <= m:
+        return [int(i) for i in avail]
+    return sorted({int(avail[int(round(k))]) for k in np.linspace(0, len(avail) - 1, m)})
+
+
+def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
+    """Build the robust graph of a compiled project and its nominal graph; None without `uncertainty`.
+
+    memo (optional, mpgspec.oracle.cache.Memo) keeps the cell verdicts and sequence statistics by the
+    content hash of the closed loops, the system, the uncertainty, the sequence and the settings.
+    """
+    spec, prims, settings, g = cp.spec, cp.prims, cp.settings, vg.graph
+    unc = spec.project.uncertainty
+    if unc is None:
+        return None
+    t0 = time.perf_counter()
+    seq_spec = spec.project.sequence
+    key = memo.key("robust", *(p.digest() for p in prims.values()), spec.system.model_dump_json(),
+                   unc.model_dump_json(), seq_spec.model_dump_json() if seq_spec else None,
+                   sorted(dataclasses.asdict(settings).items())) if memo is not None else None
+    known = memo.get(key) if memo is not None else None
+    if known is not None:
+        edges = known["edges"]
+        rg = _robust_graph(g, edges)
+        return RobustResult(rg, edges, _assertions(unc, rg), known["scenarios"],
+                            {"robust_s": time.perf_counter() - t0, "robust_cache_hit": 1.0}, known["sequence"])
+    sys = next(iter(prims.values())).system
+    names = list(unc.parameters)
+    P = plant(spec, names)
+    dist = unc.disturbance
+    dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
+    bound = (np.broadcast_to(np.asarray(dist.bound, float), (len(dist_idx),)).copy() if dist is not None
+             else np.zeros(0))
+    K = dist.segments if dist is not None else 1
+    rng = np.random.default_rng(unc.seed)
+    TH, ERR, SG, KIND = _scenarios(unc, sys, rng)
+    S = len(TH)
+    tol = settings.h_tolerance
+    nominal = {k: tr for k, tr in g.transitions.items() if tr.cls is not TransitionClass.NONE}
+    edges, n_roll, build_s = [], 0, 0.0
+    by_target: dict[str, list] = {}
+    for (a, b), tr in nominal.items():
+        by_target.setdefault(b, []).append((a, tr))
+    for bi, (b, items) in enumerate(by_target.items()):
+        if progress:
+            progress(spec.name, "robust graph", bi, len(by_target))
+        B = prims[b]
+        cells = []
+        for a, tr in items:
+            for i in _rows(tr, unc.cells):
+                tb = tr.best_t_B[i]
+                j = int(np.argmin(np.abs(tr.t_B - tb)))
+                cells.append((a, tr, i, j, prims[a].x_star(float(tr.t_A[i])), float(tb)))
+        hz = B.horizons(settings.horizon, [c[5] for c in cells])
+        tb0 = time.perf_counter()
+        rr = RobustRollout(B, P, dist_idx, K, settings, float(hz.max()))
+        build_s += time.perf_counter() - tb0
+        nsteps = np.minimum(np.ceil(hz / settings.dt - 1e-9).astype(int), rr.N)
+        C = len(cells)
+        X0 = np.concatenate([c[4][None, :] + ERR for c in cells])
+        T0 = np.repeat([c[5] for c in cells], S)
+        THb = np.tile(TH, (C, 1))
+        D = np.tile((SG[:, None, None] * bound[None, :, None]) * np.ones((1, len(dist_idx), K)), (C, 1, 1))
+        Y, last = rr.run(X0, T0, THb, D, np.repeat(nsteps, S), tol)
+        n_roll += len(X0)
+        res = [judge(Y[r, :-1], Y[r, -1], int(min(nsteps[r // S], last[r])), tol) for r in range(len(X0))]
+        worst = []  # per cell: its worst scenario so far
+        for c in range(C):
+            rs = range(c * S, (c + 1) * S)
+            r = min(rs, key=lambda r: (res[r][0], res[r][1]))
+            worst.append({"margin": res[r][1], "safe": res[r][0], "entry": res[r][2], "x0": X0[r], "t0": T0[r],
+                          "theta": THb[r], "D": D[r], "kind": KIND[r % S], "err": ERR[r % S],
+                          "all_safe": all(res[q][0] for q in rs), "Y": Y[r]})
+        for _ in range(unc.search if dist is not None else 0):
+            live = [c for c in range(C) if worst[c]["all_safe"]]
+            if not live:
+                break
+            targets = []  # per live cell: the binding h sample before entry, and the RoA margin at entry
+            for c in live:
+                w = worst[c]
+                Hs = w["Y"][:-1, : w["entry"] + 1]
+                jh, kh = np.unravel_index(int(np.argmin(Hs)), Hs.shape) if Hs.size else (0, 0)
+                targets += [(c, int(jh), int(kh)), (c, rr.nh, int(w["entry"]))]
+            gr = rr.gradients(np.array([worst[c]["x0"] for c, _, _ in targets]),
+                              np.array([worst[c]["t0"] for c, _, _ in targets]),
+                              np.array([worst[c]["theta"] for c, _, _ in targets]),
+                              np.array([worst[c]["D"] for c, _, _ in targets]),
+                              [r for _, r, _ in targets], [k for _, _, k in targets])
+            cand = [(c, np.where(gd != 0, -np.sign(gd) * bound[:, None], worst[c]["D"]))
+                    for (c, _, _), gd in zip(targets, gr)]
+            Xc = np.array([worst[c]["x0"] for c, _ in cand])
+            Yc, lc = rr.run(Xc, np.array([worst[c]["t0"] for c, _ in cand]),
+                        np.array([worst[c]["theta"] for c, _ in cand]).reshape(len(cand), -1),
+                        np.array([Dn for _, Dn in cand]), np.array([nsteps[c] for c, _ in cand]), tol)
+            n_roll += len(cand)
+            for q, (c, Dn) in enumerate(cand):
+                ok, m, k_e = judge(Yc[q, :-1], Yc[q, -1], int(min(nsteps[c], lc[q])), tol)
+                w = worst[c]
+                if (ok, m) < (w["safe"], w["margin"]):
+                    w.update(margin=m, safe=ok, entry=k_e, D=Dn, Y=Yc[q], kind="adversarial bang-bang disturbance")
+                    w["all_safe"] = w["all_safe"] and ok
+        per_edge: dict[str, list] = {}
+        for c, (a, tr, i, j, x0, tb) in enumerate(cells):
+            w = worst[c]
+            per_edge.setdefault(a, []).append({
+                "t_A": float(tr.t_A[i]), "t_B": tb, "robust_safe": bool(w["all_safe"]), "worst_margin": w["margin"],
+                "worst_case": {"kind": w["kind"], "parameters": dict(zip(names, map(float, w["theta"]))),
+                               "initial_error": {s: float(w["err"][sys.state_names.index(s)])
+                                                 for s in unc.initial_state},
+                               "disturbance": {u: [float(v) for v in w["D"][k]] for k, u in enumerate(
+                                   dist.inputs)} if dist is not None else {}},
+                "_ij": (i, j)})
+        for a, tr in items:
+            checked = per_edge.get(a, [])
+            margins = [c["worst_margin"] for c in checked]
+            worst = min(checked, key=lambda c: c["worst_margin"]) if checked else None
+            edges.append({"from": a, "to": b, "nominal_class": int(tr.cls), "rows_available": int(tr.available.sum()),
+                          "cells_checked": len(checked), "worst_margin": min(margins) if margins else None,
+                          "worst_case": None if worst is None else {"t_A": worst["t_A"], "t_B": worst["t_B"],
+                                                                   **worst["worst_case"]},
+                          "cells": {"row": [int(c["_ij"][0]) for c in checked],  # t_A rows, at the nominal best t_B
+                                    "robust_safe": [int(c["robust_safe"]) for c in checked], "worst_margin": margins}})
+    rg = _robust_graph(g, edges)
+    scen = {"per_cell": S, "corners": KIND.count("corner"), "samples": unc.samples, "search_rounds": unc.search,
+            "disturbance_segments": K, "parameters": {n: list(unc.parameters[n].range) for n in names},
+            "initial_state": dict(unc.initial_state),
+            "disturbance": {"inputs": list(dist.inputs), "bound": bound.tolist()} if dist is not None else None,
+            "seed": unc.seed, "cells_per_edge": unc.cells}
+    t1 = time.perf_counter()
+    seq = None
+    if spec.project.sequence is not None and unc.runs > 0:
+        if progress:
+            progress(spec.name, "sequence under uncertainty", 0, 3)
+        ds = DisturbedSequences(prims, P, dist_idx, bound, unc, settings, spec.project.sequence, unc.runs, unc.seed)
+        seq = {"runs": unc.runs, "seed": unc.seed, "disturbance_hold_s": HOLD,
+               "modes": {"naive": ds.run(None, {}, "naive"), "graph": ds.run(g, lookup_table(g), "graph"),
+                         "robust_graph": ds.run(rg, lookup_table(rg), "graph")}}
+    timing = {"robust_s": time.perf_counter() - t0, "robust_build_s": build_s, "robust_rollouts": n_roll,
+              "robust_sequence_s": time.perf_counter() - t1}
+    edges.sort(key=lambda e: (e["from"], e["to"]))
+    if memo is not None:
+        memo.put(key, {"edges": edges, "scenarios": scen, "sequence": seq, "rollouts": n_roll})
+    return RobustResult(rg, edges, _assertions(unc, rg), scen, timing, seq)
+
+
+def _assertions(unc, rg: MotionPrimitiveGraph) -> list[AssertionResult]:
+    checks = evaluate_assertions(unc.assertions, rg, {})
+    for c in checks:
+        c.kind = f"robust {c.kind}"
+        c.description = f"robust: {c.description}"
+    return checks
+
+
+def _robust_graph(g: MotionPrimitiveGraph, edges: list[dict]) -> MotionPrimitiveGraph:
+    """The nominal graph with each edge's transition cut to its robust cells; fills each edge record's
+    robust class, windows and weights."""
+    trs = dict(g.transitions)
+    for e in edges:
+        tr = g.transitions[(e["from"], e["to"])]
+        ok = {(i, int(np.argmin(np.abs(tr.t_B - tr.best_t_B[i]))))
+              for i, safe in zip(e["cells"]["row"], e["cells"]["robust_safe"]) if safe}
+        ev = [[x if (i, j) in ok else dataclasses.replace(x, verdict=0, status="unsafe") for j, x in enumerate(row)]
+              for i, row in enumerate(tr.evidence)]
+        rt = Transition(tr.source, tr.target, tr.t_A, tr.t_B, ev)
+        rt.classify()
+        trs[(e["from"], e["to"])] = rt
+        e.update(robust_class=int(rt.cls), survives=rt.cls is not TransitionClass.NONE, cells_robust=len(ok),
+                 robust_windows=[list(w) for w in rt.windows], robust_weights=dict(rt.weights))
+    return MotionPrimitiveGraph({n: dict(g.G.nodes[n]) for n in g.G.nodes}, trs)

@@ -1,0 +1,195 @@
+"""Rollouts of a target primitive's closed loop on a perturbed plant, and the adversarial disturbance.
+
+The controller is the primitive's own (nominal parameters); the plant is the system's dynamics with
+the uncertain parameters as inputs; a disturbance d(t), piecewise constant on `segments` pieces of
+the horizon, is added to the saturated input. A rollout is judged as the oracle judges (Definition
+4) on its samples: safe when the flow enters E_B before any h_B < -tol. Its margin is the least h
+before entry (>= -tol: safe); without entry, the least h when it fell below -tol, else the best RoA
+margin reached (<= 0), and -inf for a blow-up. These are sampled verdicts of chosen scenarios: evidence of robustness, not a proof.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import casadi as ca
+import numpy as np
+
+from ..compile.primitive import CompiledPrimitive
+from ..compile.system import compile_analytic
+from ..oracle.integrator import compile_cached
+from ..settings import OracleSettings
+
+
+def plant(spec, names: list[str]) -> ca.Function:
+    """(x, u, theta) -> xdot of the system with the parameters `names` as the entries of theta."""
+    th = ca.SX.sym("theta", len(names))
+    params = {**spec.system.parameters, **{n: th[i] for i, n in enumerate(names)}}
+    sys = compile_analytic(dataclasses.replace(spec, system=spec.system.model_copy(update={"parameters": params})))
+    return ca.Function("plant", [sys.x, sys.u, th], [sys.xdot])
+
+
+def judge(H: np.ndarray, M: np.ndarray, n: int, tol: float) -> tuple[bool, float, int | None]:
+    """(safe, margin, entry sample) of one rollout from its h (nh x N+1) and RoA margins (N+1), first n+1 samples."""
+    H, M = H[:, : n + 1], M[: n + 1]
+    hmin = H.min(axis=0) if H.shape[0] else np.full(M.shape, np.inf)
+    bad = ~np.isfinite(hmin) | ~np.isfinite(M)
+    if bad.any():  # a blow-up ends the rollout as unsafe
+        k = int(np.argmax(bad))
+        hmin, M = hmin[:k], M[:k]
+        if not len(M):
+            return False, -math.inf, None
+    inside = np.flatnonzero(M > 0)
+    if inside.size:
+        k = int(inside[0])
+        worst = float(hmin[: k + 1].min())
+        if worst >= -tol:
+            return True, worst, k
+        return False, worst, k
+    if bad.any():
+        return False, -math.inf, None
+    low = float(hmin.min())
+    return False, (low if low < -tol else float(M.max())), None
+
+
+class RobustRollout:
+    """Batched rollouts into one target primitive under (theta, d, start error) scenarios."""
+
+    BATCH = 128
+    CHUNK = 100  # steps per compiled call; rollouts stop once decided
+
+    def __init__(self, prim: CompiledPrimitive, plant_fn: ca.Function, dist_inputs: list[int], segments: int,
+                 settings: OracleSettings, horizon: float):
+        self.prim, self.settings = prim, settings
+        nx, nu = prim.system.nx, prim.system.nu
+        self.nth, self.nd, self.K = plant_fn.size1_in(2), len(dist_inputs), segments
+        dt = settings.dt
+        self.N = max(1, int(math.ceil(horizon / dt - 1e-9)))
+        self.dt = dt
+        Bd = np.zeros((nu, self.nd))
+        for k, i in enumerate(dist_inputs):
+            Bd[i, k] = 1.0
+        x, t, s = ca.SX.sym("x", nx), ca.SX.sym("t"), ca.SX.sym("s")
+        xsw, th, d = ca.SX.sym("xsw", nx), ca.SX.sym("th", self.nth), ca.SX.sym("d", self.nd)
+
+        def f(xx, tt, ss):
+            u = prim.control(xx, tt, ss, xsw)[1]
+            return plant_fn(xx, u + ca.mtimes(ca.DM(Bd), d) if nu else u, th)
+
+        k1 = f(x, t, s)
+        k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2)
+        k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2)
+        k4 = f(x + dt * k3, t + dt, s + dt)
+        xn = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        out = ca.vertcat(prim.h(xn, t + dt, s + dt, xsw), prim.roa_margin(xn, t + dt))
+        z = ca.vertcat(x, t, s, xsw, th)
+        step = ca.Function("robust_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th), out])
+        acc = step.mapaccum("robust_acc", self.N)
+        x0, t0 = ca.MX.sym("x0", nx), ca.MX.sym("t0")
+        TH, D = ca.MX.sym("theta", self.nth), ca.MX.sym("D", self.nd, self.K)
+        seg = np.minimum((np.arange(self.N) * self.K) // self.N, self.K - 1)
+        S = np.zeros((self.K, self.N))
+        S[seg, np.arange(self.N)] = 1.0
+        Dfull = ca.mtimes(D, ca.DM(S)) if self.nd else ca.MX(0, self.N)
+        z0 = ca.vertcat(x0, t0, ca.MX(0), x0, TH)
+        _, outs = acc(z0, Dfull)
+        first = ca.vertcat(prim.h(x0, t0, 0, x0), prim.roa_margin(x0, t0))
+        Y = ca.horzcat(first, outs)  # (nh + 1) x (N + 1)
+        name = f"robust_{prim.digest()[:16]}_{self.N}_{self.K}"
+        self.nh = Y.shape[0] - 1
+        self.nz = z.numel()
+        jit = (lambda fn: compile_cached(fn, settings.jit_flags)) if settings.jit else (lambda fn: fn)
+        self.first = jit(ca.Function(name + "_first", [x0, t0], [first]))
+        zc, Dc = ca.MX.sym("z", self.nz), ca.MX.sym("Dc", self.nd, self.CHUNK)
+        zL, outs_c = step.mapaccum("robust_chunk", self.CHUNK)(zc, Dc)
+        self.chunk = jit(ca.Function(name + "_chunk", [zc, Dc], [ca.vertcat(zL[:, -1], ca.vec(outs_c))]))
+        self.seg = seg
+        if self.nd:  # reverse mode: the gradient of one weighted sample w'vec(Y) with respect to D
+            w = ca.MX.sym("w", Y.numel())
+            gf = ca.Function(name + "_grad", [x0, t0, TH, D, w], [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))])
+            self.grad = jit(gf)
+        else:
+            self.grad = None
+        self._maps: dict[tuple, ca.Function] = {}
+
+    def _map(self, fn: ca.Function, n: int) -> ca.Function:
+        key = (fn.name(), n)
+        if key not in self._maps:
+            self._maps[key] = fn.map(n)
+        return self._maps[key]
+
+    def _call(self, fn: ca.Function, n: int, args: list[np.ndarray]) -> np.ndarray:
+        """fn on n columns, in mapped batches of at most BATCH (the last padded), called through a
+        FunctionBuffer on numpy arrays (column-major, no DM copies)."""
+        m = min(n, self.BATCH)
+        F = self._map(fn, m)
+        widths = [a.shape[1] // n if a.size else 0 for a in args]
+        rows = F.size1_out(0)
+        per = F.size2_out(0) // m
+        out = np.zeros((rows, n * per))
+        for start in range(0, n, m):
+            cols = np.minimum(np.arange(start, start + m), n - 1)  # pad with the last column
+            ins = []
+            for a, w in zip(args, widths):
+                sel = a[:, (cols[:, None] * w + np.arange(w)).ravel()] if w else a
+                ins.append(np.asfortranarray(sel, dtype=float).ravel(order="F"))
+            res = np.zeros(F.nnz_out(0))
+            buf, ev = F.buffer()
+            for i, a in enumerate(ins):
+                buf.set_arg(i, memoryview(a))
+            buf.set_res(0, memoryview(res))
+            ev()
+            k = min(m, n - start)
+            out[:, start * per:(start + k) * per] = res.reshape(rows, m * per, order="F")[:, : k * per]
+        return out
+
+    def run(self, X0: np.ndarray, T0: np.ndarray, TH: np.ndarray, D: np.ndarray,
+            limit: np.ndarray | None = None, tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Samples (n, nh + 1, N + 1) of n rollouts and the index of each one's last computed sample;
+        X0 (n, nx), T0 (n,), TH (n, nth), D (n, nd, K).
+
+        A rollout stops at the chunk where it is decided (entered E, h < -tol or a non-finite value)
+        or reaches its `limit` steps; its later samples are NaN.
+        """
+        n, nh, N, L = len(X0), self.nh, self.N, self.CHUNK
+        limit = np.full(n, N) if limit is None else np.minimum(np.asarray(limit, int), N)
+        Y = np.full((n, nh + 1, N + 1), np.nan)
+        Y[:, :, 0] = self._call(self.first, n, [X0.T, T0[None, :]]).T
+        last = np.zeros(n, int)
+        Z = np.vstack([X0.T, T0[None, :], np.zeros((1, n)), X0.T, self._th(TH, n)])
+
+        def hits(y, upto):  # decided within the samples up to index `upto` of y
+            k = np.arange(y.shape[2])[None, :] <= upto[:, None]
+            hit = (y[:, nh] > 0) | (y[:, :nh] < -tol).any(axis=1) | ~np.isfinite(y).all(axis=1)
+            return (hit & k).any(axis=1)
+
+        active = np.flatnonzero(~hits(Y[:, :, :1], np.zeros(n, int)) & (limit > 0))
+        for c0 in range(0, N, L):
+            if not active.size:
+                break
+            na, take = len(active), min(L, N - c0)
+            seg = self.seg[np.minimum(np.arange(c0, c0 + L), N - 1)]
+            Dc = D[active][:, :, seg] if self.nd else np.zeros((na, 0, L))
+            out = self._call(self.chunk, na, [Z[:, active], Dc.transpose(1, 0, 2).reshape(self.nd, na * L)])
+            Z[:, active] = out[: self.nz]
+            Yc = out[self.nz:].reshape(nh + 1, L, na, order="F")[:, :take].transpose(2, 0, 1)
+            Y[active, :, c0 + 1: c0 + 1 + take] = Yc
+            last[active] = c0 + take
+            upto = limit[active] - c0 - 1  # index of the rollout's last sample within this chunk
+            done = hits(Yc, upto) | (upto <= take - 1)
+            active = active[~done]
+        return Y, last
+
+    def gradients(self, X0, T0, TH, D, rows, ks) -> np.ndarray:
+        """d Y[row, k] / d D (n, nd, K) of n rollouts, one (row, k) sample each."""
+        n = len(X0)
+        W = np.zeros(((self.nh + 1) * (self.N + 1), n))
+        W[np.asarray(ks) * (self.nh + 1) + np.asarray(rows), np.arange(n)] = 1.0
+        G = self._call(self.grad, n, [X0.T, T0[None, :], self._th(TH, n), self._d(D, n), W])
+        return G.T.reshape(n, self.K, self.nd).transpose(0, 2, 1)
+
+    def _th(self, TH, n):
+        return np.asarray(TH, float).reshape(n, -1).T if self.nth else np.zeros((0, n))
+
+    def _d(self, D, n):
+        return np.asarray(D, float).transpose(1, 0, 2).reshape(self.nd, n * self.K) if self.nd else np.zeros((0, 0))

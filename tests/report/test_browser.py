@@ -1,0 +1,85 @@
+"""Each example report in headless Chromium at 1400 and 390 px: no console error or uncaught
+exception, no horizontal overflow of the page, every section present. Skipped only when no
+Chromium binary is installed (MPGSPEC_CHROMIUM names one explicitly)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cdp_browser import Browser, find_chromium
+from mpgspec import api
+from mpgspec.report.html import render_html
+from mpgspec.report.read import report_status
+
+ROOT = Path(__file__).resolve().parents[2]
+SPECS = ROOT / "specs"
+EXAMPLES = ("pendulum", "cart", "a1")
+WIDTHS = (1400, 390)
+SECTIONS = ("summary", "graph", "assertions", "assumptions", "primitives", "edges", "grids", "switches", "failures",
+            "plans", "evidence", "timing")
+PROBE = """(() => {
+  const d = document.documentElement;
+  const wide = [...document.querySelectorAll('body *')].filter(e => {
+    const r = e.getBoundingClientRect(); return r.right > innerWidth + 1 && !e.closest('.scroll, .graph, pre');
+  }).slice(0, 5).map(e => e.tagName + (e.id ? '#' + e.id : '') + (e.className ? '.' + e.className : ''));
+  return {width: innerWidth, scroll_width: d.scrollWidth, wide,
+          ids: [...document.querySelectorAll('section[id]')].map(s => s.id),
+          svgs: document.querySelectorAll('svg').length, nav_sticky: getComputedStyle(document.querySelector('nav')).position,
+          details_open: document.querySelectorAll('#grids details[open], #switches details[open]').length};
+})()"""
+
+
+@pytest.fixture(scope="module")
+def chromium() -> str:
+    exe = find_chromium()
+    if exe is None:
+        pytest.skip("no Chromium binary (install Debian's chromium, or set MPGSPEC_CHROMIUM)")
+    return exe
+
+
+@pytest.fixture(scope="module")
+def pages(tmp_path_factory):
+    """name -> (report.html, report, errors) of an example, rendered on first use: from
+    reports/<name>/report.json when `mpgspec verify` left one that matches the specs, else from a
+    fresh verify."""
+    out = tmp_path_factory.mktemp("reports")
+    cache: dict[str, tuple[Path | None, dict | None, list]] = {}
+
+    def page(name: str):
+        if name not in cache:
+            report, _ = report_status(ROOT / "reports" / name / "report.json", SPECS / name / "project.yaml")
+            if report is not None:
+                html = out / name / "report.html"
+                html.parent.mkdir(parents=True)
+                html.write_text(render_html(report), encoding="utf-8")
+                cache[name] = (html, report, [])
+            else:
+                p = api.verify(SPECS / name, out_dir=out).projects[0]
+                cache[name] = (Path(p.files["html"]) if "html" in p.files else None, p.report, p.errors)
+        return cache[name]
+
+    return page
+
+
+@pytest.fixture(scope="module")
+def browser(chromium):
+    with Browser(chromium) as b:
+        yield b
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("width", WIDTHS)
+@pytest.mark.parametrize("name", EXAMPLES)
+def test_report_in_chromium(pages, browser, name, width):
+    html, report, errors = pages(name)
+    assert html is not None, f"{name} wrote no report: {[e.get('message') for e in errors]}"
+    r = browser.open(html.resolve().as_uri(), width, script=PROBE)
+    assert r["errors"] == [], f"console errors in {name} at {width} px: {r['errors']}"
+    v = r["value"]
+    # a mobile viewport widens itself to fit content that overflows: both widths must stay at `width`
+    over = max(v["scroll_width"], v["width"]) - width
+    assert over <= 0, f"{name} overflows {width} px by {over} px: {v['wide']}"
+    want = set(SECTIONS) | ({"sequence"} if report.get("sequence") else set())
+    assert want <= set(v["ids"]), f"{name}: missing sections {sorted(want - set(v['ids']))}"
+    assert v["svgs"] >= 1 + len(report["transitions"]) and v["nav_sticky"] == "sticky" and v["details_open"] == 0

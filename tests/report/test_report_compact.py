@@ -1,0 +1,61 @@
+"""report.json v2: columnar cells and runs that expand back to the same content, rounded floats,
+and a pendulum report a quarter of the size of the v1 one."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from mpgspec import api
+from mpgspec.report.compact import (MAX_RUN, MAX_TRACE, compact_cells, compact_run, compact_series, expand_cells,
+                                    rnd, run_rows)
+from mpgspec.report.schema import validate_report
+from mpgspec.report.write import json_text
+
+SPECS = Path(__file__).resolve().parents[2] / "specs"
+
+
+def _cell(i, j, **kw):
+    return {"verdict": int(i == j), "status": "safe" if i == j else "unsafe", "reason": "entered_E" if i == j else
+            "left_C", "t_stop": 0.1 * i + 1 / 3, "t_enter": None, "violated": None if i == j else "b",
+            "checked": True, "refined": j == 1, "margin": 1 / 7, "error_bound": 1.23456e-5,
+            "peak_input": [2.0, 3.0], "peak_demand": [2.5, 3.0], "saturated": False, "min_margins": [0.5, -0.25],
+            "best_roa_margin": None, "message": "m" if (i, j) == (1, 0) else "", **kw}
+
+
+def test_cells_round_trip():
+    rows = [[_cell(i, j) for j in range(3)] for i in range(2)]
+    tr = {"h_names": ["a", "b"], "verdicts": [[c["verdict"] for c in r] for r in rows],
+          "cells": compact_cells(rows, ["a", "b"])}
+    back = expand_cells(tr)
+    for r0, r1 in zip(rows, back):
+        for c0, c1 in zip(r0, r1):
+            assert c1 == {**c0, "t_stop": rnd(c0["t_stop"]), "margin": rnd(c0["margin"]), "error_bound": 1.23e-5}
+    assert tr["cells"]["status"] == ["011", "101"] and tr["cells"]["messages"] == [[1, 0, "m"]]
+
+
+def test_runs_and_series_round_trip():
+    n = 3 * MAX_RUN
+    run = {"mode": "graph", "t": [i * 0.01 for i in range(n)], "x": [[i * 1.0, -i * 1.0] for i in range(n)],
+           "min_h": [1.0] * n, "active": ["A"] * (n // 2) + ["B"] * (n - n // 2), "switches": [], "violations": []}
+    c = compact_run(run)
+    assert len(c["t"]) <= MAX_RUN + 1 and len(c["x"]) == 2 and c["active"][0][0] == "A"
+    rows = run_rows(c)
+    assert len(rows["x"]) == len(rows["active"]) == len(c["t"]) and rows["x"][1] == [c["x"][0][1], c["x"][1][1]]
+    s = {"t": [i * 0.005 for i in range(1000)], "h": {"a": [0.1234567] * 1000}, "roa_margin": [1.0] * 1000,
+         "u": [[0.0] * 1000], "x": [[1.0] * 1000]}
+    cs = compact_series(s, t_keep=2.0021)
+    assert len(cs["t"]) <= MAX_TRACE + 2 and 2.005 in cs["t"] and cs["h"]["a"][0] == 0.1235
+
+
+@pytest.fixture(scope="module")
+def pendulum() -> dict:
+    return api.verify([SPECS / "pendulum"], out_dir=None).projects[0].report
+
+
+def test_pendulum_report_is_a_quarter_of_v1(pendulum):
+    validate_report(json.loads(json_text(pendulum, compact=True)))
+    size = len(json_text(pendulum, compact=True).encode())
+    assert size < 2_757_477 / 4, size  # v1 of the same project: 2.76 MB
+    assert pendulum["schema_version"].startswith("2.") and pendulum["project"]["digest"].startswith("sha256:")

@@ -1,0 +1,152 @@
+"""Robust graph on the pendulum: spec errors, rollouts against the oracle, gradients, worst cases."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpgspec import api
+from mpgspec.errors import SpecErrors
+from mpgspec.robust.graph import robust_stage
+from mpgspec.robust.rollout import RobustRollout, judge, plant
+from mpgspec.spec.loader import load_project
+
+PEND = Path(__file__).resolve().parents[2] / "specs" / "pendulum"
+
+
+def _copy(tmp_path: Path, block: str | None) -> Path:
+    """The pendulum project with its uncertainty block replaced by `block` (None: removed)."""
+    dst = tmp_path / "pendulum"
+    shutil.copytree(PEND, dst)
+    text = (dst / "project.yaml").read_text()
+    text = text[: text.index("uncertainty:")]
+    (dst / "project.yaml").write_text(text + (block or ""))
+    return dst / "project.yaml"
+
+
+@pytest.fixture(scope="module")
+def built():
+    spec = load_project(PEND / "project.yaml")
+    cp, vg = api.build(spec, api.settings_for(spec))
+    return cp, vg
+
+
+@pytest.fixture(scope="module")
+def rob(built):
+    return robust_stage(*built)
+
+
+@pytest.mark.parametrize("block, key, hint", [
+    ("uncertainty:\n  parameters: {mm: {range: [0.9, 1.2]}}\n", "uncertainty.parameters.mm", "did you mean 'm'"),
+    ("uncertainty:\n  disturbance: {inputs: [tua], bound: 0.1}\n", "uncertainty.disturbance.inputs.0",
+     "did you mean 'tau'"),
+    ("uncertainty:\n  initial_state: {omgea: 0.1}\n", "uncertainty.initial_state.omgea", "did you mean 'omega'"),
+    ("uncertainty:\n  parameters: {m: {nominal: 2.0, range: [0.9, 2.2]}}\n", "uncertainty.parameters.m.nominal", ""),
+    ("uncertainty:\n  parameters: {m: {range: [1.1, 1.2]}}\n", "uncertainty.parameters.m.range", ""),
+    ("uncertainty:\n  assertions:\n    - edge: {from: Hangg, to: Balance}\n", "uncertainty.assertions.0.edge.from",
+     "did you mean 'Hang'"),
+    ("uncertainty:\n  assertions:\n    - simulation_safe: graph\n", "uncertainty.assertions.0", ""),
+])
+def test_uncertainty_names_are_checked_with_located_errors(tmp_path, block, key, hint):
+    path = _copy(tmp_path, block)
+    spec = load_project(path)
+    with pytest.raises(SpecErrors) as ei:
+        api.compile_stage(spec, api.settings_for(spec))
+    err = ei.value.errors[0]
+    assert err.key == key and err.location.line > 0 and str(err.location.file).endswith("project.yaml")
+    assert hint in err.hint
+
+
+@pytest.mark.parametrize("block, what", [
+    ("uncertainty:\n  parameters: {m: {range: [1.2, 0.9]}}\n", "low <= high"),
+    ("uncertainty:\n  disturbance: {inputs: [tau], bound: -1}\n", "greater than 0"),
+    ("uncertainty:\n  samples: many\n", "integer"),
+    ("uncertainty:\n  disturbanse: {inputs: [tau], bound: 1}\n", "disturbanse"),
+])
+def test_uncertainty_structure_errors(tmp_path, block, what):
+    with pytest.raises(SpecErrors) as ei:
+        load_project(_copy(tmp_path, block))
+    text = ei.value.errors[0].format()
+    assert "uncertainty" in text and what in text and "project.yaml:" in text
+
+
+def test_rollout_agrees_with_oracle_and_gradient_with_finite_differences(built):
+    cp, vg = built
+    spec, prims = cp.spec, cp.prims
+    tr = vg.graph.edge("Hang", "Swing(1)")
+    rr = RobustRollout(prims["Swing(1)"], plant(spec, ["m"]), [0], 4, cp.settings, 6.0)
+    x0 = prims["Hang"].x_star(0.0)
+    Y, last = rr.run(x0[None], np.array([tr.best_t_B[0]]), np.array([[1.0]]), np.zeros((1, 1, 4)))
+    ok, margin, k = judge(Y[0, :-1], Y[0, -1], int(last[0]), 0.0)
+    ev = tr.evidence[0][int(np.argmin(np.abs(tr.t_B - tr.best_t_B[0])))]
+    assert ok and ev.verdict == 1
+    assert k * cp.settings.dt == pytest.approx(ev.t_enter, abs=2 * cp.settings.dt)
+    D = np.array([[[0.2, -0.1, 0.3, 0.0]]])
+    th = np.array([[1.1]])
+    g = rr.gradients(x0[None], np.array([0.3]), th, D, [0], [300])[0]
+    eps = 1e-6
+    for j in range(4):
+        Dp, Dm = D.copy(), D.copy()
+        Dp[0, 0, j] += eps
+        Dm[0, 0, j] -= eps
+        run = lambda D_: rr.run(x0[None], np.array([0.3]), th, D_, tol=np.inf)[0][0, 0, 300]  # noqa: E731
+        fd = run(Dp) - run(Dm)
+        assert g[0, j] == pytest.approx(fd / (2 * eps), rel=1e-4, abs=1e-8)
+
+
+def test_pendulum_robust_graph_and_worst_cases(built, rob):
+    cp, vg = built
+    d = rob.to_dict()
+    assert d["level"] == "empirical" and "not proof" in d["note"]
+    edges = {(e["from"], e["to"]): e for e in d["edges"]}
+    assert len(edges) == len([t for t in vg.graph.transitions.values() if int(t.cls)])
+    lost = edges[("Balance", "SwingUp")]
+    assert not lost["survives"] and lost["worst_margin"] < 0
+    wc = lost["worst_case"]
+    assert lost["cells"]["row"] == [0] and lost["cells"]["robust_safe"] == [0] and wc["t_A"] == 0.0
+    assert set(wc["parameters"]) == {"m"} and 0.9 <= wc["parameters"]["m"] <= 1.2
+    assert max(abs(v) for v in wc["disturbance"]["tau"]) <= 0.3 + 1e-12
+    assert abs(wc["initial_error"]["theta"]) <= 0.02 + 1e-12
+    kept = edges[("Hang", "Swing(1)")]
+    assert kept["survives"] and kept["robust_class"] == 1 and kept["worst_margin"] >= 0
+    assert all(a.status == "pass" for a in rob.assertions), [a.message for a in rob.assertions]
+    assert rob.graph.edge("Balance", "SwingUp") is None and vg.graph.edge("Balance", "SwingUp") is not None
+
+
+def test_no_uncertainty_reproduces_the_nominal_graph(tmp_path):
+    path = _copy(tmp_path, "uncertainty:\n  parameters: {m: {range: [1.0, 1.0]}}\n  samples: 0\n  runs: 0\n")
+    spec = load_project(path)
+    cp, vg = api.build(spec, api.settings_for(spec))
+    rob = robust_stage(cp, vg)
+    nominal = {k: int(t.cls) for k, t in vg.graph.transitions.items() if int(t.cls)}
+    robust = {k: int(t.cls) for k, t in rob.graph.transitions.items() if int(t.cls)}
+    assert robust == nominal
+
+
+def test_planner_on_robust_edges_from_the_report(built, rob):
+    from mpgspec.report.read import ReportGraph, shortest_path
+    from mpgspec.robust.plan import robust_report_graph
+
+    cp, vg = built
+    report = {"primitives": [{"name": n, "class": "fixed"} for n in cp.prims],
+              "edges": [{"from": a, "to": b, "class": int(t.cls), **t.weights}
+                        for (a, b), t in vg.graph.transitions.items() if int(t.cls)],
+              "transitions": [{"from": a, "to": b, "t_A": list(t.t_A), "best_t_B": t.best_t_B, "windows": t.windows}
+                              for (a, b), t in vg.graph.transitions.items()],
+              "robust": rob.to_dict()}
+    nominal, robust = ReportGraph(report), robust_report_graph(report)
+    assert nominal.edge("Balance", "SwingUp") is not None and robust.edge("Balance", "SwingUp") is None
+    path, _ = shortest_path(robust.planner_graph(), "Balance", "SwingUp")
+    assert path == ["Balance", "Swing(2.6)", "SwingUp"]
+    for (a, b), t in rob.graph.transitions.items():
+        if robust.edge(a, b) is not None:
+            assert robust.edge(a, b).best_t_B == t.best_t_B and robust.edge(a, b).cls == int(t.cls)
+
+
+def test_sequence_under_uncertainty_naive_vs_graphs(rob):
+    modes = rob.sequence["modes"]
+    assert rob.sequence["runs"] == 8 and set(modes) == {"naive", "graph", "robust_graph"}
+    assert modes["naive"]["safe_fraction"] == 0.0 and modes["naive"]["first_violation"][0]["primitive"] == "Balance"
+    assert modes["graph"]["safe_fraction"] == 1.0 and modes["robust_graph"]["safe_fraction"] == 1.0

@@ -1,0 +1,57 @@
+"""The notebook API: verify writes nothing by default; the result's graph is the planner's, plan()
+and simulate() answer from it; load_report reads back what verify wrote; HTML for notebooks."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import networkx as nx
+import pytest
+
+from mpgspec import api
+
+TINY = Path(__file__).parent / "fixtures" / "cli_tiny"
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    return api.verify(TINY)
+
+
+def test_verify_writes_nothing_by_default(tiny, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    api.verify(TINY)
+    assert not (tmp_path / "reports").exists()
+    assert tiny["tiny"] is tiny.projects[0] and tiny.exit_code == 0
+
+
+def test_graph_is_the_planners(tiny):
+    p = tiny["tiny"]
+    G = p.graph
+    assert isinstance(G, nx.DiGraph) and all("class" in d and "cls" not in d for *_, d in G.edges(data=True))
+    plan = p.plan("Left", "Right", weight="hops")
+    assert plan["path"] == nx.shortest_path(G, "Left", "Right", weight="hops") == ["Left", "Mid", "Right"]
+    assert [h["class"] for h in plan["hops"]] == [1, 1] and plan["cost"] == 2
+    with pytest.raises(api.UsageError):
+        p.plan("Left", "Nowhere")
+
+
+def test_simulate_matches_the_report(tiny):
+    p = tiny["tiny"]
+    run = p.simulate("graph")
+    stored = p.report["sequence"]["runs"]["graph"]
+    assert run.safe == stored["safe"] and [s["to"] for s in run.switches] == [s["to"] for s in stored["switches"]]
+    assert p.simulate(mode="naive").safe is False
+
+
+def test_load_report_round_trip(tmp_path):
+    res = api.verify(TINY, out_dir=tmp_path)
+    back = api.load_report(tmp_path / "tiny")
+    assert back.name == "tiny" and back.status == res["tiny"].status and back.mpg is None
+    assert back.plan("Left", "Right")["path"] == res["tiny"].plan("Left", "Right")["path"]
+    assert back.simulate("graph").safe
+    html = back._repr_html_()
+    assert "<table>" in html and "tiny" in html and "report.html" in html
+
+
+def test_all_names_exist():
+    assert all(hasattr(api, n) for n in api.__all__)
