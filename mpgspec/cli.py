@@ -495,6 +495,13 @@ def _sub(sub, name: str, help: str, examples: str):
                           epilog="examples:\n" + examples, formatter_class=argparse.RawDescriptionHelpFormatter)
 
 
+def _verified_results_args(p, used: str) -> None:
+    """--out and --rebuild of the commands that read what `verify` wrote."""
+    p.add_argument("--out", default="reports", metavar="DIR",
+                   help=f"where `verify` wrote its reports; {used} used while the specs match (default: reports)")
+    p.add_argument("--rebuild", action="store_true", help="build the graph again instead of reading the report")
+
+
 def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="mpgspec", description="Verify safe transitions between motion primitives.",
@@ -538,10 +545,7 @@ def parser() -> argparse.ArgumentParser:
                    help="what the plan minimises: summed transition duration (default), peak input, or hops")
     p.add_argument("--format", choices=("human", "json"), default="human",
                    help="human: the path and each hop with its class and waiting window; json: the same as JSON")
-    p.add_argument("--out", default="reports", metavar="DIR",
-                   help="where `verify` wrote its reports; its graph is used while it matches the specs "
-                        "(default: reports)")
-    p.add_argument("--rebuild", action="store_true", help="build the graph again instead of reading the report")
+    _verified_results_args(p, "its graph is")
     p.add_argument("--robust", action="store_true",
                    help="use only the edges that withstood the project's `uncertainty` (the robust graph)")
     p.set_defaults(fn=cmd_plan)
@@ -554,10 +558,7 @@ def parser() -> argparse.ArgumentParser:
                         "verified windows; both (default)")
     s.add_argument("--format", choices=("human", "json"), default="human",
                    help="human: switches and the first violation of each run; json: the runs as JSON")
-    s.add_argument("--out", default="reports", metavar="DIR",
-                   help="where `verify` wrote its reports; its graph and lookup table are used while they "
-                        "match the specs (default: reports)")
-    s.add_argument("--rebuild", action="store_true", help="build the graph again instead of reading the report")
+    _verified_results_args(s, "its graph and lookup table are")
     s.set_defaults(fn=cmd_simulate)
     k = _sub(sub, "cache", "show or clear stored oracle results and compiled chunks",
              "  mpgspec cache info\n  mpgspec cache clear")

@@ -26,7 +26,7 @@ class HybridFlow:
     """Compiled steps, periods and tubes of a compiled primitive's discrete flow."""
 
     def __init__(self, prim, dt: float):
-        from mpgspec.oracle.integrator import LEFT, compile_cached
+        from mpgspec.oracle.integrator import LEFT, compile_cached, rk4_jump
 
         self.prim, self.dt = prim, float(dt)
         T = float(prim.period)
@@ -38,13 +38,9 @@ class HybridFlow:
         z = ca.MX.sym("z", nx + 2)  # [x; t; min h so far]
         x, t, m = z[:nx], z[nx], z[nx + 1]
         f = lambda xx, tt: prim.f_cl(xx, tt, S_LONG, xs0)  # noqa: E731
+        k = lambda xx, tt: prim.control(xx, tt, S_LONG, xs0)[1]  # noqa: E731
         h = self.dt
-        k1 = f(x, t)
-        k2 = f(x + h / 2 * k1, t + h / 2)
-        k3 = f(x + h / 2 * k2, t + h / 2)
-        k4 = f(x + h * k3, t + h - LEFT)  # inside the step: its own contact mode
-        u = prim.control(x, t, S_LONG, xs0)[1]
-        xn = prim.jump(x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), u, t + h)
+        xn = rk4_jump(f, k, prim.jump, x, t, h, LEFT if prim.info.get("contact_schedule") else 0.0)
         hv = prim.h(xn, t + h, S_LONG, xs0)
         mn = ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
         body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn)])
@@ -70,28 +66,9 @@ def monodromy(flow: HybridFlow, x0: np.ndarray, neutral: list[str]) -> tuple[np.
     """The one-period derivative at x0 (clock 0): reduced if `neutral` names the ground symmetry."""
     sys = flow.prim.system
     if neutral:
-        from mpgspec.compile.rigidbody.symmetry import generators, lift_function, reduce_function
+        from mpgspec.compile.rigidbody.symmetry import reduced_monodromy
 
-        red, lift = reduce_function(sys), lift_function(sys)
-        zr = np.array(red(x0), float).ravel()
-        base = np.array(lift(zr), float).ravel()
-        Dl = np.array(ca.Function("Dl", [lift.sx_in(0)], [ca.jacobian(lift(lift.sx_in(0)), lift.sx_in(0))])(zr))
-        n = zr.size
-        X0 = np.hstack([base[:, None] + FD * Dl, base[:, None] - FD * Dl, base[:, None]])
-        XT, _ = flow.run(X0, np.zeros(2 * n + 1))
-        R = np.array([np.array(red(XT[:, j]), float).ravel() for j in range(2 * n)]).T
-        M = (R[:, :n] - R[:, n:]) / (2 * FD)
-        xT = XT[:, -1]
-        found = {}
-        g0, gT = generators(sys, base), generators(sys, xT)
-        for name in neutral:
-            g = g0[name]
-            k = np.linalg.norm(g)
-            Y, _ = flow.run(np.stack([base + FD * g / k, base - FD * g / k], 1), np.zeros(2))
-            Pg = (Y[:, 0] - Y[:, 1]) / (2 * FD) * k
-            found[name] = {"multiplier": float(gT[name] @ Pg / (gT[name] @ gT[name])),
-                           "invariance_defect": float(np.linalg.norm(Pg - gT[name]) / np.linalg.norm(gT[name]))}
-        return M, found
+        return reduced_monodromy(sys, lambda X: flow.run(X, np.zeros(X.shape[1]))[0], x0, neutral, FD)
     nx = sys.nx
     E = np.eye(nx)
     XT, _ = flow.run(np.hstack([x0[:, None] + FD * E, x0[:, None] - FD * E]), np.zeros(2 * nx))
@@ -199,12 +176,14 @@ def _held(prim):
     sched = prim.info.get("contact_schedule")
     if not sched or not getattr(prim.system, "is_rigid_body", False):
         return None
+    from mpgspec.compile.primitive import SNAP
+
     T = float(prim.period)
 
-    def held(t):
-        tc = t % T
+    def held(t):  # as compile.primitive.scheduled_mode reads the schedule
+        tc = (t + SNAP) % T
         for until, feet in sched:
-            if tc < until - 1e-9:
+            if tc < until:
                 return tuple(feet)
         return tuple(sched[-1][1])
 

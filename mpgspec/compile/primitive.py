@@ -260,8 +260,9 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         path = ("safe_set", j)
         if sf.use is not None:
             try:
-                items = sys.builtin_safe_set(sf.use, loop.contacts, *((mode, loop.env) if schedule is not None
-                                                                      and not sys.events else ()))
+                scheduled = schedule is not None and not sys.events  # contact conditions bind by the mode
+                items = sys.builtin_safe_set(sf.use, loop.contacts, mode=mode if scheduled else None,
+                                             env=loop.env if scheduled else None)
             except KeyError:
                 raise SpecError("this safe-set block does not apply to the system", location=inst.locate(path + ("use",)),
                                 key=f"primitive '{inst.name}': safe_set.{j}.use", expected="a block of the project or, "
@@ -332,27 +333,28 @@ def _boundaries(windows, schedule, period, domain) -> tuple[float, ...]:
 
 def _trot_setup(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, consts: dict) -> dict:
     """Speed, calibrated command, gains and the gait table's header of a trot controller."""
+    from ..spec.paths import ReadProblem
     from .rigidbody.trot import check_quadruped, gains_of, gait_header, trot_inputs
 
     c = inst.spec.controller
     owner = f"primitive '{inst.name}'"
-    check_quadruped(type("Ctx", (), {"sys": sys, "ec": ec})())
+    check_quadruped(sys, ec)
     speed = ec.number(c.speed, ("controller", "speed"), consts, finite=True)
     out = {"speed": speed, "command": speed, "gait": None, "inputs": trot_inputs(c, sys, speed)}
     if c.gait is not None:
-        from ..spec.paths import confine
-
-        raw = c.gait
-        for k, v in inst.argument.items():
-            raw = raw.replace("{" + k + "}", f"{v:g}")
         where = inst.locate(("controller", "gait"))
-        path = confine(raw, inst.source.parent, inst.roots, where=where, key=f"{owner}: controller.gait") \
-            if inst.roots else (inst.source.parent / raw).resolve()
+        raw, path = spec_file(inst, c.gait, where, f"{owner}: controller.gait")
         if not path.is_file():
             raise SpecError("the gait table does not exist", location=where, key=f"{owner}: controller.gait",
                             expected="a table written by `mpgspec gait`", found=str(raw), code="MPG110",
                             hint="generate it with `mpgspec gait <project>/gaits.yaml`")
-        head = gait_header(path)
+        try:
+            head = gait_header(path)
+        except ReadProblem as prob:
+            raise SpecError(f"cannot read the gait table: {prob.message}", location=where,
+                            key=f"{owner}: controller.gait", expected=prob.expected or "a table written by "
+                            "`mpgspec gait`", found=f"{raw} ({prob.found})" if prob.found else raw,
+                            code="MPG110") from None
         if head.get("inputs") != out["inputs"]:
             raise SpecError("the gait table is stale: it was generated for other settings", location=where,
                             key=f"{owner}: controller.gait", expected=f"inputs {out['inputs']}",
@@ -441,6 +443,18 @@ def _jump(inst: PrimitiveInstance, sys: CompiledSystem, t: ca.SX, schedule, peri
     return ca.Function("jump", [x, u, t], [ca.vertcat(xu[:nq], v_new, xu[nq + nv:])])
 
 
+def spec_file(inst: PrimitiveInstance, raw: str, where, key: str):
+    """(name, path) of a file a primitive names: `{<argument>}` takes the node's value (one file per
+    node), and the path must stay inside the project folder or an allowed folder (spec.paths)."""
+    from ..spec.paths import confine
+
+    for k, v in inst.argument.items():
+        raw = raw.replace("{" + k + "}", f"{v:g}")
+    if not inst.roots:  # an instance built without the loader: no project folder known
+        return raw, (inst.source.parent / raw).resolve()
+    return raw, confine(raw, inst.source.parent, inst.roots, where=where, key=key)
+
+
 def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) -> tuple[np.ndarray, np.ndarray]:
     """Times and full-state samples of a setpoint table; states without a column take their default.
 
@@ -448,17 +462,11 @@ def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) ->
     of at most MAX_FILE_BYTES and hold finite numbers; errors never echo more than a short piece
     of a line.
     """
-    from ..spec.paths import MAX_FILE_BYTES, ReadProblem, clip, clip_repr, confine, read_text_bounded
+    from ..spec.paths import MAX_FILE_BYTES, ReadProblem, clip, clip_repr, read_text_bounded
 
     where = inst.locate(("setpoint", "file"))
     key = f"primitive '{clip(inst.name, 60)}': setpoint.file"
-    raw = inst.spec.setpoint.file
-    for k, v in inst.argument.items():  # one table per node: `{<argument>}` in the name takes its value
-        raw = raw.replace("{" + k + "}", f"{v:g}")
-    if inst.roots:
-        path = confine(raw, inst.source.parent, inst.roots, where=where, key=key)
-    else:  # an instance built without the loader: no project folder known
-        path = (inst.source.parent / raw).resolve()
+    raw, path = spec_file(inst, inst.spec.setpoint.file, where, key)
 
     def fail(msg, expected, found, line=0):
         loc = where if not line else type(where)(str(path), line, 1)

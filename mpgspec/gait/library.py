@@ -82,8 +82,8 @@ def load_gait_file(path: Path) -> GaitFile:
 
 def generate(path: str | Path, progress=print) -> list[GaitTable]:
     """Find the orbit of every node of the gait file's primitive; return the tables (not yet written)."""
-    from ..compile.rigidbody.system import feet_on_ground
-    from ..compile.rigidbody.trot import trot_inputs
+    from ..compile.primitive import spec_file
+    from ..compile.rigidbody.trot import nominal_state, trot_inputs
     from ..compile.system import compile_system
     from ..spec.loader import load_project
 
@@ -97,20 +97,19 @@ def generate(path: str | Path, progress=print) -> list[GaitTable]:
                         expected="the name of a primitive with controller type trot", found=gf.primitive,
                         code="MPG104")
     ctrl = nodes[0].spec.controller
+    targets = {}  # written only inside the project: checked before any orbit is computed
+    for inst in nodes:
+        raw = inst.spec.controller.gait or f"gaits/{gf.primitive.lower()}_{{speed}}.csv"
+        targets[inst.name] = spec_file(inst, raw, inst.locate(("controller", "gait")),
+                                       f"primitive '{inst.name}': controller.gait")[1]
     progress(f"compiling the stride map of {gf.primitive} (dt = {gf.dt:g} s)")
     sm = StrideMap(sys, ctrl, gf.dt)
-    stand = sys.default_state()
-    for j, a in ctrl.pose.items():
-        stand[sys.state_names.index(j)] = float(a)
-    stand = feet_on_ground(sys, stand)
+    stand = nominal_state(sys, dict(ctrl.pose))
     out = []
     for inst in nodes:
         speed = float(next(iter(inst.argument.values()))) if inst.argument else float(ctrl.speed)
         orbit = find_orbit(sm, stand, speed)
-        raw = inst.spec.controller.gait or f"gaits/{gf.primitive.lower()}_{{speed}}.csv"
-        for k, v in inst.argument.items():
-            raw = raw.replace("{" + k + "}", f"{v:g}")
-        table = GaitTable(inst.name, (inst.source.parent / raw).resolve(), orbit, trot_inputs(ctrl, sys, speed))
+        table = GaitTable(inst.name, targets[inst.name], orbit, trot_inputs(ctrl, sys, speed))
         progress(f"{inst.name}: {orbit.status} in {orbit.iterations} Newton steps, residual {orbit.residual:.1e}, "
                  f"command {orbit.command:.4f} m/s for a mean speed of {orbit.stats['mean_speed']:.4f} m/s, "
                  f"largest multiplier {orbit.spectral_radius:.4f} ({orbit.seconds:.1f} s)")

@@ -20,9 +20,10 @@ import casadi as ca
 import numpy as np
 
 from ..compile.primitive import _jump, saturate, scheduled_mode
-from ..compile.rigidbody.symmetry import generators, lift_function, reduce_function
+from ..compile.rigidbody.symmetry import (NEUTRAL, lift_function, lift_jacobian, reduce_function,
+                                          reduced_monodromy)
 from ..compile.rigidbody.trot import gains_of, nominal_geometry, trot_torque
-from ..oracle.integrator import LEFT, compile_cached
+from ..oracle.integrator import LEFT, compile_cached, rk4_jump
 
 FD = 1e-6
 
@@ -77,65 +78,43 @@ class StrideMap:
         fz = ca.vertcat(*[sys.extra_env[f"{ft}_z"] for ft in feet])
         self.aux = ca.Function("aux", [x, t, c], [u, ca.substitute(lam, sys.u, u), ca.vertcat(*mode.values()), fz])
         jump = _jump(None, sys, ca.SX.sym("tj"), schedule, g.period)
-        h = self.dt
         z = ca.MX.sym("z", sys.nx + 2)  # [x; t; c]: the RK4 stages call f, so its code is generated once
         xm, tm, cm = z[:sys.nx], z[sys.nx], z[sys.nx + 1]
-        k1 = f(xm, tm, cm)
-        k2 = f(xm + h / 2 * k1, tm + h / 2, cm)
-        k3 = f(xm + h / 2 * k2, tm + h / 2, cm)
-        k4 = f(xm + h * k3, tm + h - LEFT, cm)  # inside the step: its own contact mode
-        xn = jump(xm + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), k_u(xm, tm, cm), tm + h)
-        body = ca.Function("body", [z], [ca.vertcat(xn, tm + h, cm)])
-        one = ca.Function("gait_step", [z], [body(z)])
-        stride = ca.Function("gait_stride", [z], [body.fold(n)(z)])
-        self.step = compile_cached(one, ("-O1",)) if jit else one
+        xn = rk4_jump(lambda xx, tt: f(xx, tt, cm), lambda xx, tt: k_u(xx, tt, cm), jump, xm, tm, self.dt, LEFT)
+        body = ca.Function("body", [z], [ca.vertcat(xn, tm + self.dt, cm)])
+        stride = ca.Function("gait_stride", [z], [body.mapaccum(n)(z)])  # every step's state out
         self.stride = compile_cached(stride, ("-O1",)) if jit else stride
-        self.reduce, self.lift = reduce_function(sys), lift_function(sys)
+        self.reduce, self.lift, self.lift_jacobian = reduce_function(sys), lift_function(sys), lift_jacobian(sys)
 
     def run(self, x0: np.ndarray, command: float, strides: int = 1) -> np.ndarray:
         z = np.concatenate([x0, [0.0, command]])
         for _ in range(strides):
-            z = np.array(self.stride(z), float).ravel()
+            z = np.array(self.stride(z), float)[:, -1]
             z[-2] = 0.0
         return z[:-2]
 
     def strides(self, X0: np.ndarray, commands: np.ndarray) -> np.ndarray:
         """End states of one stride from each column of X0 with its command."""
         Z = np.vstack([X0, np.zeros((1, X0.shape[1])), commands[None, :]])
-        return np.array(self.stride.map(X0.shape[1])(Z), float)[:-2]
+        return np.array(self.stride.map(X0.shape[1])(Z), float)[:-2, self.steps - 1::self.steps]
 
     def samples(self, x0: np.ndarray, command: float) -> tuple[np.ndarray, np.ndarray, dict]:
         """States at every step of one stride, with the torques, held-foot forces and foot heights."""
-        z = np.concatenate([x0, [0.0, command]])
-        X, stats = [x0.copy()], {"peak_torque": 0.0, "least_normal_force": np.inf, "least_cone_margin": np.inf,
-                                 "largest_touchdown_gap": 0.0, "least_swing_foot_height": np.inf}
+        N = self.steps
+        X = np.hstack([x0[:, None], np.array(self.stride(np.concatenate([x0, [0.0, command]])), float)[:-2]])
+        t = np.arange(N + 1) * self.dt
+        U, lam, held, fz = (np.array(v, float) for v in self.aux.map(N + 1)(X, t[None, :], command))
         mu = float(self.sys.friction)
-        for k in range(self.steps):
-            u, lam, held, fz = (np.array(v, float).ravel() for v in self.aux(z[:-2], k * self.dt, command))
-            stats["peak_torque"] = max(stats["peak_torque"], float(np.abs(u).max()))
-            if (held < 0.5).any():
-                stats["least_swing_foot_height"] = min(stats["least_swing_foot_height"], float(fz[held < 0.5].min()))
-            for i in np.flatnonzero(held > 0.5):
-                fx, fy, fzz = lam[3 * i:3 * i + 3]
-                stats["least_normal_force"] = min(stats["least_normal_force"], float(fzz))
-                stats["least_cone_margin"] = min(stats["least_cone_margin"], float(mu * fzz - np.hypot(fx, fy)))
-            z = np.array(self.step(z), float).ravel()
-            _, _, held_next, fz_next = (np.array(v, float).ravel() for v in self.aux(z[:-2], (k + 1) * self.dt,
-                                                                                     command))
-            joined = (held_next > 0.5) & (held < 0.5)
-            if joined.any():  # the gap of a foot at its scheduled touchdown (before the impact stops it)
-                stats["largest_touchdown_gap"] = max(stats["largest_touchdown_gap"], float(fz_next[joined].max()))
-                stats["least_swing_foot_height"] = min(stats["least_swing_foot_height"], float(fz_next[joined].min()))
-            X.append(z[:-2].copy())
-        t = np.arange(self.steps + 1) * self.dt
-        return t, np.array(X).T, stats
-
-
-def _jac(fn, z: np.ndarray, eps: float = 1e-7) -> np.ndarray:
-    z = np.asarray(z, float)
-    cols = [(np.array(fn(z + eps * e), float).ravel() - np.array(fn(z - eps * e), float).ravel()) / (2 * eps)
-            for e in np.eye(z.size)]
-    return np.array(cols).T
+        on, off = held[:, :N] > 0.5, held[:, :N] < 0.5
+        fx, fy, fzz = lam[0::3, :N], lam[1::3, :N], lam[2::3, :N]
+        joined = (held[:, 1:] > 0.5) & off  # the gap of a foot at its scheduled touchdown (before the impact)
+        stats = {"peak_torque": float(np.abs(U[:, :N]).max()),
+                 "least_normal_force": float(fzz[on].min(initial=np.inf)),
+                 "least_cone_margin": float((mu * fzz - np.hypot(fx, fy))[on].min(initial=np.inf)),
+                 "largest_touchdown_gap": float(fz[:, 1:][joined].max(initial=0.0)),
+                 "least_swing_foot_height": float(min(fz[:, :N][off].min(initial=np.inf),
+                                                      fz[:, 1:][joined].min(initial=np.inf)))}
+        return t, X, stats
 
 
 def find_orbit(sm: StrideMap, x_stand: np.ndarray, speed: float, tol: float = 1e-10, max_iter: int = 20,
@@ -154,7 +133,7 @@ def find_orbit(sm: StrideMap, x_stand: np.ndarray, speed: float, tol: float = 1e
     status, it, res = "max_iter", 0, np.inf
     for it in range(1, max_iter + 1):
         x0 = lift(z)
-        Dl = _jac(sm.lift, z)
+        Dl = np.array(sm.lift_jacobian(z), float)
         X0 = np.hstack([x0[:, None] + FD * Dl, x0[:, None] - FD * Dl, np.tile(x0[:, None], (1, 3))])
         C = np.concatenate([np.full(2 * nz, c), [c + FD, c - FD, c]])
         XT = sm.strides(X0, C)
@@ -181,29 +160,10 @@ def find_orbit(sm: StrideMap, x_stand: np.ndarray, speed: float, tol: float = 1e
         nan = np.full(nz, np.nan)
         return Orbit(speed, c, T, sm.dt, np.zeros(1), x0[:, None], status, res, it, nan, {}, {},
                      time.perf_counter() - t0)
-    # the reduced monodromy and the neutral multipliers along the symmetry's generators
-    M = _monodromy(sm, x0, c, red, lift, z)
+    M, found = reduced_monodromy(sm.sys, lambda X: sm.strides(X, np.full(X.shape[1], c)), x0, NEUTRAL, FD)
     mu = np.linalg.eigvals(M)
     mu = mu[np.argsort(-np.abs(mu))]
-    neutral = {}
-    xT = sm.run(x0, c)
-    after = generators(sm.sys, xT)
-    for name, g in generators(sm.sys, x0).items():
-        n = np.linalg.norm(g)
-        XT = sm.strides(np.stack([x0 + FD * g / n, x0 - FD * g / n], axis=1), np.array([c, c]))
-        Pg = (XT[:, 0] - XT[:, 1]) / (2 * FD) * n  # the stride's derivative along the generator ...
-        gT = after[name]  # ... is the generator at the stride's end (exactly, by the symmetry)
-        neutral[name] = (float(gT @ Pg / (gT @ gT)), float(np.linalg.norm(Pg - gT) / np.linalg.norm(gT)))
+    neutral = {k: (v["multiplier"], v["invariance_defect"]) for k, v in found.items()}
     t, X, stats = sm.samples(x0, c)
     stats["mean_speed"] = float((X[0, -1] - X[0, 0]) / T)
     return Orbit(speed, c, T, sm.dt, t, X, status, res, it, mu, neutral, stats, time.perf_counter() - t0)
-
-
-def _monodromy(sm: StrideMap, x0, c, red, lift, z) -> np.ndarray:
-    nz = z.size
-    Dl = _jac(sm.lift, z)
-    X0 = np.hstack([x0[:, None] + FD * Dl, x0[:, None] - FD * Dl])
-    XT = sm.strides(X0, np.full(2 * nz, c))
-    Rp = np.array([red(XT[:, j]) for j in range(nz)]).T
-    Rm = np.array([red(XT[:, nz + j]) for j in range(nz)]).T
-    return (Rp - Rm) / (2 * FD)

@@ -18,7 +18,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..compile.primitive import INACTIVE, CompiledPrimitive
+from ..compile.primitive import INACTIVE, SNAP, CompiledPrimitive
 
 
 INLINE_NODES = 4000
@@ -167,6 +167,17 @@ LEFT = 1e-8
 step that ends on a contact switch runs wholly in its own mode (modes switch 1e-9 s early, SNAP);
 the jump then applies the new mode at the end."""
 
+def rk4_jump(f, k, jump, x, t, h: float, left: float = 0.0):
+    """x after one oracle step of h from clock t, without the error bookkeeping: RK4 on
+    xdot = f(x, t) with the last stage `left` before the step's end (see LEFT), then the jump with
+    the input k(x, t) of the step's start."""
+    k1 = f(x, t)
+    k2 = f(x + h / 2 * k1, t + h / 2)
+    k3 = f(x + h / 2 * k2, t + h / 2)
+    k4 = f(x + h * k3, t + h - min(left, h / 2))
+    return jump(x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), k(x, t), t + h)
+
+
 FD_STEP = 1e-6
 """Time step of the forward differences that give the rates of h along the flow in large loops."""
 
@@ -228,7 +239,7 @@ def _step_length(prim: CompiledPrimitive, dt: float, tc):
     B = prim.boundaries
     if not B:
         return ca.DM(dt)
-    eps = 1e-9
+    eps = SNAP  # a clock this close below a switching time is at it (as for the contact mode)
     if prim.period is not None:  # the next b + k T ahead of tc (tc may sit within eps below T)
         P = prim.period
         nxt = [ca.if_else(b > tc + eps, b, ca.if_else(b + P > tc + eps, b + P, b + 2 * P)) for b in (*B, P)]

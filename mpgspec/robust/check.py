@@ -5,7 +5,7 @@ import difflib
 
 from ..errors import SpecError, SpecErrors
 from ..spec.loader import ProjectSpec
-from ..spec.project import ForbidEdge, RequireEdge, RequirePlan, RequireReachable
+from ..spec.project import node_refs
 
 
 def _hint(word: str, choices) -> str:
@@ -66,17 +66,10 @@ def check_uncertainty(spec: ProjectSpec) -> None:
 
     for i, a in enumerate(unc.assertions):
         base = ("assertions", i)
-        if isinstance(a, (RequireEdge, ForbidEdge)):
-            k = "edge" if isinstance(a, RequireEdge) else "no_edge"
-            ref = getattr(a, k)
-            node(ref.from_, base + (k, "from"), f"assertions.{i}.{k}.from")
-            node(ref.to, base + (k, "to"), f"assertions.{i}.{k}.to")
-        elif isinstance(a, RequirePlan):
-            node(a.plan.from_, base + ("plan", "from"), f"assertions.{i}.plan.from")
-            node(a.plan.to, base + ("plan", "to"), f"assertions.{i}.plan.to")
-        elif isinstance(a, RequireReachable):
-            node(a.reachable_from, base + ("reachable_from",), f"assertions.{i}.reachable_from")
-        else:
+        refs = node_refs(a)
+        for name, where in refs or ():
+            node(name, base + where, ".".join(map(str, base + where)))
+        if refs is None:
             errors.append(SpecError("this assertion does not apply to the robust graph", location=loc(*base),
                                     key=f"uncertainty.assertions.{i}", expected="edge, no_edge, plan or reachable_from",
                                     found=type(a).__name__, code="MPG104"))

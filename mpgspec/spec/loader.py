@@ -17,16 +17,7 @@ from typing import Any, Callable, Iterable
 from pydantic import ValidationError
 
 from ..errors import Location, SpecError, SpecErrors, UsageError
-from .models import (
-    ForbidEdge,
-    Primitive,
-    PrimitiveClass,
-    Project,
-    RequireEdge,
-    RequirePlan,
-    RequireReachable,
-    SafetyFunction,
-)
+from .models import Primitive, PrimitiveClass, Project, SafetyFunction
 from .paths import (
     SAFE_NAME_TEXT,
     ReadProblem,
@@ -39,6 +30,7 @@ from .paths import (
     read_text_bounded,
     resolve_roots,
 )
+from .project import node_refs
 from .yamlpos import PositionMap, parse_yaml
 
 PROJECT_FILE = "project.yaml"
@@ -392,17 +384,8 @@ def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = No
                                     expected=clip("one of " + ", ".join(sorted(node_names)), 300),
                                     found=clip_repr(p.next), code="MPG304"))
     for i, a in enumerate(project.assertions):
-        base = ("assertions", i)
-        if isinstance(a, (RequireEdge, ForbidEdge)):
-            ref = a.edge if isinstance(a, RequireEdge) else a.no_edge
-            k = "edge" if isinstance(a, RequireEdge) else "no_edge"
-            check_name(ref.from_, base + (k, "from"), f"assertions.{i}.{k}.from")
-            check_name(ref.to, base + (k, "to"), f"assertions.{i}.{k}.to")
-        elif isinstance(a, RequirePlan):
-            check_name(a.plan.from_, base + ("plan", "from"), f"assertions.{i}.plan.from")
-            check_name(a.plan.to, base + ("plan", "to"), f"assertions.{i}.plan.to")
-        elif isinstance(a, RequireReachable):
-            check_name(a.reachable_from, base + ("reachable_from",), f"assertions.{i}.reachable_from")
+        for name, where in node_refs(a) or ():
+            check_name(name, ("assertions", i) + where, ".".join(map(str, ("assertions", i) + where)))
     if project.sequence is not None:
         check_name(project.sequence.start, ("sequence", "start"), "sequence.start")
         for i, c in enumerate(project.sequence.commands):

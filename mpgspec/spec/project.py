@@ -71,6 +71,20 @@ class RequireConclusive(Strict):
     max_inconclusive: int = Field(ge=0)
 
 
+def node_refs(a) -> list[tuple[str, tuple]] | None:
+    """The primitive names an edge, no_edge, plan or reachable_from assertion refers to, each with
+    its key path inside the assertion; None for assertions that name no primitive."""
+    if isinstance(a, (RequireEdge, ForbidEdge)):
+        k = "edge" if isinstance(a, RequireEdge) else "no_edge"
+        ref = getattr(a, k)
+        return [(ref.from_, (k, "from")), (ref.to, (k, "to"))]
+    if isinstance(a, RequirePlan):
+        return [(a.plan.from_, ("plan", "from")), (a.plan.to, ("plan", "to"))]
+    if isinstance(a, RequireReachable):
+        return [(a.reachable_from, ("reachable_from",))]
+    return None
+
+
 ASSERTION_KEYS = {"edge": RequireEdge, "no_edge": ForbidEdge, "plan": RequirePlan,
                   "reachable_from": RequireReachable, "simulation_safe": RequireSimulation,
                   "max_inconclusive": RequireConclusive}

@@ -81,3 +81,19 @@ def test_twenty_seconds_of_walking_from_the_orbit(prims, name):
     mean = (XT[0, 0] - x0[0]) / (periods * p.period)
     v = SPEEDS[name]
     assert abs(mean - v) <= max(0.1 * v, 0.01), f"{name}: mean speed {mean:.4f} m/s for {v} m/s"
+
+
+def test_a_gait_table_outside_the_project_is_refused(tmp_path):
+    """`mpgspec gait` writes tables only inside the project folder, and says so before any work."""
+    import shutil
+
+    from mpgspec.errors import SpecError
+
+    d = tmp_path / "a1"
+    shutil.copytree(A1, d)
+    walk = d / "primitives" / "walk.yaml"
+    walk.write_text(walk.read_text().replace("  gait: ../gaits/walk_{speed}.csv", "  gait: ../../escaped_{speed}.csv"))
+    with pytest.raises(SpecError) as err:
+        generate(d / "gaits.yaml", progress=lambda m: None)
+    assert err.value.code == "MPG305" and "controller.gait" in err.value.format()
+    assert not list(tmp_path.glob("escaped_*"))

@@ -62,3 +62,38 @@ def generators(sys, x: np.ndarray) -> dict[str, np.ndarray]:
     gyaw[0], gyaw[1] = -x[1], x[0]
     gyaw[3:7] = dq
     return {"base_x": gx, "base_y": gy, "yaw": gyaw}
+
+
+def lift_jacobian(sys) -> ca.Function:
+    """z -> d lift / d z (exact)."""
+    lift = lift_function(sys)
+    z = lift.sx_in(0)
+    return ca.Function("lift_jacobian", [z], [ca.jacobian(lift(z), z)])
+
+
+def reduced_monodromy(sys, run, x0: np.ndarray, neutral=NEUTRAL, eps: float = 1e-6) -> tuple[np.ndarray, dict]:
+    """The derivative of a period map on the reduced state at x0, by central differences, and the
+    multipliers along the generators named in `neutral` (1 when the map respects the symmetry).
+
+    run(X) maps columns of full states to their images after one period. Each neutral multiplier
+    compares the map's derivative along a generator at x0 with the generator at the image (the
+    symmetry maps one onto the other exactly); its invariance defect is the relative mismatch.
+    """
+    red, lift = reduce_function(sys), lift_function(sys)
+    z = np.array(red(x0), float).ravel()
+    base = np.array(lift(z), float).ravel()
+    Dl = np.array(lift_jacobian(sys)(z), float)
+    g0 = generators(sys, base)
+    G = np.stack([g0[k] / np.linalg.norm(g0[k]) for k in neutral], 1) if neutral else np.zeros((base.size, 0))
+    n, m = z.size, G.shape[1]
+    b = base[:, None]
+    XT = run(np.hstack([b + eps * Dl, b - eps * Dl, b + eps * G, b - eps * G, b]))
+    R = np.array([np.array(red(XT[:, j]), float).ravel() for j in range(2 * n)]).T
+    M = (R[:, :n] - R[:, n:]) / (2 * eps)
+    gT = generators(sys, XT[:, -1])
+    found = {}
+    for i, k in enumerate(neutral):
+        Pg = (XT[:, 2 * n + i] - XT[:, 2 * n + m + i]) / (2 * eps) * np.linalg.norm(g0[k])
+        found[k] = {"multiplier": float(gT[k] @ Pg / (gT[k] @ gT[k])),
+                    "invariance_defect": float(np.linalg.norm(Pg - gT[k]) / np.linalg.norm(gT[k]))}
+    return M, found

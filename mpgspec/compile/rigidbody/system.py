@@ -79,17 +79,9 @@ class RigidBodyCompiledSystem(CompiledSystem):
 
     def _hybrid_loop(self, key: tuple[str, ...]) -> OpenLoop:
         """The contact set follows the flags in the state; `key` only names the initial set."""
-        from .hybrid import masked_contact_dynamics
-
         m = self.model
-        xq, xv, xc = self.x[:m.nq], self.x[m.nq:m.nq + m.nv], self.x[m.nq + m.nv:]
-        a, lam = masked_contact_dynamics(self, xq, xv, self.u, xc)
-        xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(len(m.contact_frames)))
-        env = dict(self.extra_env)
-        for k, f in enumerate(m.contact_frames):
-            for j, ax in enumerate("xyz"):
-                env[f"{f}_f{ax}"] = lam[3 * k + j]
-        return OpenLoop(xdot, env, contacts=key)
+        flags = self.x[m.nq + m.nv:]
+        return self.scheduled_loop({f: flags[i] for i, f in enumerate(m.contact_frames)}, key)
 
     def contact_flag(self, frame: str) -> ca.SX | None:
         return self.x[self.state_names.index(f"contact_{frame}")] if self.events else None
@@ -200,8 +192,9 @@ class RigidBodyCompiledSystem(CompiledSystem):
         c = mode[frame] if mode is not None else self.contact_flag(frame)
         return h if c is None else ca.if_else(c > 0.5, h, 1e3)
 
-    def scheduled_loop(self, mode: dict) -> OpenLoop:
-        """Constrained dynamics holding the feet whose mode is 1 (mode: foot -> 0/1 symbols of the clock)."""
+    def scheduled_loop(self, mode: dict, contacts: tuple[str, ...] | None = None) -> OpenLoop:
+        """Constrained dynamics holding the feet whose mode is 1 (mode: foot -> 0/1 symbols, of the
+        clock under a schedule or the contact flags of the state); `contacts` names the loop's set."""
         from .hybrid import masked_contact_dynamics
 
         m = self.model
@@ -213,7 +206,7 @@ class RigidBodyCompiledSystem(CompiledSystem):
         for k, f in enumerate(m.contact_frames):
             for j, ax in enumerate("xyz"):
                 env[f"{f}_f{ax}"] = lam[3 * k + j]
-        return OpenLoop(xdot, env, contacts=tuple(m.contact_frames))
+        return OpenLoop(xdot, env, contacts=tuple(m.contact_frames) if contacts is None else contacts)
 
     def builtin_safe_set(self, name: str, contacts: tuple[str, ...], mode: dict | None = None,
                          env: dict | None = None, tol: float = 1e-3) -> list[tuple[str, ca.SX]]:

@@ -161,18 +161,23 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
     return ca.vertcat(*u)
 
 
+def nominal_state(sys, pose: dict) -> np.ndarray:
+    """The nominal stance at rest: the system's default state with the `pose` joint angles, feet on the ground."""
+    from .system import feet_on_ground
+
+    x = sys.default_state()
+    for j, a in pose.items():
+        x[sys.state_names.index(j)] = float(a)
+    return feet_on_ground(sys, x)
+
+
 def nominal_geometry(sys, pose: dict) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Centroidal inertia and horizontal foot offsets from the CoM in the nominal stance (`pose`,
     feet on the ground)."""
     import pinocchio as pin
 
-    from .system import feet_on_ground
-
     m = sys.model
-    x = sys.default_state()
-    for j, a in pose.items():
-        x[sys.state_names.index(j)] = float(a)
-    x = feet_on_ground(sys, x)
+    x = nominal_state(sys, pose)
     pm = m.pin_model
     data = pm.createData()
     q = np.asarray(x[:m.nq], float)
@@ -200,14 +205,15 @@ def trot_law(c, ctx) -> ca.SX:
 
 
 def gait_header(path) -> dict[str, str]:
-    """The `# key: value` lines at the top of a gait table."""
+    """The `# key: value` lines at the top of a gait table (read with the bound of every spec file)."""
+    from ...spec.paths import MAX_FILE_BYTES, read_text_bounded
+
     out = {}
-    with open(path, encoding="utf-8") as fh:
-        for line in fh:
-            if not line.startswith("#"):
-                break
-            key, _, value = line[1:].partition(":")
-            out[key.strip()] = value.strip()
+    for line in read_text_bounded(path, MAX_FILE_BYTES).splitlines():
+        if not line.startswith("#"):
+            break
+        key, _, value = line[1:].partition(":")
+        out[key.strip()] = value.strip()
     return out
 
 
@@ -233,15 +239,15 @@ def gains_of(c, speed: float) -> TrotGains:
                      kd_swing=float(c.kd_swing), k_tilt=float(c.k_tilt), d_tilt=float(c.d_tilt))
 
 
-def check_quadruped(ctx) -> None:
+def check_quadruped(sys, ec) -> None:
+    """A SpecError at controller.type unless sys is a floating-base quadruped with FL, FR, RL, RR feet."""
     from ...errors import SpecError
 
-    sys = ctx.sys
     ok = sys.is_rigid_body and sys.model.floating_base and len(sys.model.contact_frames) == 4 \
         and tuple(sys.model.contact_frames) == PAIR_A[:1] + PAIR_B + PAIR_A[1:]
     if not ok:
         raise SpecError("the trot needs a floating-base quadruped with contact frames FL_foot, FR_foot, RL_foot, "
-                        "RR_foot in this order", location=ctx.ec.locate(("controller", "type")),
-                        key=f"{ctx.ec.owner}: controller.type", expected="system kind rigid_body with four feet",
+                        "RR_foot in this order", location=ec.locate(("controller", "type")),
+                        key=f"{ec.owner}: controller.type", expected="system kind rigid_body with four feet",
                         found=f"contacts {list(getattr(getattr(sys, 'model', None), 'contact_frames', []))}",
                         code="MPG108")
