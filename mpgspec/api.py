@@ -178,7 +178,7 @@ def settings_for(spec: ProjectSpec, overrides: dict | None = None) -> OracleSett
     """Oracle settings of a project: its accuracy preset, then explicit overrides."""
     o = spec.project.oracle
     s = OracleSettings.with_accuracy(o.accuracy, horizon=o.horizon, dt=o.dt, method=o.method,
-                                     h_tolerance=o.h_tolerance)
+                                     h_tolerance=o.h_tolerance, error=o.error)
     s = s.replace(**(overrides or {}))
     try:
         get_backend(s.method)  # an unknown method is a spec error, not evidence

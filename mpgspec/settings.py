@@ -11,7 +11,10 @@ class OracleSettings:
     dt: integration step (shortened where the safe set switches); horizon: T of Definition 4;
     h_tolerance: h >= -tol is safe; refinements: how many times an inconclusive rollout is run
     again with the step halved; chunk: steps per compiled call between early-termination checks;
-    batch: start points integrated side by side in one call; jit: compile with gcc.
+    batch: start points integrated side by side in one call; jit: compile with gcc; error: how the
+    integration error is estimated, 'local' (embedded third-order estimates summed over the steps)
+    or 'doubling' (the rollout runs at dt/2 beside one at dt; their difference is the error, so it
+    is the error the flow really propagates, shrinking where the closed loop contracts).
     """
 
     horizon: float = 5.0
@@ -23,6 +26,7 @@ class OracleSettings:
     batch: int = 64
     jit: bool = True
     jit_flags: tuple[str, ...] = ("-O1",)
+    error: str = "local"
 
     @classmethod
     def with_accuracy(cls, level: str, **kw) -> "OracleSettings":

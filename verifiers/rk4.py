@@ -2,7 +2,8 @@
 
 Rollouts run side by side in compiled chunks of K steps; a step never crosses a clock time where
 the safe set or the contact mode switches. Each step reports the safety functions at both ends,
-their rates along the flow and the embedded third-order error estimate, from which the judge
+their rates along the flow and an integration error estimate (embedded third-order per step, or
+step doubling: see mpgspec.oracle.integrator), from which the judge
 (mpgspec.oracle.verdict) bounds what can hide between samples and in the integration error.
 After each chunk, decided rollouts are retired and their slots refilled from the queue.
 Inconclusive rollouts are run again with the step halved, up to `settings.refinements` times.
@@ -33,8 +34,10 @@ class RK4Runner:
         self.prim = prim
         self.s = settings
         self.dt = dt or settings.dt
-        self.chunk: Chunk = build_chunk(prim, self.dt, settings.chunk, settings.jit, settings.jit_flags)
-        self.c_margin = margin_gain(prim)
+        self.chunk: Chunk = build_chunk(prim, self.dt, settings.chunk, settings.jit, settings.jit_flags,
+                                        error=settings.error)
+        # step doubling estimates the margin's error directly; local estimates are state norms
+        self.c_margin = 1.0 if settings.error == "doubling" else margin_gain(prim)
         self._fine: RK4Runner | None = None
 
     def evaluate(self, x0s: np.ndarray, t0s: np.ndarray, horizon: np.ndarray | float,
@@ -62,7 +65,8 @@ class RK4Runner:
         """
         n = Zall.shape[1]
         try:
-            H, M, UR, U = (np.asarray(v) for v in build_first(self.prim, self.dt, self.s.jit).map(n, "serial")(Zall))
+            nz = 2 * self.prim.system.nx + 2
+            H, M, UR, U = (np.asarray(v) for v in build_first(self.prim, self.dt, self.s.jit).map(n, "serial")(Zall[:nz]))
         except Exception:  # judged with the chunks instead
             return np.arange(n)
         nh, nu = len(self.prim.h_names), self.prim.system.nu
@@ -84,7 +88,7 @@ class RK4Runner:
         lo, hi = prim.system.u_lo, prim.system.u_hi
         T = np.asarray(horizons, float)
         results: list[OracleEvidence | None] = [None] * len(x0s)
-        Zall = np.vstack([x0s.T, np.asarray(t0s, float)[None, :], np.zeros((1, len(x0s))), x0s.T])
+        Zall = ch.start(x0s, t0s)
         order = self._first(Zall, T, np.asarray(t0s, float), results)
         Zall = Zall[:, order]
         n = order.size
@@ -115,7 +119,7 @@ class RK4Runner:
             end_ok = np.isfinite(Zf).all(axis=0)
             finite[:, -1] &= end_ok
             blk = Block(out[r.h], out[r.lb], out[r.dh], out[r.margin], out[r.err], out[r.s], out[r.dt],
-                        out[r.u_raw], out[r.u], finite)
+                        out[r.u_raw], out[r.u], finite, out[r.ds] if r.doubling else None)
             d = judge(blk, carry, T[order[ids]], self.s.h_tolerance, self.c_margin, lo, hi)
             done = np.flatnonzero(d.done)
             msgs = {int(b): _non_finite(out[:, b, int(d.k[b])], r, int(d.k[b]) == K - 1 and not end_ok[b])

@@ -53,6 +53,7 @@ class Rows:
     nh: int
     nu: int
     nx: int = 0
+    doubling: bool = False
 
     @property
     def h(self):
@@ -95,6 +96,13 @@ class Rows:
         o = 3 * self.nh + 4 + 2 * self.nu
         return slice(o, o + self.nx)
 
+    @property
+    def ds(self):
+        """Under step doubling: the error estimate of each h at sample k (dh is then the one at the
+        step's end, err the RoA margin's at sample k; all absolute, not per step)."""
+        o = 3 * self.nh + 4 + 2 * self.nu + self.nx
+        return slice(o, o + (self.nh if self.doubling else 0))
+
 
 @dataclass
 class Chunk:
@@ -127,6 +135,12 @@ class Chunk:
             self._buffers[n] = (buf, ev, zin, zf, out)  # buf keeps the bindings alive
         return self._buffers[n][1:]
 
+    def start(self, x0s: np.ndarray, t0s: np.ndarray) -> np.ndarray:
+        """Augmented start states (one column per row of x0s), as initial_state."""
+        X = np.asarray(x0s, float).T
+        t = np.asarray(t0s, float)[None, :]
+        return np.vstack([X, t, np.zeros_like(t), X] + ([X] if self.rows.doubling else []))
+
     def run(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Advance the columns of Z (nz x n) by K steps; out has shape (rows, n, K).
 
@@ -144,16 +158,19 @@ class Chunk:
 
 
 def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
-                flags: tuple[str, ...] = ("-O1",), with_state: bool = False, boundaries: bool = True) -> Chunk:
+                flags: tuple[str, ...] = ("-O1",), with_state: bool = False, boundaries: bool = True,
+                error: str = "local") -> Chunk:
     """Compile K steps of RK4 with per-step outputs for one primitive (and the states, if asked).
 
     With `boundaries`, a step never crosses a clock time where the safe set or the contact mode
-    switches: it is shortened to end there. Compiled chunks are remembered on the primitive, so
-    oracles, traces and executions share them.
+    switches: it is shortened to end there. `error` is 'local' (embedded per-step estimates) or
+    'doubling' (see _build_doubling). Compiled chunks are remembered on the primitive, so oracles,
+    traces and executions share them.
     """
-    key = (dt, K, jit, tuple(flags), with_state, boundaries)
+    key = (dt, K, jit, tuple(flags), with_state, boundaries, error)
     if key not in prim.cache:
-        prim.cache[key] = _build_chunk(prim, dt, K, jit, flags, with_state, boundaries)
+        build = _build_doubling if error == "doubling" else _build_chunk
+        prim.cache[key] = build(prim, dt, K, jit, flags, with_state, boundaries)
     return prim.cache[key]
 
 
@@ -195,11 +212,8 @@ def _ends(prim: CompiledPrimitive) -> tuple[ca.Function, ca.Function, ca.Functio
     and h(x_next) - h(x_next - e), which reuse the one compiled loop instead of generating
     derivative code several times its size.
     """
-    f, loop = prim.f_cl, prim.loop_raw or prim.loop
-    sx = loop.is_a("SXFunction")
-    big = not sx or f.n_nodes() > INLINE_NODES
-    if big:
-        loop = _with_cse(loop) if sx else loop
+    f, loop = prim.f_cl, _loop(prim)
+    if not loop.is_a("SXFunction") or f.n_nodes() > INLINE_NODES:
         a = loop.mx_in()  # the inner stages take xdot from the same loop: its code is generated once
         return (*_ends_differences(loop), ca.Function("f_of_loop", a, [loop.call(a)[0]]))
     a = loop.sx_in()
@@ -213,6 +227,17 @@ def _ends(prim: CompiledPrimitive) -> tuple[ca.Function, ca.Function, ca.Functio
     D = ca.jtimes(hv, arg, ca.horzcat(ca.vertcat(xdot, one), ca.vertcat(e, ca.DM.zeros(2))))
     end = ca.Function("end", a + [k4, dt], [xdot, hv, D[:, 0], ca.fabs(D[:, 1]), e])
     return start, end, f
+
+
+def _loop(prim: CompiledPrimitive) -> ca.Function:
+    """The closed loop (x, t, s, x_sw) -> (xdot, h, u_raw, u); large SX loops with common
+    subexpressions eliminated, one Function object per primitive so that its code is generated once."""
+    loop = prim.loop_raw or prim.loop
+    if loop.is_a("SXFunction") and prim.f_cl.n_nodes() > INLINE_NODES:
+        if "cse_loop" not in prim.cache:
+            prim.cache["cse_loop"] = _with_cse(loop)
+        return prim.cache["cse_loop"]
+    return loop
 
 
 def _ends_differences(loop: ca.Function) -> tuple[ca.Function, ca.Function]:
@@ -289,6 +314,59 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
     fn = ca.Function(name, [Z], [zs[:, -1], outs])
     return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
                  Rows(nh, prim.system.nu, nx if with_state else 0))
+
+
+def _rk4(f, x, t, s, xs, h, te, k1=None):
+    """One RK4 step of h (last stage at te); k1 given when already evaluated."""
+    k1 = f(x, t, s, xs) if k1 is None else k1
+    k2 = f(x + h / 2 * k1, t + h / 2, s + h / 2, xs)
+    k3 = f(x + h / 2 * k2, t + h / 2, s + h / 2, xs)
+    k4 = f(x + h * k3, t + te, s + te, xs)
+    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: tuple[str, ...],
+                    with_state: bool, boundaries: bool) -> Chunk:
+    """K steps of step doubling: the judged rollout takes two RK4 half steps per step while a
+    companion rollout x_c takes one full step from its own state, both with the same clock, jumps
+    and boundaries. RK4's global error shrinks 16x when the step halves, so |h(x) - h(x_c)| at each
+    sample (and at each step's end, before the jump) estimates the judged rollout's error in h
+    about 15 times over; likewise for the RoA margin. The estimate is the error the closed loop
+    really propagates: it shrinks where the loop contracts instead of adding up step by step.
+    The augmented state is [x; t; s; x_sw; x_c]."""
+    nx, nh = prim.system.nx, len(prim.h_names)
+    start, _end, f = _ends(prim)
+    loop = _loop(prim)
+    jump = _jump_fn(prim)
+    z = _sym(prim.f_cl, prim)("z", 3 * nx + 2)
+    x, t, s, xs, xc = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2], z[2 * nx + 2:]
+    tc = _wrap(prim, t)
+    h = _step_length(prim, dt, tc) if boundaries else ca.DM(dt)
+    te = h - ca.fmin(LEFT, h / 2) if prim.info.get("contact_schedule") else h
+    k1, h0, d0, u_raw, u = start(x, t, s, xs)
+    kc1, h0c, _uc_raw, uc = (loop(xc, t, s, xs)[i] for i in (0, 1, 2, 3))
+    hh = h / 2
+    x_mid = _rk4(f, x, t, s, xs, hh, hh, k1)
+    x_end = _rk4(f, x_mid, t + hh, s + hh, xs, hh, te - hh)
+    xc_end = _rk4(f, xc, t, s, xs, h, te, kc1)
+    _k5, h1, d1, _ur, _u = start(x_end, t + te, s + te, xs)  # h and its rate at the step's end
+    h1c = loop(xc_end, t + te, s + te, xs)[1]
+    act = _active(prim, _wrap(prim, t + h / 2))
+    L = ca.fmax(ca.fmax(ca.fabs(d0), ca.fabs(d1)), ca.fabs(h1 - h0) / h)
+    lb = (h0 + h1) / 2 - L * h / 2
+    masked = (lambda v: ca.if_else(act, v, INACTIVE)) if nh else (lambda v: v)
+    m_f, m_c = prim.roa_margin(x, t), prim.roa_margin(xc, t)
+    out = ca.vertcat(masked(h0), masked(lb), ca.fabs(h1 - h1c), m_f, ca.fabs(m_f - m_c), s, h, u_raw, u,
+                     *([x] if with_state else []), ca.fabs(h0 - h0c))
+    x_next, xc_next = jump(x_end, u, t + h), jump(xc_end, uc, t + h)
+    body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next), out])
+    acc = body.mapaccum("acc", K)
+    Z = ca.MX.sym("Z", 3 * nx + 2)
+    zs, outs = acc(Z)
+    name = "chunk2_" + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}{boundaries}".encode()).hexdigest()[:10]
+    fn = ca.Function(name, [Z], [zs[:, -1], outs])
+    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
+                 Rows(nh, prim.system.nu, nx if with_state else 0, doubling=True))
 
 
 def cache_dir() -> Path:

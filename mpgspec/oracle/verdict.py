@@ -40,6 +40,7 @@ class Block:
     u_raw: np.ndarray
     u: np.ndarray
     finite: np.ndarray  # (m, K): every output of the step (and, for the last, the end state) is finite
+    ds: np.ndarray | None = None  # step doubling: absolute error of h at the samples (dh, err absolute too)
 
 
 class Carry:
@@ -88,10 +89,14 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
     """Decide what can be decided in this block and fold its judged part into the carry."""
     nh, m, K = b.lb.shape if b.lb.ndim == 3 else (0, *b.margin.shape)
     ar = np.arange(K)
+    absolute = b.ds is not None  # step doubling: the estimates are absolute, not per step
     if nh:
-        cdh = np.cumsum(b.dh, axis=2)
-        eh_s = c.eh[:, :, None] + cdh - b.dh  # error estimate at sample k
-        eh_e = c.eh[:, :, None] + cdh  # at the end of step k
+        if absolute:
+            eh_s, eh_e = b.ds, b.dh
+        else:
+            cdh = np.cumsum(b.dh, axis=2)
+            eh_s = c.eh[:, :, None] + cdh - b.dh  # error estimate at sample k
+            eh_e = c.eh[:, :, None] + cdh  # at the end of step k
         # inactive functions hold INACTIVE (1e9): never binding, and left out of the reported least values
         low_s = b.h - eh_s
         low_t = b.lb - eh_e
@@ -100,9 +105,12 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
         doubt_t = (low_t < -tol).any(axis=0)
     else:
         viol = doubt_s = doubt_t = np.zeros((m, K), bool)
-    cen = np.cumsum(b.err, axis=1)
-    with np.errstate(invalid="ignore"):
-        en_s = c.en[:, None] + cen - b.err
+    if absolute:
+        en_s = b.err
+    else:
+        cen = np.cumsum(b.err, axis=1)
+        with np.errstate(invalid="ignore"):
+            en_s = c.en[:, None] + cen - b.err
     valid = b.s <= T[:, None] + 1e-9
     valid_t = b.s + b.dt <= T[:, None] + 1e-9
     bad = ~b.finite
@@ -157,8 +165,15 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
             c.min_h = np.fmin(c.min_h, np.fmin.reduce(hs, axis=2))
             c.low = np.fmin(c.low, np.fmin(np.fmin.reduce(ls, axis=2), np.fmin.reduce(lt, axis=2)))
         c.count += (hs < INACTIVE / 2).sum(axis=2) + (lt < INACTIVE / 2).sum(axis=2)
-        c.eh = c.eh + (cdh[:, :, -1] if full_t else np.where(jt[None], b.dh, 0.0).sum(axis=2))
-    c.en = c.en + (cen[:, -1] if bool(jt.all()) else np.where(jt, b.err, 0.0).sum(axis=1))
+        if absolute:
+            last = np.clip(n_t - 1, 0, K - 1)
+            c.eh = np.where(n_t > 0, eh_e[:, rows, last], c.eh)
+        else:
+            c.eh = c.eh + (cdh[:, :, -1] if full_t else np.where(jt[None], b.dh, 0.0).sum(axis=2))
+    if absolute:  # the margin's error at the last judged sample
+        c.en = np.where(n_s > 0, en_s[rows, np.clip(n_s - 1, 0, K - 1)], c.en)
+    else:
+        c.en = c.en + (cen[:, -1] if bool(jt.all()) else np.where(jt, b.err, 0.0).sum(axis=1))
     c.nsteps = c.nsteps + n_t
     with np.errstate(invalid="ignore"):
         c.best_m = np.maximum(c.best_m, np.where(js & ~np.isnan(b.margin), b.margin, -np.inf).max(axis=1))

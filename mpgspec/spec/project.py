@@ -19,6 +19,10 @@ class OracleConfig(Strict):
     method: Text = Field(default="rk4", description="verifier backend name")
     accuracy: Literal["low", "medium", "high", "very_high"] = "medium"
     h_tolerance: Number = Field(default=0.0, ge=0, description="h >= -tol counts as safe (finite)")
+    error: Literal["local", "doubling"] = Field(
+        default="local", description="integration error estimate: local (summed per-step estimates) or doubling "
+        "(each rollout runs at dt/2 beside one at dt; their difference is its error: about 2x the cost, "
+        "far tighter on long rollouts of contracting closed loops)")
 
     @model_validator(mode="after")
     def _step_within_horizon(self):

@@ -61,7 +61,7 @@ from scipy.optimize import brentq
 DT = 0.005  # base step of the presets (high: DT/2, very_high: DT/4)
 HORIZON = 2.5
 PRESETS = ("low", "medium", "high", "very_high")
-BACKENDS = ("rk4", "scipy")
+BACKENDS = ("rk4", "rk4:doubling", "scipy")  # rk4:doubling is rk4 with error: doubling
 FAMILIES = ("window", "slab", "graze", "fast")
 CASES_PER_FAMILY = 600
 SCIPY_PER_FAMILY = 75
@@ -468,7 +468,8 @@ def oracle_statuses(prims: dict, backend: str, preset: str, prim: str, X: np.nda
     from mpgspec.oracle import SafetyOracle
     from mpgspec.settings import OracleSettings
 
-    settings = OracleSettings.with_accuracy(preset, dt=DT, horizon=HORIZON, method=backend)
+    method, _, error = backend.partition(":")
+    settings = OracleSettings.with_accuracy(preset, dt=DT, horizon=HORIZON, method=method, error=error or "local")
     try:
         return [status_of(e) for e in SafetyOracle(prims[prim], settings).evaluate(X, T0)]
     except Exception as err:  # reported per case, never counted as 'safe'
