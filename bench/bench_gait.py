@@ -22,7 +22,7 @@ from mpgspec.gait.orbit import StrideMap, find_orbit  # noqa: E402
 from mpgspec.oracle.integrator import build_chunk, initial_state  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402
 
-A1 = Path(__file__).resolve().parents[1] / "specs" / "a1" / "walks.yaml"
+A1 = Path(__file__).resolve().parents[1] / "specs" / "a1" / "project.yaml"
 
 
 def main() -> None:

@@ -32,8 +32,8 @@ def build_plain_chunk(prim, dt: float, K: int, jit: bool = True, flags: tuple[st
     if prim.jump is not None:
         jump = prim.jump
     else:
-        ju, jt = ca.SX.sym("u", prim.system.nu), ca.SX.sym("t")
-        jump = ca.Function("jump", [prim.system.x, ju, jt], [prim.system.project(prim.system.x, ju)])
+        ju, jt, js = ca.SX.sym("u", prim.system.nu), ca.SX.sym("t"), ca.SX.sym("s")
+        jump = ca.Function("jump", [prim.system.x, ju, jt, js], [prim.system.project(prim.system.x, ju, js)])
     sym = ca.SX.sym if prim.f_cl.is_a("SXFunction") and prim.f_cl.n_nodes() <= INLINE_NODES else ca.MX.sym
     z = sym("z", 2 * nx + 2)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
@@ -41,7 +41,7 @@ def build_plain_chunk(prim, dt: float, K: int, jit: bool = True, flags: tuple[st
     k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2, xs)
     k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2, xs)
     k4 = f(x + dt * k3, t + dt, s + dt, xs)
-    x_next = jump(x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), u, t + dt)
+    x_next = jump(x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), u, t + dt, s + dt)
     body = ca.Function("body", [z], [ca.vertcat(x_next, t + dt, s + dt, xs), out])
     Z = ca.MX.sym("Z", 2 * nx + 2)
     zs, outs = body.mapaccum("acc", K)(Z)

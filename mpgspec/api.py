@@ -21,9 +21,12 @@ from typing import Callable
 from .certify.roa import RANK, size_regions
 from .check.assertions import AssertionResult, evaluate_assertions
 from .check.assumptions import AssumptionCheck, check_primitive
+from .check.crosscheck import agreement_assertions
 from .compile.primitive import CompiledPrimitive, compile_primitive
 from .compile.system import compile_system
 from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, UsageError  # noqa: F401
+from .execute.crosscheck import CrossCheckResult, crosscheck_runs
+from .execute.crosscheck.settings import settings_of as crosscheck_settings
 from .execute.sequence import simulate_sequence
 from .graph.build import build_graph
 from .graph.traces import edge_traces, failure_traces
@@ -275,6 +278,7 @@ class Checks:
     status: str
     timing: dict
     robust: RobustResult | None = None  # the robust graph when the project declares `uncertainty`
+    crosscheck: CrossCheckResult | None = None  # the runs replayed in MuJoCo when the project asks
 
 
 def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
@@ -283,6 +287,7 @@ def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progres
     (memo: mpgspec.oracle.cache.Memo, to reuse the sizing of unchanged primitives)."""
     t0 = time.perf_counter()
     check_uncertainty(spec)
+    crosscheck_settings(spec)  # a cross-check that cannot run is a spec error before anything is built
     if progress:
         progress(spec.name, "compile (closed loops as CasADi functions)", 0, len(spec.primitives))
     prims = compile_project(spec)
@@ -334,6 +339,14 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
             runs[mode] = simulate_sequence(prims, g, table["next"], spec.project.sequence, settings, mode)
     checks = evaluate_assertions(spec.project.assertions, g, runs)
     checks += roa_requirements(spec, cp.roa, start=len(checks))
+    t_x = time.perf_counter()
+    xcs, xc = crosscheck_settings(spec), None
+    if xcs is not None and runs:
+        if progress:
+            progress(spec.name, f"cross-check ({xcs.simulator})", 0, len(xcs.runs))
+        xc = crosscheck_runs(prims, runs, spec.project.sequence.duration, xcs, settings.h_tolerance)
+        if xcs.require_agreement:
+            checks += agreement_assertions(xc, start=len(checks))
     t1 = time.perf_counter()
     robust = robust_stage(cp, vg, progress, memo)
     if robust is not None:
@@ -347,7 +360,8 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     st = [c.status for c in checks] + [a.status for a in assumed]
     status = "error" if "error" in st else "fail" if "fail" in st else "pass"
     return Checks(plans, table, runs, checks, assumed, status,
-                  {"plan_execute_s": t1 - t0, "robust_s": t2 - t1, "assumptions_s": time.perf_counter() - t2}, robust)
+                  {"plan_execute_s": t_x - t0, **({"crosscheck_s": t1 - t_x} if xc is not None else {}),
+                   "robust_s": t2 - t1, "assumptions_s": time.perf_counter() - t2}, robust, xc)
 
 
 def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
@@ -472,6 +486,8 @@ def _locate_checks(spec: ProjectSpec, report: dict) -> None:
                 loc = spec.locate(("assertions", a["index"]))
             elif a["kind"] == "roa_level":
                 loc = prim(a["description"].removeprefix("E of ").rsplit(" is ", 1)[0], "roa")
+            elif a["kind"] == "crosscheck":
+                loc = spec.locate(("crosscheck", "require_agreement"))
         except (KeyError, LookupError, TypeError, ValueError):
             loc = None
         if (w := _where(loc)) is not None:
@@ -491,7 +507,8 @@ def _finish_project(res: ProjectResult, cp: CompiledProject, vg: VerifiedGraph, 
                           table=ch.table, assertions=ch.assertions, runs=ch.runs, failures=vg.failure_traces,
                           timing=timing, status=ch.status, assumptions=ch.assumptions, roa=cp.roa,
                           edge_series=vg.edge_traces, digest=_digest(cp.spec.path),
-                          robust=ch.robust.to_dict() if ch.robust is not None else None)
+                          robust=ch.robust.to_dict() if ch.robust is not None else None,
+                          crosscheck=ch.crosscheck.to_dict() if ch.crosscheck is not None else None)
     _locate_checks(cp.spec, report)
     res.status, res.report, res.compiled = ch.status, report, cp
     if out_dir is not None:

@@ -2,7 +2,7 @@
 
     mpgspec verify PATH [--out reports] [--format human|json|github]
     mpgspec plan PROJECT --from A --to B [--weight duration|peak_input|hops]
-    mpgspec simulate PROJECT [--mode naive|graph|both]
+    mpgspec simulate PROJECT [--mode naive|graph|both] [--uncertain --runs N --seed S]
     mpgspec schema [--kind project|primitive|system|report]
 
 plan and simulate reuse what verify wrote (reports/<project>/report.json) while it matches the
@@ -410,13 +410,74 @@ def _expected(spec) -> dict[str, bool]:
     return out
 
 
+def _simulate_uncertain(args, spec, report) -> int:
+    """The goal sequence under seeded draws of the project's uncertainty: the fraction of runs that
+    stay safe naive, through the nominal graph and through the robust graph. Exit 0 when every
+    robust-graph run stays safe."""
+    from .plan.planner import lookup_table
+    from .robust.sequence import sequence_under_uncertainty
+
+    unc = spec.project.uncertainty
+    if unc is None:
+        raise UsageError(f"{spec.path}: the project declares no `uncertainty` to sample")
+    runs = unc.runs if args.runs is None else args.runs
+    seed = unc.seed if args.seed is None else args.seed
+    if not 1 <= runs <= 100000:
+        raise UsageError(f"--runs must be between 1 and 100000; got {runs}")
+    with stdout_to_stderr():
+        settings = api.settings_for(spec)
+        if report is not None and report.get("robust"):
+            from .report.read import ReportGraph
+            from .robust.plan import report_lookup_table, robust_report_graph
+
+            cp = api.compile_stage(spec, settings, memo=getattr(_cached_executor(), "memo", None))
+            rg = robust_report_graph(report)
+            graphs = {"graph": (ReportGraph(report), report["lookup_table"]["next"]),
+                      "robust_graph": (rg, report_lookup_table(rg))}
+        else:
+            executor = _cached_executor()
+            cp, vg = api.build(spec, settings, executor=executor)
+            rob = api.robust_stage(cp, vg, memo=getattr(executor, "memo", None))
+            graphs = {"graph": (vg.graph, lookup_table(vg.graph)), "robust_graph": (rob.graph, lookup_table(rob.graph))}
+        stats = sequence_under_uncertainty(spec, cp.prims, settings, graphs, runs, seed)
+    modes = stats["modes"]
+    args.exit_code = EXIT_OK if modes["robust_graph"]["safe_runs"] == runs else EXIT_CHECK_FAILED
+    if args.format == "json":
+        print(json.dumps({**stats, "modes": {m: {k: v for k, v in r.items() if k != "final"} for m, r in modes.items()},
+                          "uncertainty": {"parameters": {n: list(r.range) for n, r in unc.parameters.items()},
+                                          "initial_state": dict(unc.initial_state),
+                                          "disturbance": unc.disturbance.model_dump() if unc.disturbance else None}},
+                         indent=1))
+        return args.exit_code
+    print(f"{runs} seeded runs (seed {seed}) of the goal sequence: parameters, start error and a disturbance held "
+          f"{stats['disturbance_hold_s']:g} s drawn uniformly from the project's uncertainty")
+    for m, r in modes.items():
+        first = r["first_violation"][0] if r["first_violation"] else None
+        why = "" if first is None else (f"; first unsafe at t = {first['t']:.3f} s in {first['primitive']}"
+                                        + (f" (unverified hand-over to {first['unverified_hand_over']})"
+                                           if first.get("unverified_hand_over") else ""))
+        print(f"  {m.replace('_', ' '):13} {r['safe_runs']:>5} / {r['runs']} safe ({100 * r['safe_fraction']:.1f} %){why}")
+    return args.exit_code
+
+
 def cmd_simulate(args) -> int:
     from .execute.sequence import simulate_sequence
 
     spec = _load_one(args.project)
     if spec.project.sequence is None:
         raise UsageError(f"{spec.path}: the project has no 'sequence'")
+    xcs = None
+    if args.crosscheck:
+        from .execute.crosscheck.settings import settings_of
+
+        if args.uncertain:
+            raise UsageError("--crosscheck replays the nominal runs; it does not apply to --uncertain")
+        xcs = settings_of(spec, force=True)
     report = _verified(spec, args.out, args.rebuild, quiet=args.format == "json")
+    if args.uncertain:
+        return _simulate_uncertain(args, spec, report)
+    if args.runs is not None or args.seed is not None:
+        raise UsageError("--runs and --seed apply to --uncertain runs only")
     with stdout_to_stderr():
         if report is not None:
             from .report.read import ReportGraph
@@ -431,13 +492,21 @@ def cmd_simulate(args) -> int:
             table = lookup_table(g)
         modes = ("naive", "graph") if args.mode == "both" else (args.mode,)
         runs = {m: simulate_sequence(prims, g, table, spec.project.sequence, settings, m) for m in modes}
+        if xcs is not None:
+            from .execute.crosscheck import crosscheck_runs
+
+            xc = crosscheck_runs(prims, runs, spec.project.sequence.duration, xcs.replace(runs=modes),
+                                 settings.h_tolerance).runs
     expect = _expected(spec)
     ok = {m: r.safe == expect.get(m, True) for m, r in runs.items()}
-    args.exit_code = EXIT_OK if all(ok.values()) else EXIT_CHECK_FAILED
+    args.exit_code = EXIT_OK if all(ok.values()) and (xcs is None or all(x["agree"] for x in xc.values())) \
+        else EXIT_CHECK_FAILED
     if args.format == "json":
         print(json.dumps({m: {**{k: v for k, v in r.to_dict().items() if k in (
             "mode", "safe", "switches", "violations", "final_primitive", "failed")},
-            "expected_safe": expect.get(m, True), "as_expected": ok[m]} for m, r in runs.items()}, indent=1))
+            "expected_safe": expect.get(m, True), "as_expected": ok[m],
+            **({"crosscheck": {k: v for k, v in xc[m].items() if k != "series"}} if xcs is not None else {})}
+            for m, r in runs.items()}, indent=1, default=float))
     else:
         for m, r in runs.items():
             note = "as expected" if ok[m] else f"NOT as expected: the project expects it to be " \
@@ -448,7 +517,20 @@ def cmd_simulate(args) -> int:
             if r.violations:
                 v = r.violations[0]
                 print(f"    first violation: {v['h']} of {v['primitive']} at t = {v['t']:.3f} s ({v['value']:.3g})")
+            if xcs is not None:
+                print("    " + _crosscheck_line(xc[m]))
     return args.exit_code
+
+
+def _crosscheck_line(x: dict) -> str:
+    """One replayed run: the simulator's verdict, agreement and the largest divergences."""
+    fv, dv = x["mujoco"]["first_violation"], x["divergence"]
+    verdict = "safe" if x["mujoco"]["safe"] else "UNSAFE" + (
+        f" (first: {fv['h']} of {fv['primitive']} at t = {fv['t']:.3f} s)" if fv else f" ({x['mujoco']['failed']})")
+    com = f"{1000 * dv['com']['max']:.3g} mm" if dv["com"] else "-"
+    joint = f"{dv['joint']['max']:.3g} rad" if dv["joint"] else "-"
+    return (f"MuJoCo: {verdict}; {'agrees' if x['agree'] else 'DISAGREES'}; largest divergence: CoM {com}, "
+            f"joints {joint}")
 
 
 def cmd_schema(args) -> int:
@@ -551,13 +633,23 @@ def parser() -> argparse.ArgumentParser:
     p.set_defaults(fn=cmd_plan)
     s = _sub(sub, "simulate", "run the project's goal sequence naive and through the graph",
              "  mpgspec simulate specs/pendulum              both runs; exit 0 when each is as the project expects\n"
-             "  mpgspec simulate specs/pendulum --mode graph --format json")
+             "  mpgspec simulate specs/pendulum --mode graph --format json\n"
+             "  mpgspec simulate specs/pendulum --uncertain --runs 64 --seed 1")
     s.add_argument("project", metavar="PROJECT", help="a project.yaml or its folder")
     s.add_argument("--mode", choices=("naive", "graph", "both"), default="both",
                    help="naive: switch to each goal at once; graph: follow the lookup table and wait for "
                         "verified windows; both (default)")
     s.add_argument("--format", choices=("human", "json"), default="human",
                    help="human: switches and the first violation of each run; json: the runs as JSON")
+    s.add_argument("--uncertain", action="store_true",
+                   help="run the sequence under seeded draws of the project's `uncertainty` (parameters, start "
+                        "error, disturbance) naive, through the nominal and through the robust graph, and give "
+                        "the fraction of runs that stay safe in each; exit 0 when every robust-graph run is safe")
+    s.add_argument("--runs", type=int, metavar="N", help="with --uncertain: how many draws (default: uncertainty.runs)")
+    s.add_argument("--seed", type=int, metavar="S", help="with --uncertain: the seed (default: uncertainty.seed)")
+    s.add_argument("--crosscheck", action="store_true",
+                   help="also replay the runs in MuJoCo (the project's `crosscheck` settings, else defaults; the "
+                        "xcheck extra) and compare verdicts and trajectories; exit 1 when a verdict differs")
     _verified_results_args(s, "its graph and lookup table are")
     s.set_defaults(fn=cmd_simulate)
     k = _sub(sub, "cache", "show or clear stored oracle results and compiled chunks",

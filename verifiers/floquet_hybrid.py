@@ -17,6 +17,7 @@ import casadi as ca
 import numpy as np
 
 from .roa_common import PeriodicProblem, RoAResult, bisect, unit_sphere
+from mpgspec.compile.primitive import held_feet
 
 FD = 1e-6
 S_LONG = 1e6  # time since switch-in: long after any motion profile
@@ -62,6 +63,18 @@ class HybridFlow:
         return Z[:-2], Z[-1]
 
 
+def orbit(flow: HybridFlow, W: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """(x* on the step grid of one period, orbit defect, least h along it): x*(t) must be a
+    trajectory of the loop's own discrete flow, step by step; the defect is the largest W-distance
+    between a step from x*(t_k) and x*(t_k+1)."""
+    x_star = flow.prim.setpoint.map(flow.steps + 1)
+    ts = np.arange(flow.steps + 1) * flow.dt
+    Xs = np.array(x_star(ts[None, :]), float)
+    Z = flow.states(Xs[:, 0])
+    E = Z[:-2] - Xs[:, 1:]
+    return Xs, float(np.sqrt(np.einsum("ij,ik,kj->j", E, W, E)).max()), float(Z[-1, -1])
+
+
 def monodromy(flow: HybridFlow, x0: np.ndarray, neutral: list[str]) -> tuple[np.ndarray, dict]:
     """The one-period derivative at x0 (clock 0): reduced if `neutral` names the ground symmetry."""
     sys = flow.prim.system
@@ -88,22 +101,15 @@ def estimate(problem: PeriodicProblem, o: dict, name: str) -> RoAResult:
                          f"neutral directions must be among {', '.join(NEUTRAL)} of a floating base; got {bad or neutral}")
     flow = HybridFlow(prim, dt)
     W = problem.W
-    x_star = prim.setpoint.map(flow.steps + 1)
-    ts = np.arange(flow.steps + 1) * dt
-    Xs = np.array(x_star(ts[None, :]), float)
-    # the orbit: x*(t) must be a trajectory of the loop (one period step by step)
-    Z = flow.states(Xs[:, 0])
-    E = Z[:-2] - Xs[:, 1:]
-    defect = float(np.sqrt(np.einsum("ij,ik,kj->j", E, W, E)).max())
-    z = Z[:, -1]
-    ev = {"period": T, "dt": dt, "orbit_defect": defect, "least_h_on_orbit": float(z[-1]), "hybrid": True}
+    Xs, defect, least_h = orbit(flow, W)
+    ev = {"period": T, "dt": dt, "orbit_defect": defect, "least_h_on_orbit": least_h, "hybrid": True}
     if not np.isfinite(defect) or defect > float(o.get("orbit_tol", 1e-3)):
         ev["verdict"] = "x*(t) is not a solution"
         return RoAResult(0.0, "failed", name, ev, f"the flow from x*(0) leaves the orbit by {defect:.3g} in the "
                          "W metric: x*(t) is not a trajectory of the closed loop (regenerate the gait table?)")
-    if not z[-1] >= 0:
+    if not least_h >= 0:
         ev["verdict"] = "orbit not safe"
-        return RoAResult(0.0, "failed", name, ev, f"the orbit itself leaves C (least h {z[-1]:.3g})")
+        return RoAResult(0.0, "failed", name, ev, f"the orbit itself leaves C (least h {least_h:.3g})")
     M, found = monodromy(flow, Xs[:, 0], neutral)
     mu = np.linalg.eigvals(M)
     mu = mu[np.argsort(-np.abs(mu))]
@@ -138,7 +144,7 @@ def _size(flow: HybridFlow, problem: PeriodicProblem, Xs: np.ndarray, W: np.ndar
     w, U = np.linalg.eigh(0.5 * (W + W.T))
     keep = w > 1e-12 * max(w.max(), 1e-300)
     Wi = (U[:, keep] / np.sqrt(w[keep])) @ U[:, keep].T  # pseudo-inverse root: unweighted states are not moved
-    held = _held(prim)
+    held = held_feet(prim)
     log = []
 
     def starts(r):
@@ -169,22 +175,3 @@ def _size(flow: HybridFlow, problem: PeriodicProblem, Xs: np.ndarray, W: np.ndar
     return r, {"samples_per_radius": n, "simulations": n * len(log), "bisection": log, "capped": capped,
                "periods": periods, "dt": flow.dt, "conv": conv, "time_s": time.perf_counter() - t0,
                "starts": "projected onto the contact manifold of the feet held at their phase" if held else "as drawn"}
-
-
-def _held(prim):
-    """clock -> feet the primitive's contact schedule holds (None without a schedule)."""
-    sched = prim.info.get("contact_schedule")
-    if not sched or not getattr(prim.system, "is_rigid_body", False):
-        return None
-    from mpgspec.compile.primitive import SNAP
-
-    T = float(prim.period)
-
-    def held(t):  # as compile.primitive.scheduled_mode reads the schedule
-        tc = (t + SNAP) % T
-        for until, feet in sched:
-            if tc < until:
-                return tuple(feet)
-        return tuple(sched[-1][1])
-
-    return held

@@ -5,7 +5,7 @@ is a located spec error instead of a failed or silently different region of attr
 """
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictInt, StrictStr, field_validator
 
@@ -42,6 +42,8 @@ class LevelSetOptions(BaseModel):
     solver_opts: dict = Field(default_factory=dict)
     tol_eig: Positive = 1e-8
     tol_res: Positive = 1e-6
+    region: Literal["ball", "level_set"] = Field(
+        default="ball", description="E: the largest W-ball inside {V <= rho} (ball) or the level set itself")
 
     @field_validator("degree")
     @classmethod

@@ -3,7 +3,9 @@
 A radius from a verifier replaces the spec's; when the spec also gives a radius and it is larger
 than the verified one, the smaller one is used and the record says so. A verifier that fails
 leaves the spec's radius (labelled 'given') or, without one, an empty E (radius 0): no flow can
-enter it, so no transition into the primitive is claimed.
+enter it, so no transition into the primitive is claimed. A level-set verifier's region is recorded
+as {V <= rho} and as the W-ball inside it; with `roa.options.region: level_set` E is the level set
+itself (level_set.py).
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ from pydantic import ValidationError
 from ..compile.primitive import CompiledPrimitive
 from ..errors import SpecError, SpecErrors
 from ..spec.loader import ProjectSpec
+from .level_set import level_set_of, use_level_set
 from .registry import accepted_options, option_model, roa_verifiers
 
 RANK = {"certified": 3, "empirical": 2, "given": 1, "failed": 0}
@@ -151,7 +154,30 @@ def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=No
         if memo and rec.level != "failed":
             memo.put(key, rec.to_dict())
     apply_radii(prims, {n: r.radius for n, r in records.items()})
+    _regions(spec, prims, records)
     return records
+
+
+def _regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], records: dict[str, RoARecord]) -> None:
+    """Record each level-set verifier's region, {V <= rho} and the W-ball inside it, and make E that
+    level set (in place) where the spec asks for `region: level_set`."""
+    for inst in spec.primitives:
+        rec = records[inst.name]
+        ls = level_set_of(rec.evidence) if rec.level in ("certified", "empirical") else None
+        if ls is None:
+            continue
+        prim = prims[inst.name]
+        region = {"E": "ball", "level_set": ls.to_dict(), "ball": {"radius": rec.radius, "W": prim.info.get("roa_W")}}
+        if inst.spec.roa.options.get("region") == "level_set":
+            new, info = use_level_set(prim, rec.evidence, rec.radius)
+            region.update(info)
+            if new is not None:
+                prims[inst.name] = new
+                rec.message = (f"E is the level set {{V <= {ls.rho:.6g}}} (V of degree {ls.degree}), checked in "
+                               f"float64; the W-ball inside it has r = {rec.radius:.4g}. " + rec.message)
+            else:
+                rec.message = f"E is the W-ball: {info['reason']}. " + rec.message
+        rec.evidence = {**rec.evidence, "region": region}
 
 
 def apply_radii(prims: dict[str, CompiledPrimitive], radii: dict[str, float]) -> None:

@@ -7,6 +7,11 @@
 - local_stability: eigenvalues of the closed-loop Jacobian at a fixed setpoint (Floquet
   multipliers of the orbit for periodic primitives come from the floquet verifier).
 
+Periodic primitives whose state jumps (gaits under a contact schedule) are checked on the loop's
+own discrete flow (RK4 steps and impacts, verifiers.floquet_hybrid): x*(t) by its orbit defect,
+stability by the multipliers of the one-period map with the ground symmetry's neutral directions
+set aside, and E on the contact manifold of the feet the schedule holds at each clock time.
+
 Checks evaluate the loop after any motion profile has ended (s large, x_sw = x*). Each result
 says how it was obtained: sampled checks are 'empirical', eigenvalue checks 'computed'.
 """
@@ -17,7 +22,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
-from ..compile.primitive import INACTIVE, CompiledPrimitive
+from ..compile.primitive import INACTIVE, CompiledPrimitive, held_feet
 from ..spec.models import PrimitiveClass
 
 S_SETTLED = 1e3  # time since switch-in at which every motion profile has finished
@@ -52,8 +57,40 @@ def _h(p, x, t):
     return v[np.abs(v) < INACTIVE / 2]
 
 
+HYBRID_DT = 0.001
+"""Step of the discrete flow on which gaits are checked (that of `mpgspec gait` and the floquet verifier)."""
+
+
+def _hybrid(p: CompiledPrimitive) -> bool:
+    return p.cls is PrimitiveClass.PERIODIC and held_feet(p) is not None and p.jump is not None
+
+
+def _hybrid_orbit(p: CompiledPrimitive) -> dict:
+    """Orbit defect and reduced multipliers of a gait's discrete flow (computed once per primitive)."""
+    if "hybrid_orbit" not in p.cache:
+        from mpgspec.compile.rigidbody.symmetry import NEUTRAL
+        from verifiers.floquet_hybrid import HybridFlow, monodromy, orbit
+
+        W = np.asarray(p.info.get("roa_W", np.eye(p.system.nx)), float)
+        flow = HybridFlow(p, HYBRID_DT)
+        Xs, defect, least_h = orbit(flow, W)
+        neutral = list(NEUTRAL) if p.system.model.n_base else []
+        M, found = monodromy(flow, Xs[:, 0], neutral)
+        p.cache["hybrid_orbit"] = {"defect": defect, "least_h": least_h, "mu": np.linalg.eigvals(M),
+                                   "neutral": {k: float(v["multiplier"]) for k, v in found.items()}}
+    return p.cache["hybrid_orbit"]
+
+
 def setpoint_dynamics(p: CompiledPrimitive, tol: float, n: int = 40) -> AssumptionCheck:
-    """max_t |d/dt x*(t) - f_cl(x*(t), t)| by central differences of the setpoint."""
+    """max_t |d/dt x*(t) - f_cl(x*(t), t)| by central differences of the setpoint; for gaits the
+    orbit defect of the discrete flow (in E's norm), since x*(t) jumps at every touchdown."""
+    if _hybrid(p):
+        d = _hybrid_orbit(p)["defect"]
+        ok = np.isfinite(d) and d <= tol
+        return AssumptionCheck(p.name, "setpoint_dynamics", "pass" if ok else "fail", "computed",
+                               f"orbit defect {d:.3g} (one period of the discrete flow with impacts from x*(0), "
+                               f"dt {HYBRID_DT:g}, largest ||x - x*||_W; tolerance {tol:g})",
+                               {"orbit_defect": d if np.isfinite(d) else None, "tolerance": tol, "dt": HYBRID_DT})
     worst, at = 0.0, 0.0
     eps = 1e-6
     for t in _clock(p, n):
@@ -82,14 +119,15 @@ def setpoint_safe(p: CompiledPrimitive, tol: float, n: int = 40) -> AssumptionCh
 
 
 def _contact_projection(p: CompiledPrimitive, W: np.ndarray):
-    """(x, x*) -> (x on the contact manifold of the primitive's contact mode at x*, that mode), or
-    None for systems without contact constraints."""
+    """(x, x*, t) -> (x on the contact manifold of the primitive's contact mode at x*, or of the
+    feet its contact schedule holds at clock t; that mode), or None for systems without contacts."""
     sys = p.system
     if not sys.is_rigid_body or not sys.model.contact_frames:
         return None
+    held = held_feet(p)
 
-    def project(x, xs):
-        feet = sys.contact_mode(xs, p.info.get("contacts"))
+    def project(x, xs, t=0.0):
+        feet = held(t) if held is not None else sys.contact_mode(xs, p.info.get("contacts"))
         return sys.project_to_contacts(x, feet, W), feet
 
     return project
@@ -169,7 +207,7 @@ def _roa_on_contact_manifold(p, tol, samples, rng, W, L, r, project, starts: int
 
         def hv(z):
             nonlocal worst
-            h = _h(p, project(xs + L @ z, xs)[0], t)
+            h = _h(p, project(xs + L @ z, xs, t)[0], t)
             worst = min(worst, float(h.min()))
             return h
 
@@ -191,7 +229,7 @@ def _roa_on_contact_manifold(p, tol, samples, rng, W, L, r, project, starts: int
         cands = []
         for z in d:
             x0 = xs + L @ z
-            x, mode = project(x0, xs)
+            x, mode = project(x0, xs, t)
             feet.update(mode)
             dist.append(wnorm(x - x0))
             spread.append(wnorm(x - xs))
@@ -251,6 +289,8 @@ def local_stability(p: CompiledPrimitive, rel_tol: float = 1e-6) -> AssumptionCh
     Directions that E does not weigh (for example a robot's position on flat ground) may be
     neutral; those eigenvalues give 'warn', not 'fail'.
     """
+    if _hybrid(p):
+        return hybrid_stability(p)
     if p.cls is PrimitiveClass.PERIODIC:
         return floquet_stability(p)
     if p.cls is not PrimitiveClass.FIXED:
@@ -301,6 +341,22 @@ def floquet_stability(p: CompiledPrimitive, tol: float = 1e-6) -> AssumptionChec
                            + (" (orbitally, one multiplier at 1 set aside)" if m["autonomous"] else ""),
                            {"max_abs_multiplier": worst, "multipliers": [[float(z.real), float(z.imag)] for z in mu],
                             "orbit_defect": m["orbit_defect"]})
+
+
+def hybrid_stability(p: CompiledPrimitive, tol: float = 1e-6) -> AssumptionCheck:
+    """Gaits: multipliers of the one-period map of the discrete flow, reduced by the ground symmetry
+    (base x, y and yaw, whose multipliers are 1 on flat ground and are reported apart)."""
+    o = _hybrid_orbit(p)
+    mags = np.abs(o["mu"])
+    worst = float(mags.max()) if mags.size and np.isfinite(mags).all() else float("inf")
+    status = "pass" if worst < 1 - tol else "fail"
+    neutral = ", ".join(f"{k} {v:.6f}" for k, v in o["neutral"].items())
+    return AssumptionCheck(p.name, "local_stability", status, "computed",
+                           f"max |Floquet multiplier| {worst:.3g} over period {p.period:.4g} (discrete flow with impacts"
+                           + (f"; neutral {neutral}" if neutral else "") + ")",
+                           {"max_abs_multiplier": worst if np.isfinite(worst) else None,
+                            "multipliers": [[float(z.real), float(z.imag)] for z in o["mu"]],
+                            "neutral": o["neutral"], "orbit_defect": o["defect"]})
 
 
 def check_primitive(p: CompiledPrimitive, h_tol: float = 1e-9, dyn_tol: float = 1e-3) -> list[AssumptionCheck]:

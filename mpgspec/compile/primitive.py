@@ -19,6 +19,7 @@ from ..errors import SpecError, SpecErrors
 from ..spec.loader import PrimitiveInstance
 from ..spec.models import PrimitiveClass
 from .controllers import LAWS, ControlContext
+from .events import EventWindow, event_window
 from .expr_casadi import interp_cubic, interp_linear
 from .exprs import ExprCompiler
 from .system import CompiledSystem, shadowing_error, taken_names
@@ -48,10 +49,11 @@ class CompiledPrimitive:
     roa_margin: ca.Function  # (x, t) -> r - ||x - x*(t)||_W ; > 0 is inside E
     setpoint: ca.Function  # t -> x*(t)
     info: dict = field(default_factory=dict)
-    jump: ca.Function | None = None  # (x, u, t) -> x: the discrete part of a step (quaternion, contacts)
+    jump: ca.Function | None = None  # (x, u, t, s) -> x: the discrete part of a step (quaternion, contacts)
     loop: ca.Function | None = None  # (x, t, s, x_sw) -> (xdot, h, u_raw, u) with one control evaluation
     loop_raw: ca.Function | None = None  # the same with every safety function active (no `when` windows)
-    windows: list[tuple[float, float] | None] = field(default_factory=list)  # per safety function, on the clock
+    windows: list[tuple[float, float] | EventWindow | None] = field(default_factory=list)  # per safety function:
+    # a clock window [t0, t1) or one anchored on a contact event (compile/events.py); None: always active
     boundaries: tuple[float, ...] = ()  # clock times where C or the contact schedule switches
     hybrid: bool = False  # the state jumps (contact events or a contact schedule), not only renormalised
     cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
@@ -275,10 +277,16 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         for name, hv in items:
             hv = ca.substitute(hv, sys.u, sat_u) if sys.nu else hv
             hs_raw.append(hv)
-            windows.append(None if sf.when is None else (float(sf.when[0]), float(sf.when[1])))
-            if sf.when is not None:
-                a, b = sf.when
+            if isinstance(sf.when, tuple):
+                a, b = float(sf.when[0]), float(sf.when[1])
+                windows.append((a, b))
                 hv = ca.if_else(ca.logic_and(tc >= a, tc < b), hv, INACTIVE)
+            elif sf.when is not None:  # anchored on a contact event: the loader checked the system has them
+                w = event_window(sf.when, sys.state_names)
+                windows.append(w)
+                hv = ca.if_else(w.active(x[w.clock], s), hv, INACTIVE)
+            else:
+                windows.append(None)
             hs.append(hv)
             names.append(name or f"h{j}")
     h_u = ca.Function("h_u", args + [sys.u], [ca.vertcat(*hs) if hs else ca.SX(0, 1)])
@@ -299,10 +307,14 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     else:
         w = np.ones(sys.nx) if roa.weights is None else np.asarray(roa.weights, float)
         if w.shape != (sys.nx,):
+            # with contact events, name the states they append (flags, event clocks)
+            tail = sys.state_names[sys.event_clocks[0] - len(sys.model.contact_frames):] if sys.events else []
             raise SpecError("roa.weights needs one weight per state", location=inst.locate(("roa", "weights")),
                             key=f"primitive '{inst.name}': roa.weights", expected=f"{sys.nx}", found=f"{w.size}",
-                            code="MPG106")
+                            code="MPG106", hint=f"the states end with {', '.join(tail)}" if tail else "")
         W = np.diag(w)
+    W[sys.event_clocks, :] = 0.0  # times since contact events: no distance to x*
+    W[:, sys.event_clocks] = 0.0
     radius = float(roa.radius) if roa.radius is not None else 0.0  # 0 until a verifier sizes E
     ctx.info["roa_W"] = W.tolist()
     roa_margin = _roa_margin(sys, setpoint, W, radius, ident)
@@ -322,7 +334,7 @@ def _boundaries(windows, schedule, period, domain) -> tuple[float, ...]:
     For a periodic primitive they are taken within one period (the clock wraps); a transient's end
     t_f is one, so its rollouts stop exactly at t_f.
     """
-    times = {v for w in windows if w is not None for v in w}
+    times = {v for w in windows if isinstance(w, tuple) for v in w}
     times |= {float(until) for until, _ in (schedule or [])}
     if domain is not None:
         times.add(float(domain[1]))
@@ -418,29 +430,50 @@ def scheduled_mode(schedule, feet, t, period: float | None, before: bool = False
 
 
 def _jump(inst: PrimitiveInstance, sys: CompiledSystem, t: ca.SX, schedule, period: float | None) -> ca.Function:
-    """The discrete update after each step, given the step's input and the clock t after it.
+    """The discrete update after each step, (x, u, t, s) -> x: given the step's input and the clock t
+    and time since switch-in s after it (s dates contact events, compile/events.py).
 
-    Under a contact schedule, feet that join the mode at the step's end touch down with a plastic
-    impact; with contact flags in the state the flags are set to the scheduled mode.
+    Under a contact schedule, feet that join the mode at the step's end are put on the ground by
+    their legs and touch down with a plastic impact; with contact flags in the state the flags are set to the scheduled mode.
     """
     u = ca.SX.sym("u", sys.nu)
     x = sys.x
+    s = ca.SX.sym("s")
     if schedule is None:
-        return ca.Function("jump", [x, u, t], [sys.project(x, u)])
-    from .rigidbody.hybrid import masked_impact, scheduled_contacts
+        return ca.Function("jump", [x, u, t, s], [sys.project(x, u, s)])
+    from .rigidbody.hybrid import masked_impact, scheduled_contacts, touchdown_projection
 
     feet = sys.model.contact_frames
     mode = scheduled_mode(schedule, feet, t, period)
     c = ca.vertcat(*[mode[f] for f in feet])
     if sys.events:
         x_unit = ca.vertcat(sys.project(x)[: sys.model.nq], x[sys.model.nq:])
-        return ca.Function("jump", [x, u, t], [scheduled_contacts(sys, x_unit, c)])
+        return ca.Function("jump", [x, u, t, s], [scheduled_contacts(sys, x_unit, c)])
     nq, nv = sys.model.nq, sys.model.nv
     before = scheduled_mode(schedule, feet, t, period, before=True)  # the mode the step ran in
-    joined = sum(ca.logic_and(mode[f] > 0.5, before[f] < 0.5) for f in feet)
+    joins = [ca.logic_and(mode[f] > 0.5, before[f] < 0.5) for f in feet]
     xu = sys.project(x)
-    v_new = ca.if_else(joined > 0, masked_impact(sys, xu[:nq], xu[nq:nq + nv], c), xu[nq:nq + nv])
-    return ca.Function("jump", [x, u, t], [ca.vertcat(xu[:nq], v_new, xu[nq + nv:])])
+    q_new = touchdown_projection(sys, xu[:nq], joins)
+    v_new = ca.if_else(sum(joins) > 0, masked_impact(sys, q_new, xu[nq:nq + nv], c), xu[nq:nq + nv])
+    return ca.Function("jump", [x, u, t, s], [ca.vertcat(q_new, v_new, xu[nq + nv:])])
+
+
+def held_feet(prim: "CompiledPrimitive"):
+    """clock -> the feet a primitive's contact schedule holds, read as scheduled_mode reads it; None
+    without a schedule."""
+    sched = prim.info.get("contact_schedule")
+    if not sched or not getattr(prim.system, "is_rigid_body", False):
+        return None
+    T = float(prim.period) if prim.period is not None else np.inf
+
+    def held(t: float) -> tuple[str, ...]:
+        tc = (t + SNAP) % T
+        for until, feet in sched:
+            if tc < until:
+                return tuple(feet)
+        return tuple(sched[-1][1])
+
+    return held
 
 
 def spec_file(inst: PrimitiveInstance, raw: str, where, key: str):

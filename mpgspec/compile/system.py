@@ -58,6 +58,11 @@ class CompiledSystem:
         return len(self.state_names)
 
     @property
+    def event_clocks(self) -> list[int]:
+        """State indices of the event clocks of contact events (compile/events.py); none here."""
+        return []
+
+    @property
     def nu(self) -> int:
         return len(self.input_names)
 
@@ -76,8 +81,9 @@ class CompiledSystem:
         """The open-loop dynamics a primitive runs on; analytic systems have one mode."""
         return OpenLoop(self.xdot, dict(self.extra_env))
 
-    def project(self, x: ca.SX, u: ca.SX | None = None) -> ca.SX:
-        """The discrete part of a step: back onto the state manifold, events (identity here)."""
+    def project(self, x: ca.SX, u: ca.SX | None = None, s=ca.inf) -> ca.SX:
+        """The discrete part of a step ending s after switch-in: back onto the state manifold, events
+        (identity here)."""
         return x
 
     def builtin_safe_set(self, name: str, contacts: tuple[str, ...], mode: dict | None = None,

@@ -17,9 +17,24 @@ from pathlib import Path
 
 import numpy as np
 
+from functools import lru_cache
+
 from .. import __version__
 from .evidence import OracleEvidence, Reason
 from .executors import Executor, Task
+
+
+@lru_cache(maxsize=1)
+def code_version() -> str:
+    """The package version and a hash of the source of mpgspec and its verifiers: cached results
+    are keyed by it, so a changed oracle, judge or verifier never serves results computed by the old one."""
+    root = Path(__file__).resolve().parents[2]
+    h = hashlib.sha256(__version__.encode())
+    for d in ("mpgspec", "verifiers"):
+        for f in sorted((root / d).rglob("*.py")):
+            h.update(f.relative_to(root).as_posix().encode())
+            h.update(f.read_bytes())
+    return f"{__version__}+{h.hexdigest()[:16]}"
 
 
 def cache_root() -> Path:
@@ -85,7 +100,7 @@ class Memo:
         self.store = store
 
     def key(self, *parts) -> str:
-        return hashlib.sha256("|".join(map(str, (*parts, __version__))).encode()).hexdigest()
+        return hashlib.sha256("|".join(map(str, (*parts, code_version()))).encode()).hexdigest()
 
     def get(self, key: str):
         row = self.store.db.execute("SELECT value FROM memo WHERE key = ?", (key,)).fetchone()
@@ -110,7 +125,7 @@ class CachedExecutor:
         return self.inner.workers
 
     def run(self, prims, settings, tasks: list[Task], progress=None):
-        base = {t: hashlib.sha256(f"{prims[t].digest()}|{settings!r}|{__version__}".encode()).hexdigest()
+        base = {t: hashlib.sha256(f"{prims[t].digest()}|{settings!r}|{code_version()}".encode()).hexdigest()
                 for t in {task.target for task in tasks}}
         keys = [[_key(base[task.target], x, t0) for x, t0 in zip(task.x0s, task.t0s)] for task in tasks]
         found = self.store.get([k for ks in keys for k in ks])

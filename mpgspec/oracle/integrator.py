@@ -18,6 +18,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ..compile.events import EventWindow
 from ..compile.primitive import INACTIVE, SNAP, CompiledPrimitive
 
 
@@ -35,8 +36,8 @@ def _sym(f: ca.Function, prim: CompiledPrimitive | None = None):
 def _jump_fn(prim: CompiledPrimitive) -> ca.Function:
     if prim.jump is not None:
         return prim.jump
-    u, t = ca.SX.sym("u", prim.system.nu), ca.SX.sym("t")
-    return ca.Function("jump", [prim.system.x, u, t], [prim.system.project(prim.system.x, u)])
+    u, t, s = ca.SX.sym("u", prim.system.nu), ca.SX.sym("t"), ca.SX.sym("s")
+    return ca.Function("jump", [prim.system.x, u, t, s], [prim.system.project(prim.system.x, u, s)])
 
 
 @dataclass(frozen=True)
@@ -184,15 +185,15 @@ LEFT = 1e-8
 step that ends on a contact switch runs wholly in its own mode (modes switch 1e-9 s early, SNAP);
 the jump then applies the new mode at the end."""
 
-def rk4_jump(f, k, jump, x, t, h: float, left: float = 0.0):
+def rk4_jump(f, k, jump, x, t, h: float, left: float = 0.0, s: float = np.inf):
     """x after one oracle step of h from clock t, without the error bookkeeping: RK4 on
     xdot = f(x, t) with the last stage `left` before the step's end (see LEFT), then the jump with
-    the input k(x, t) of the step's start."""
+    the input k(x, t) of the step's start (s: time since switch-in, inf for a settled orbit)."""
     k1 = f(x, t)
     k2 = f(x + h / 2 * k1, t + h / 2)
     k3 = f(x + h / 2 * k2, t + h / 2)
     k4 = f(x + h * k3, t + h - min(left, h / 2))
-    return jump(x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), k(x, t), t + h)
+    return jump(x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), k(x, t), t + h, s + h)
 
 
 FD_STEP = 1e-6
@@ -208,8 +209,8 @@ def _ends(prim: CompiledPrimitive) -> tuple[ca.Function, ca.Function, ca.Functio
     (before any jump), with the embedded third-order error estimate e = dt/6 (k4 - k5) of the
     RK4 step (weights 1/6, 1/3, 1/3, 0, 1/6 on k1..k4 and k5 = f(x_next)).
     Small SX loops get exact directional derivatives, inlined with common subexpressions
-    eliminated; large loops (called from an MX graph) get forward differences along the flow
-    and h(x_next) - h(x_next - e), which reuse the one compiled loop instead of generating
+    eliminated; large loops (called from an MX graph) get one-sided differences along the flow
+    (see _rate) and h(x_next) - h(x_next - e), which reuse the one compiled loop instead of generating
     derivative code several times its size.
     """
     f, loop = prim.f_cl, _loop(prim)
@@ -229,6 +230,13 @@ def _ends(prim: CompiledPrimitive) -> tuple[ca.Function, ca.Function, ca.Functio
     return start, end, f
 
 
+def _at_end(prim: CompiledPrimitive, start: ca.Function) -> ca.Function:
+    """(x, t, s, x_sw) -> (h, dh/dt) at a step's end, as `start` gives them at its start."""
+    a = start.mx_in() if start.is_a("MXFunction") else start.sx_in()
+    r = start.call(a)
+    return ca.Function("at_end", a, [r[1], r[2]])
+
+
 def _loop(prim: CompiledPrimitive) -> ca.Function:
     """The closed loop (x, t, s, x_sw) -> (xdot, h, u_raw, u); large SX loops with common
     subexpressions eliminated, one Function object per primitive so that its code is generated once."""
@@ -240,18 +248,26 @@ def _loop(prim: CompiledPrimitive) -> ca.Function:
     return loop
 
 
-def _ends_differences(loop: ca.Function) -> tuple[ca.Function, ca.Function]:
-    a = loop.mx_in()
+def _rate(loop: ca.Function, a: list, xdot, hv):
+    """dh/dt along the flow by one-sided differences, the smaller in magnitude of the two: a forward
+    difference at a step's end (or a backward one at its start) can reach across a contact switch
+    or the end of a motion profile, where h jumps; for smooth h the two agree to O(FD_STEP)."""
     x, t, s, xs = a
     eps = FD_STEP
+    fwd = (loop(x + eps * xdot, t + eps, s + eps, xs)[1] - hv) / eps
+    bwd = (hv - loop(x - eps * xdot, t - eps, s - eps, xs)[1]) / eps
+    return ca.if_else(ca.fabs(fwd) <= ca.fabs(bwd), fwd, bwd)
+
+
+def _ends_differences(loop: ca.Function) -> tuple[ca.Function, ca.Function]:
+    a = loop.mx_in()
+    x = a[0]
     xdot, hv, u_raw, u_sat = loop.call(a)
-    h_eps = loop(x + eps * xdot, t + eps, s + eps, xs)[1]
-    start = ca.Function("start", a, [xdot, hv, (h_eps - hv) / eps, u_raw, u_sat])
+    start = ca.Function("start", a, [xdot, hv, _rate(loop, a, xdot, hv), u_raw, u_sat])
     k4, dt = ca.MX.sym("k4", x.shape[0]), ca.MX.sym("dt")
     e = dt / 6 * (k4 - xdot)
-    h_ahead = loop(x + eps * xdot, t + eps, s + eps, xs)[1]
-    h_lower = loop(x - e, t, s, xs)[1]
-    end = ca.Function("end", a + [k4, dt], [xdot, hv, (h_ahead - hv) / eps, ca.fabs(hv - h_lower), e])
+    h_lower = loop(x - e, *a[1:])[1]
+    end = ca.Function("end", a + [k4, dt], [xdot, hv, _rate(loop, a, xdot, hv), ca.fabs(hv - h_lower), e])
     return start, end
 
 
@@ -259,11 +275,19 @@ def _wrap(prim: CompiledPrimitive, t):
     return t - prim.period * ca.floor(t / prim.period) if prim.period is not None else t
 
 
-def _step_length(prim: CompiledPrimitive, dt: float, tc):
-    """dt, shortened so that the step ends on the next switching time of the clock."""
+def _step_length(prim: CompiledPrimitive, dt: float, tc, x=None, s=None):
+    """dt, shortened so that the step ends on the next switching time of the clock and, once a
+    contact event has happened, on the next edge of a window anchored on it (T_E + eps): x is the
+    state at the step's start (its event clocks), s the time since switch-in."""
+    anchored = [w for w in prim.windows if isinstance(w, EventWindow) and w.edges]
+    if anchored and x is None:
+        raise ValueError("windows anchored on contact events need the state to place the step's end")
+    step = ca.DM(dt)
+    for w in anchored:
+        step = ca.fmin(step, w.gap(x[w.clock], s))
     B = prim.boundaries
     if not B:
-        return ca.DM(dt)
+        return step
     eps = SNAP  # a clock this close below a switching time is at it (as for the contact mode)
     if prim.period is not None:  # the next b + k T ahead of tc (tc may sit within eps below T)
         P = prim.period
@@ -273,13 +297,23 @@ def _step_length(prim: CompiledPrimitive, dt: float, tc):
     gap = nxt[0]
     for v in nxt[1:]:
         gap = ca.fmin(gap, v)
-    return ca.fmin(dt, gap - tc)
+    return ca.fmin(step, gap - tc)
 
 
-def _active(prim: CompiledPrimitive, tc):
-    """1 for every safety function whose window contains the clock tc, else 0."""
-    return ca.vertcat(*[1 if w is None else ca.logic_and(tc >= w[0], tc < w[1]) for w in prim.windows]) \
-        if prim.windows else ca.DM(0, 1)
+def _active(prim: CompiledPrimitive, tc, x=None, s=None, x_next=None, h=0.0):
+    """1 for every safety function active over a step, else 0: a clock window must contain the
+    step's middle tc; a window anchored on a contact event must hold over the whole step of h from
+    the state x at time s since switch-in to x_next after its jump (events.EventWindow.over_step:
+    the step in which the event happens is judged by the functions that do not depend on it)."""
+    def on(w):
+        if w is None:
+            return 1
+        if isinstance(w, EventWindow):
+            tau = x[w.clock]  # without the jump, the event clock only advances
+            return w.over_step(tau, s, tau + h if x_next is None else x_next[w.clock], h)
+        return ca.logic_and(tc >= w[0], tc < w[1])
+
+    return ca.vertcat(*[on(w) for w in prim.windows]) if prim.windows else ca.DM(0, 1)
 
 
 def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: tuple[str, ...],
@@ -290,7 +324,7 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
     z = _sym(prim.f_cl, prim)("z", 2 * nx + 2)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
     tc = _wrap(prim, t)
-    h = _step_length(prim, dt, tc) if boundaries else ca.DM(dt)
+    h = _step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
     k1, h0, d0, u_raw, u = start(x, t, s, xs)
     k2 = f(x + h / 2 * k1, t + h / 2, s + h / 2, xs)
     k3 = f(x + h / 2 * k2, t + h / 2, s + h / 2, xs)
@@ -299,13 +333,13 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
     k4 = f(x + h * k3, t + te, s + te, xs)
     x_end = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     _k5, h1, d1, dh, e = end(x_end, t + te, s + te, xs, k4, h)
-    act = _active(prim, _wrap(prim, t + h / 2))  # a step lies inside or outside each window: judge at its middle
+    x_next = jump(x_end, u, t + h, s + h)
+    act = _active(prim, _wrap(prim, t + h / 2), x, s, x_next, h)  # a step lies inside or outside each window
     L = ca.fmax(ca.fmax(ca.fabs(d0), ca.fabs(d1)), ca.fabs(h1 - h0) / h)
     lb = (h0 + h1) / 2 - L * h / 2  # least value of a function with |dh/dt| <= L taking h0 and h1 at the ends
     masked = (lambda v: ca.if_else(act, v, INACTIVE)) if nh else (lambda v: v)
     out = ca.vertcat(masked(h0), masked(lb), dh, prim.roa_margin(x, t), ca.norm_2(e), s, h, u_raw, u,
                      *([x] if with_state else []))
-    x_next = jump(x_end, u, t + h)
     body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs), out])
     acc = body.mapaccum("acc", K)
     Z = ca.MX.sym("Z", 2 * nx + 2)
@@ -341,7 +375,7 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
     z = _sym(prim.f_cl, prim)("z", 3 * nx + 2)
     x, t, s, xs, xc = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2], z[2 * nx + 2:]
     tc = _wrap(prim, t)
-    h = _step_length(prim, dt, tc) if boundaries else ca.DM(dt)
+    h = _step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
     te = h - ca.fmin(LEFT, h / 2) if prim.info.get("contact_schedule") else h
     k1, h0, d0, u_raw, u = start(x, t, s, xs)
     kc1, h0c, _uc_raw, uc = (loop(xc, t, s, xs)[i] for i in (0, 1, 2, 3))
@@ -349,16 +383,16 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
     x_mid = _rk4(f, x, t, s, xs, hh, hh, k1)
     x_end = _rk4(f, x_mid, t + hh, s + hh, xs, hh, te - hh)
     xc_end = _rk4(f, xc, t, s, xs, h, te, kc1)
-    _k5, h1, d1, _ur, _u = start(x_end, t + te, s + te, xs)  # h and its rate at the step's end
+    h1, d1 = _at_end(prim, start)(x_end, t + te, s + te, xs)  # h and its rate at the step's end
     h1c = loop(xc_end, t + te, s + te, xs)[1]
-    act = _active(prim, _wrap(prim, t + h / 2))
+    x_next, xc_next = jump(x_end, u, t + h, s + h), jump(xc_end, uc, t + h, s + h)
+    act = _active(prim, _wrap(prim, t + h / 2), x, s, x_next, h)
     L = ca.fmax(ca.fmax(ca.fabs(d0), ca.fabs(d1)), ca.fabs(h1 - h0) / h)
     lb = (h0 + h1) / 2 - L * h / 2
     masked = (lambda v: ca.if_else(act, v, INACTIVE)) if nh else (lambda v: v)
     m_f, m_c = prim.roa_margin(x, t), prim.roa_margin(xc, t)
     out = ca.vertcat(masked(h0), masked(lb), ca.fabs(h1 - h1c), m_f, ca.fabs(m_f - m_c), s, h, u_raw, u,
                      *([x] if with_state else []), ca.fabs(h0 - h0c))
-    x_next, xc_next = jump(x_end, u, t + h), jump(xc_end, uc, t + h)
     body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next), out])
     acc = body.mapaccum("acc", K)
     Z = ca.MX.sym("Z", 3 * nx + 2)
@@ -420,9 +454,9 @@ def build_first(prim: CompiledPrimitive, dt: float, jit: bool = True) -> ca.Func
         z = _sym(prim.f_cl, prim)("z", 2 * nx + 2)
         x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
         tc = _wrap(prim, t)
-        h = _step_length(prim, dt, tc)
+        h = _step_length(prim, dt, tc, x, s)
         _k1, h0, _d0, u_raw, u = start(x, t, s, xs)
-        act = _active(prim, _wrap(prim, t + h / 2))
+        act = _active(prim, _wrap(prim, t + h / 2), x, s, h=h)
         hm = ca.if_else(act, h0, INACTIVE) if prim.h_names else h0
         fn = ca.Function("first_" + hashlib.sha1(f"{prim.name}{dt}".encode()).hexdigest()[:10], [z],
                          [hm, prim.roa_margin(x, t), u_raw, u])

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..compile.events import EventWindow
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .evidence import OracleEvidence, Reason
 
@@ -264,9 +265,14 @@ def evidence(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, j: int, t
 
 
 def unevaluated(prim: CompiledPrimitive, t0: float, t1: float, count: np.ndarray) -> str | None:
-    """The first safety function whose window overlaps the rollout's clock span but was never evaluated."""
+    """The first safety function whose window overlaps the rollout's clock span but was never evaluated.
+
+    Windows anchored on a contact event are left out: whether and when the event happened is known
+    from the rollout's states only (an `after` window is never open when it did not happen, and a
+    `before` one is over after the first step when it happened there), and the edges of an open
+    one are step ends (integrator._step_length)."""
     for i, w in enumerate(prim.windows):
-        if count[i] > 0 or t1 <= 0:
+        if count[i] > 0 or t1 <= 0 or isinstance(w, EventWindow):
             continue
         if w is None or _overlaps(w, t0, t0 + t1, prim.period):
             return prim.h_names[i]

@@ -108,7 +108,7 @@ def edge_entries(graph) -> list[dict]:
 
 def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs, failures, timing,
                  status: str, assumptions=(), roa=None, edge_series=(), digest: str | None = None,
-                 robust: dict | None = None) -> dict:
+                 robust: dict | None = None, crosscheck: dict | None = None) -> dict:
     """The report dict; see mpgspec/report/schema/report-v2.json. digest: of the spec files (see
     mpgspec.spec.digest), so that readers can tell whether the report is up to date."""
     sysm = spec.system
@@ -144,6 +144,7 @@ def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs
         },
         "timing": timing,
         "robust": None if robust is None else rnd(finite_json(robust)),
+        "crosscheck": None if crosscheck is None else rnd(finite_json(crosscheck)),
     }
 
 

@@ -1,7 +1,9 @@
 """The motion primitive graph of a report as Graphviz DOT and GraphML, for use outside mpgspec.
 
 Both are built from the report dict alone, in the paper's notation (Table I, Definition 3):
-box = fixed, circle = periodic, diamond = transient; solid = Class 1, dashed = Class 2.
+box = fixed, circle = periodic, diamond = transient; solid = Class 1, dashed = Class 2. With a robust
+graph in the report, an edge lost under uncertainty (nominal only) is vermillion in DOT and carries
+`robust = false` in GraphML.
 """
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ import networkx as nx
 
 SHAPES = {"fixed": "box", "periodic": "circle", "transient": "diamond"}
 STYLES = {1: "solid", 2: "dashed"}
+NOMINAL_ONLY = "#D55E00"
 EDGE_WEIGHTS = ("duration", "peak_input", "hops")
 
 
@@ -42,10 +45,16 @@ def _methods(report: dict) -> dict[tuple[str, str], dict]:
     return {(t["from"], t["to"]): t for t in report.get("transitions", [])}
 
 
+def _survives(report: dict) -> dict[tuple[str, str], bool]:
+    """(from, to) -> whether the nominal edge survives the project's uncertainty (empty without `robust`)."""
+    return {(e["from"], e["to"]): bool(e.get("survives")) for e in (report.get("robust") or {}).get("edges", [])}
+
+
 def to_dot(report: dict) -> str:
     """Graphviz DOT of the graph; edges are labelled with their transition duration."""
     name = report.get("project", {}).get("name", "mpg")
     trs = _methods(report)
+    survives = _survives(report)
     lines = [f"digraph {_q(name)} {{", f"  label={_q(f'motion primitive graph: {name}')};", "  labelloc=t;",
              '  node [fontname="Helvetica", style=filled, fillcolor="#f4f4f4"];',
              '  edge [fontname="Helvetica", fontsize=10];']
@@ -62,6 +71,9 @@ def to_dot(report: dict) -> str:
         tip = f"Class {e['class']}" + (f", {tr['method']}" if tr else "")
         if tr and e["class"] == 2:
             tip += ", t_A windows " + " ".join(f"[{_num(a)}, {_num(b)}]" for a, b in tr["windows"])
+        if survives.get((e["from"], e["to"])) is False:
+            tip += ", nominal only (lost under uncertainty)"
+            attrs += [f"color={_q(NOMINAL_ONLY)}", f"fontcolor={_q(NOMINAL_ONLY)}"]
         attrs.append(f"tooltip={_q(tip)}")
         lines.append(f"  {_q(e['from'])} -> {_q(e['to'])} [{', '.join(attrs)}];")
     lines.append("}")
@@ -81,6 +93,7 @@ def to_networkx(report: dict) -> nx.DiGraph:
         attrs["safety_functions"] = ",".join(p.get("safety_functions", []))
         G.add_node(p["name"], **{k: v for k, v in attrs.items() if v is not None})
     trs = _methods(report)
+    survives = _survives(report)
     for e in report.get("edges", []):
         tr = trs.get((e["from"], e["to"]))
         attrs = {"class": int(e["class"]), "style": STYLES.get(e["class"], "dotted"),
@@ -89,6 +102,8 @@ def to_networkx(report: dict) -> nx.DiGraph:
             attrs["method"] = tr["method"]
             attrs["windows"] = len(tr["windows"])
             attrs["safe_cells"], attrs["total_cells"] = tr["counts"]["safe"], tr["counts"]["total"]
+        if (e["from"], e["to"]) in survives:
+            attrs["robust"] = survives[(e["from"], e["to"])]
         G.add_edge(e["from"], e["to"], **attrs)
     return G
 

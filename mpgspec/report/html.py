@@ -122,14 +122,62 @@ def _summary(report: dict, ids: Anchors) -> dict:
                                   f"{sum(e['class'] == 2 for e in edges)} Class 2"
                                   + (f", {sum(e.get('usable') is False for e in edges)} not usable by the planner"
                                      if any(e.get("usable") is False for e in edges) else "")),
+            *([_robust_count(report["robust"])] if report.get("robust") else []),
             ("oracle calls", (report.get("verdicts") or {}).get("total", "–"),
              ", ".join(f"{(report.get('verdicts') or {}).get(k, 0)} {k}" for k in ("safe", "unsafe", "inconclusive"))),
             ("assertions", len(asserts), _counts(asserts)),
             ("assumption checks", len(assumed), _counts(assumed)),
             *([("sequence runs", len(runs), ", ".join(f"{m} {'safe' if r.get('safe') else 'unsafe'}"
                                                        for m, r in runs.items()))] if runs else []),
+            *([_crosscheck_count(report["crosscheck"])] if report.get("crosscheck") else []),
         ],
     }
+
+
+def _robust_count(rob: dict) -> tuple:
+    """The summary line of the robust graph: edges that survive uncertainty, the nominal-only ones and
+    the safe runs of the goal sequence under sampled uncertainty per mode."""
+    sm = rob.get("summary") or {}
+    lost = sm.get("nominal_only") or []
+    runs = ((rob.get("sequence") or {}).get("modes") or {}).items()
+    names = {"graph": "nominal graph", "robust_graph": "robust graph"}
+    seq = "; disturbed sequence safe: " + ", ".join(f"{names.get(m, m)} {x['safe_runs']}/{x['runs']}" for m, x in runs)
+    return ("robust edges", sm.get("robust_edges", "–"),
+            f"of {sm.get('nominal_edges', '–')}; " + (f"nominal only: {', '.join(lost)}" if lost else "none lost")
+            + (seq if runs else "") + " (empirical)")
+
+
+def _crosscheck_count(xc: dict) -> tuple:
+    """The summary line of the cross-check: how many replayed runs agree with mpgspec's verdict."""
+    runs = xc.get("runs") or {}
+    agree = sum(bool(r.get("agree")) for r in runs.values())
+    sim = SIMULATORS.get(xc.get("simulator"), str(xc.get("simulator")))
+    return (f"cross-check in {sim}", f"{agree} / {len(runs)}",
+            "runs agree" + "".join(f"; {m} disagrees" for m, r in runs.items() if not r.get("agree")))
+
+
+SIMULATORS = {"mujoco": "MuJoCo"}
+"""How simulator names are written in the report."""
+
+
+def _crosscheck(report: dict) -> dict | None:
+    """Each replayed run with its plots: CoM height and least h, simulator vs mpgspec."""
+    xc = report.get("crosscheck")
+    if not xc:
+        return None
+    sim = SIMULATORS.get(xc.get("simulator"), str(xc.get("simulator")))
+    runs = []
+    for mode, r in (xc.get("runs") or {}).items():
+        s = r.get("series") or {}
+        pics = []
+        for key, title, label in (("com_z", f"{mode}: CoM height", "m"), ("least_h", f"{mode}: least active h", "h")):
+            pair = s.get(key) or {}
+            pics.append(Markup(svg.series_svg(s.get("t") or [], {sim: pair.get("mujoco") or [],
+                                                                 "mpgspec": pair.get("mpgspec") or []},
+                                              title=title, ylabel=label, zero_line=key == "least_h",
+                                              shade_negative=key == "least_h", width=420, height=200)))
+        runs.append({"mode": mode, "run": r, "svgs": pics})
+    return {"simulator": sim, "runs": runs}
 
 
 def _counts(items) -> str:
@@ -213,6 +261,7 @@ def view(report: dict) -> dict:
         "edge_traces": _failures(report, ids, "edge_traces"),
         "names": names,
         "sequence": _sequence(report),
+        "crosscheck": _crosscheck(report),
         "assert_counts": dict(Counter(a["status"] for a in report["assertions"])),
         "cell_colors": svg.CELL_COLORS,
     }

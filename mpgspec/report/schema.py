@@ -279,6 +279,102 @@ class Sequence(_Strict):
     runs: dict[str, Run]
 
 
+class CrossCheckSwitch(_Strict):
+    t: float
+    from_: str | None = Field(default=None, alias="from")
+    to: str
+    clock: float
+    roa_margin: Num = Field(description="margin of E of the primitive left, at the simulator's state (> 0: inside)")
+
+
+class CrossCheckVerdict(_Strict):
+    safe: bool
+    first_violation: Violation | None
+    violation_samples: int = Field(description="samples at which some active h < -tolerance (mpgspec: recorded ones)")
+    failed: str
+
+
+class CrossCheckCom(_Strict):
+    max: float = Field(description="largest distance between the two centres of mass, metres")
+    t: float
+    mpgspec: list[Num]
+    mujoco: list[Num]
+
+
+class CrossCheckJoint(_Strict):
+    max: float = Field(description="largest |q_mujoco - q_mpgspec| over the joints, radians")
+    t: float
+    joint: str
+
+
+class CrossCheckDivergence(_Strict):
+    samples: int = Field(description="mpgspec's samples compared, each with the nearest control update")
+    com: CrossCheckCom | None
+    joint: CrossCheckJoint | None
+    until: Num = Field(description="the first violation in either simulator; the two may part for good after it")
+    com_until: Num = Field(description="largest CoM divergence up to `until`, metres")
+    joint_until: Num = Field(description="largest joint divergence up to `until`, radians")
+
+
+class CrossCheckWorst(_Strict):
+    primitive: str
+    h: str
+    mujoco: Num = Field(description="least value in the simulator")
+    t: float
+    violated_in_mpgspec: bool
+
+
+class CrossCheckFoot(_Strict):
+    t: float
+    foot: str
+    primitive: str | None = None
+
+
+class CrossCheckContact(_Strict):
+    max_penetration: Num = Field(description="deepest foot below z = 0, metres")
+    max_slip_speed: Num = Field(description="largest horizontal speed of a held foot's contact point, m/s")
+    slip_at: CrossCheckFoot | None
+    lift_off: CrossCheckFoot | None = Field(description="the first time a foot the primitive holds left the floor")
+    trunk_contact: Num = Field(description="the first time the trunk touched the floor")
+
+
+class CrossCheckPair(_Strict):
+    mujoco: list[Num]
+    mpgspec: list[Num]
+
+
+class CrossCheckSeries(_Strict):
+    t: list[float]
+    com_z: CrossCheckPair
+    least_h: CrossCheckPair
+
+
+class CrossCheckRun(_Strict):
+    """One sequence run replayed in the simulator and compared with mpgspec's rollout."""
+
+    mode: str
+    agree: bool = Field(description="both say safe, or both unsafe")
+    mujoco: CrossCheckVerdict
+    mpgspec: CrossCheckVerdict
+    switches: list[CrossCheckSwitch]
+    divergence: CrossCheckDivergence
+    worst: list[CrossCheckWorst] = Field(description="the least margin of each kind of h in the simulator")
+    contact: CrossCheckContact
+    start_offset: Num = Field(description="distance of the settled start configuration from x*(t0)")
+    wall_s: float
+    series: CrossCheckSeries
+
+
+class CrossCheck(_Strict):
+    """The sequence's runs replayed in an independent simulator with the same compiled control laws."""
+
+    simulator: str
+    settings: dict[str, Any]
+    model: dict[str, Any] = Field(description="what the simulator's model was built from and holds")
+    agree: bool
+    runs: dict[str, CrossCheckRun]
+
+
 class Report(_Strict):
     """One project's verification report; the HTML, DOT and GraphML files are rendered from it."""
 
@@ -305,6 +401,8 @@ class Report(_Strict):
     timing: dict[str, float]
     robust: dict | None = Field(default=None, description="the robust graph (mpgspec.robust): edges that "
                                 "withstood the project's uncertainty in every scenario tried; empirical, not proof")
+    crosscheck: CrossCheck | None = Field(default=None, description="the sequence's runs replayed in an "
+                                          "independent simulator (mpgspec.execute.crosscheck)")
 
 
 def validate_report(d: dict) -> None:

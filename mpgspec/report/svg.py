@@ -23,6 +23,9 @@ SHAPES = {"fixed": "box", "periodic": "ellipse", "transient": "diamond"}
 NODE_FILL = {"fixed": "#d6e8f5", "periodic": "#e4f1fa", "transient": "#fbe6c6"}
 ARROW_ID = "mpg-arrow"
 DASH = "6 4"
+DOT = "1.5 3.5"
+NOMINAL_ONLY = VERMILLION
+"""Nominal-only edges (safe for the nominal model, lost under the project's uncertainty): dotted, vermillion."""
 
 
 def _n(v: float) -> str:
@@ -325,30 +328,46 @@ def windows_text(ws, limit: int = 3) -> str:
     return txt + (f" and {len(ws) - limit} more" if len(ws) > limit else "")
 
 
+def robust_edges(report: dict) -> dict[tuple[str, str], dict]:
+    """(from, to) -> the robust section's record of that nominal edge (empty without `robust`)."""
+    return {(e["from"], e["to"]): e for e in (report.get("robust") or {}).get("edges", [])}
+
+
 def edge_views(report: dict) -> list[dict]:
-    """Each edge with what the pictures show: label, tooltip, whether the planner may use it."""
+    """Each edge with what the pictures show: label, tooltip, whether the planner may use it and
+    whether it survives the project's uncertainty (`robust`: True, False for nominal only, None unchecked)."""
     trs = {(t["from"], t["to"]): t for t in report.get("transitions", [])}
+    rob = robust_edges(report)
     out = []
     for e in report.get("edges", []):
         tr = trs.get((e["from"], e["to"]))
         ws = tr.get("windows", []) if tr and e["class"] == 2 else []
         usable = e.get("usable", True) is not False
+        r = rob.get((e["from"], e["to"]))
+        robust = None if r is None else bool(r.get("survives"))
         label = f" {fmt(e.get('duration'))} s " if e.get("duration") is not None else ""
         if ws:
             label += f"\nt_A ∈ {windows_text(ws, 1)}"
+        if robust is False:
+            label += "\nnominal only"
         tip = (f"{e['from']} → {e['to']}: Class {e['class']}, duration {fmt(e.get('duration'))} s, "
                f"peak input {fmt(e.get('peak_input'))}")
         if ws:
             tip += f"; safe only from t_A in {windows_text(ws, 8)} s"
         if not usable:
             tip += f"; not used by the planner: {e.get('unusable_reason') or 'not executable'}"
-        out.append({"e": e, "label": label, "tip": tip, "usable": usable})
+        if robust is False:
+            tip += (f"; nominal only: unsafe under the project's uncertainty (worst margin "
+                    f"{fmt(r.get('worst_margin'))})")
+        elif robust and r.get("robust_class") != e["class"]:
+            tip += f"; Class {r.get('robust_class')} under uncertainty"
+        out.append({"e": e, "label": label, "tip": tip, "usable": usable, "robust": robust})
     return out
 
 
 def graph_dot(report: dict) -> str:
     """DOT text laid out for the report (Graphviz `dot`): shapes by class, dashed Class 2, grey edges
-    the planner cannot use, labels beside the edges."""
+    the planner cannot use, dotted vermillion edges that are nominal only, labels beside the edges."""
     def q(v) -> str:
         return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
 
@@ -365,9 +384,12 @@ def graph_dot(report: dict) -> str:
         e = v["e"]
         if e["from"] == e["to"]:
             continue
-        color = "#333333" if v["usable"] else UNUSABLE
-        attrs = [f"style={'dashed' if e['class'] == 2 else 'solid'}", f"color={q(color)}", f"fontcolor={q(color)}",
+        color = UNUSABLE if not v["usable"] else NOMINAL_ONLY if v["robust"] is False else "#333333"
+        style = "dotted" if v["robust"] is False else "dashed" if e["class"] == 2 else "solid"
+        attrs = [f"style={style}", f"color={q(color)}", f"fontcolor={q(color)}",
                  f"label={q(v['label'])}", f"tooltip={q(v['tip'])}", f"labeltooltip={q(v['tip'])}"]
+        if v["robust"] is False:
+            attrs.append("penwidth=1.6")
         lines.append(f"  {q(e['from'])} -> {q(e['to'])} [{', '.join(attrs)}];")
     lines.append("}")
     return "\n".join(lines) + "\n"
@@ -404,7 +426,8 @@ def graphviz_svg(report: dict, timeout: float = 10.0) -> str | None:
 
 def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str = "circular") -> str:
     """The motion primitive graph: box fixed, ellipse periodic, diamond transient; solid Class 1, dashed Class 2,
-    grey edges the planner cannot use; duration labels beside the edges (hand-made layout)."""
+    grey edges the planner cannot use, dotted vermillion edges that are nominal only; duration labels beside
+    the edges (hand-made layout)."""
     prims = report.get("primitives", [])
     node = {p["name"]: (SHAPES.get(p["class"], "ellipse"), *_size(SHAPES.get(p["class"], "ellipse"), p["name"]))
             for p in prims}
@@ -421,11 +444,15 @@ def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str 
     body = [f'<defs><marker id="{ARROW_ID}" viewBox="0 0 10 10" refX="9" refY="5" markerWidth="7" markerHeight="7" '
             f'orient="auto"><path d="M0 0L10 5L0 10z" fill="#333"/></marker>'
             f'<marker id="{ARROW_ID}-grey" viewBox="0 0 10 10" refX="9" refY="5" markerWidth="7" markerHeight="7" '
-            f'orient="auto"><path d="M0 0L10 5L0 10z" fill="{UNUSABLE}"/></marker></defs>']
+            f'orient="auto"><path d="M0 0L10 5L0 10z" fill="{UNUSABLE}"/></marker>'
+            f'<marker id="{ARROW_ID}-nominal" viewBox="0 0 10 10" refX="9" refY="5" markerWidth="7" markerHeight="7" '
+            f'orient="auto"><path d="M0 0L10 5L0 10z" fill="{NOMINAL_ONLY}"/></marker></defs>']
     labels = []
     for v in views:
         e = v["e"]
-        color, arrow = ("#333", ARROW_ID) if v["usable"] else (UNUSABLE, ARROW_ID + "-grey")
+        lost = v["robust"] is False
+        color, arrow = ((UNUSABLE, ARROW_ID + "-grey") if not v["usable"] else
+                        (NOMINAL_ONLY, ARROW_ID + "-nominal") if lost else ("#333", ARROW_ID))
         (ax, ay), (bx, by) = P[e["from"]], P[e["to"]]
         cx, cy = (ax + bx) / 2 - 0.15 * (by - ay), (ay + by) / 2 + 0.15 * (bx - ax)  # bend: A->B and B->A part
         ends = []
@@ -434,14 +461,15 @@ def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str 
             r = _reach(*node[nm], (cx - px) / d, (cy - py) / d) + gap
             ends.append(f"{_n(px + (cx - px) / d * r)} {_n(py + (cy - py) / d * r)}")
         body.append(_el("path", _tip(v["tip"]), d=f"M{ends[0]}Q{_n(cx)} {_n(cy)} {ends[1]}", fill="none",
-                        stroke=color, stroke_width=1.2, stroke_dasharray=DASH if e["class"] == 2 else "",
+                        stroke=color, stroke_width=1.6 if lost else 1.2,
+                        stroke_dasharray=DOT if lost else DASH if e["class"] == 2 else "",
                         marker_end=f"url(#{arrow})"))
         if v["label"]:
             # beside the curve: from its midpoint, outwards along the bend's normal
             mx, my = (ax + 2 * cx + bx) / 4, (ay + 2 * cy + by) / 4
             nx_, ny_ = cx - (ax + bx) / 2, cy - (ay + by) / 2
             d = math.hypot(nx_, ny_) or 1.0
-            lab = v["label"].split("\n")[0].strip() + (" ⧗" if e["class"] == 2 else "")
+            lab = v["label"].split("\n")[0].strip() + (" ⧗" if e["class"] == 2 else "") + (" ✗" if lost else "")
             lx, ly = mx + nx_ / d * 9, my + ny_ / d * 9 + 3
             anchor = "middle" if abs(nx_ / d) < 0.4 else ("start" if nx_ > 0 else "end")
             labels += [_text(lx, ly, lab, 10, anchor, stroke="#fff", stroke_width=3, stroke_linejoin="round"),
@@ -454,9 +482,12 @@ def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str 
     body += labels
     for x, (cls, shape) in zip((20, 92, 174), SHAPES.items()):
         body += [_node(shape, x, ly, 11, 8, NODE_FILL[cls]), _text(x + 15, ly + 4, cls, 10, "start")]
-    for k, label in enumerate(("Class 1 transition", "Class 2 transition")):
-        x = 260.0 + 150 * k
-        body += [_el("line", x1=x, x2=x + 30, y1=ly, y2=ly, stroke="#333", stroke_width=1.2,
-                     stroke_dasharray=DASH if k else "", marker_end=f"url(#{ARROW_ID})"),
+    keys = [("Class 1", "#333", "", ARROW_ID), ("Class 2 ⧗", "#333", DASH, ARROW_ID)]
+    if any(v["robust"] is False for v in views):
+        keys.append(("nominal only ✗", NOMINAL_ONLY, DOT, ARROW_ID + "-nominal"))
+    for k, (label, color, dash, arrow) in enumerate(keys):
+        x = 250.0 + 120 * k
+        body += [_el("line", x1=x, x2=x + 30, y1=ly, y2=ly, stroke=color, stroke_width=1.6 if dash == DOT else 1.2,
+                     stroke_dasharray=dash, marker_end=f"url(#{arrow})"),
                  _text(x + 36, ly + 4, label, 10, "start")]
     return _svg(width, height, body, f"motion primitive graph of {report.get('project', {}).get('name', '')}")

@@ -23,9 +23,11 @@ from ..check.assertions import AssertionResult, evaluate_assertions
 from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
 from .rollout import RobustRollout, judge, plant
-from .sequence import HOLD, DisturbedSequences
+from .sequence import sequence_under_uncertainty
 
 LABEL = "empirical"
+RECORD = 2
+"""Layout of the memoised robust record (part of its key)."""
 NOTE = ("falsification, not proof: a robust edge withstood every scenario tried (parameter-box corners, seeded "
         "samples and an adversarial disturbance search); no certificate backs it")
 
@@ -104,7 +106,7 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
         return None
     t0 = time.perf_counter()
     seq_spec = spec.project.sequence
-    key = memo.key("robust", *(p.digest() for p in prims.values()), spec.system.model_dump_json(),
+    key = memo.key("robust", RECORD, *(p.digest() for p in prims.values()), spec.system.model_dump_json(),
                    unc.model_dump_json(), seq_spec.model_dump_json() if seq_spec else None,
                    sorted(dataclasses.asdict(settings).items())) if memo is not None else None
     known = memo.get(key) if memo is not None else None
@@ -220,10 +222,9 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
     if spec.project.sequence is not None and unc.runs > 0:
         if progress:
             progress(spec.name, "sequence under uncertainty", 0, 3)
-        ds = DisturbedSequences(prims, P, dist_idx, bound, unc, settings, spec.project.sequence, unc.runs, unc.seed)
-        seq = {"runs": unc.runs, "seed": unc.seed, "disturbance_hold_s": HOLD,
-               "modes": {"naive": ds.run(None, {}, "naive"), "graph": ds.run(g, lookup_table(g), "graph"),
-                         "robust_graph": ds.run(rg, lookup_table(rg), "graph")}}
+        seq = sequence_under_uncertainty(spec, prims, settings, {"graph": (g, lookup_table(g)),
+                                                                 "robust_graph": (rg, lookup_table(rg))},
+                                         unc.runs, unc.seed)
     timing = {"robust_s": time.perf_counter() - t0, "robust_build_s": build_s, "robust_rollouts": n_roll,
               "robust_sequence_s": time.perf_counter() - t1}
     edges.sort(key=lambda e: (e["from"], e["to"]))

@@ -25,3 +25,16 @@ def robust_report_graph(report: dict) -> ReportGraph:
             best = [tb if i in ok else None for i, tb in enumerate(t.get("best_t_B", []))]
             trs.append({**t, "windows": r.get("robust_windows", []), "best_t_B": best})
     return ReportGraph({**report, "edges": edges, "transitions": trs})
+
+
+def report_lookup_table(g: ReportGraph, weight: str = "duration") -> dict[str, dict[str, str | None]]:
+    """table[current][goal] = next primitive on the shortest path of g's planner graph (as
+    mpgspec.plan.planner.lookup_table, for a graph read from a report)."""
+    import networkx as nx
+
+    G = g.planner_graph()
+    table: dict[str, dict[str, str | None]] = {}
+    for a in G.nodes:
+        paths = nx.single_source_dijkstra_path(G, a, weight=weight)
+        table[a] = {b: (paths[b][1] if len(paths[b]) > 1 else a) if b in paths else None for b in G.nodes}
+    return table

@@ -92,7 +92,8 @@ class DisturbedSequences:
             self.fns[name] = _Bound(fn.map(runs))
 
     def run(self, graph, table, mode: str) -> dict:
-        """Safe fraction and per-run outcome of one mode ('naive' or 'graph' with the given graph)."""
+        """Safe fraction, per-run outcome and the switches made per edge of one mode ('naive' or
+        'graph' with the given graph)."""
         prims, st, seq, n = self.prims, self.settings, self.seq, self.n
         dt, tol = st.dt, st.h_tolerance
         nx = next(iter(prims.values())).system.nx
@@ -104,6 +105,7 @@ class DisturbedSequences:
         first = [None] * n
         goal, cmd = [seq.start] * n, 0
         cur_a = np.array(cur, dtype=object)
+        taken: dict[tuple[str, str], int] = {}  # switches per edge over all runs
         trans = {n: p.cls is PrimitiveClass.TRANSIENT for n, p in prims.items()}
         for k in range(self.steps):
             t = (k + 1) * dt
@@ -155,8 +157,27 @@ class DisturbedSequences:
                         if abs(tr.t_A[j] - c) <= dt / 2 + 1e-12 and tr.best_t_B[j] is not None:
                             to = (nxt, tr.best_t_B[j])
                 if to is not None:
+                    taken[(cur[r], to[0])] = taken.get((cur[r], to[0]), 0) + 1
                     cur[r], conv[r] = to[0], False
                     cur_a[r] = to[0]
                     Z[nx:, r] = np.concatenate([[to[1], 0.0], Z[:nx, r]])
         return {"safe_fraction": float(safe.mean()), "safe_runs": int(safe.sum()), "runs": n,
-                "first_violation": [f for f in first if f is not None][:5], "final": cur}
+                "first_violation": [f for f in first if f is not None][:5], "final": cur,
+                "switches": [{"from": a, "to": b, "count": c} for (a, b), c in sorted(taken.items())]}
+
+
+def sequence_under_uncertainty(spec, prims, settings, graphs: dict, runs: int, seed: int) -> dict:
+    """The project's goal sequence in `runs` seeded draws of its uncertainty, run naive and through
+    each graph of `graphs` (mode -> (graph, lookup table)) on the same draws; per mode the safe
+    fraction, the safe runs and the first violations."""
+    from .rollout import plant
+
+    unc, sys = spec.project.uncertainty, next(iter(prims.values())).system
+    dist = unc.disturbance
+    dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
+    bound = np.broadcast_to(np.asarray(dist.bound, float), (len(dist_idx),)) if dist is not None else np.zeros(0)
+    ds = DisturbedSequences(prims, plant(spec, list(unc.parameters)), dist_idx, bound, unc, settings,
+                            spec.project.sequence, runs, seed)
+    modes = {"naive": ds.run(None, {}, "naive")}
+    modes.update({m: ds.run(g, table, "graph") for m, (g, table) in graphs.items()})
+    return {"runs": runs, "seed": seed, "disturbance_hold_s": HOLD, "modes": modes}

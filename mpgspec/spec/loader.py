@@ -17,7 +17,7 @@ from typing import Any, Callable, Iterable
 from pydantic import ValidationError
 
 from ..errors import Location, SpecError, SpecErrors, UsageError
-from .models import Primitive, PrimitiveClass, Project, SafetyFunction
+from .models import EventWindow, Primitive, PrimitiveClass, Project, SafetyFunction
 from .paths import (
     SAFE_NAME_TEXT,
     ReadProblem,
@@ -129,7 +129,8 @@ def _validation_errors(err: ValidationError, positions: PositionMap, prefix: tup
         if msg.startswith("Value error, "):
             msg = msg[len("Value error, ") :]
         code = "MPG102" if e["type"] == "extra_forbidden" else "MPG103" if e["type"] == "missing" else "MPG104"
-        expected = ""
+        ctx = e.get("ctx") or {}  # custom errors (e.g. an unknown contact event) say what was expected
+        expected, hint = str(ctx.get("expected", "")), str(ctx.get("hint", ""))
         if e["type"] == "extra_forbidden":
             msg = "unknown key"
             found_s = clip_repr(data_loc[-1]) if data_loc else ""
@@ -137,7 +138,8 @@ def _validation_errors(err: ValidationError, positions: PositionMap, prefix: tup
             msg = "required key is missing"
             found_s = ""
         out.append(
-            SpecError(msg, location=positions.locate(data_loc), key=key, expected=expected, found=found_s, code=code)
+            SpecError(msg, location=positions.locate(data_loc), key=key, expected=expected, found=found_s, code=code,
+                      hint=hint)
         )
     _suggest_keys(out, errs, prefix, data)
     # one union branch usually explains the problem best; keep distinct locations
@@ -229,13 +231,50 @@ def _read_included(path: Path, written: str, where: Location, key: str) -> tuple
     return data, positions
 
 
-def _within(item: SafetyFunction, when: tuple[float, float] | None) -> SafetyFunction:
-    """A block's safety function restricted to the `when` window of the `use` that includes it."""
+def _within(item: SafetyFunction, when) -> SafetyFunction:
+    """A block's safety function restricted to the `when` window of the `use` that includes it.
+
+    Two clock windows intersect; a window anchored on a contact event is taken as it is when the
+    other side has none (ValueError when both have a window and one is anchored on an event)."""
     if when is None:
         return item
     if item.when is not None:
+        if not (isinstance(when, tuple) and isinstance(item.when, tuple)):
+            raise ValueError("the block's function has a window of its own")
         when = (max(when[0], item.when[0]), min(when[1], item.when[1]))
     return item.model_copy(update={"when": when})
+
+
+def _event_window_errors(project: Project, p: Primitive, loc_fn: Locator, block_loc: Locator) -> list[SpecError]:
+    """Windows anchored on a contact event need contact events in the state: a rigid-body system with
+    `contact_events: true`, whose contact set is not set by a clock (contact_schedule, trot)."""
+    events = bool(getattr(project.system, "contact_events", False))
+    scheduled = p.contact_schedule is not None or p.controller.type == "trot"
+    if events and not scheduled:
+        return []
+    out = []
+    for j, sf in enumerate(p.safe_set):
+        places = [(loc_fn(("safe_set", j, "when")), f"primitive '{clip(p.name, 60)}': safe_set.{j}.when", sf.when)]
+        if sf.use is not None and sf.use in project.safe_sets:
+            places += [(block_loc(("safe_sets", sf.use, k, "when")), f"safe_sets.{clip(sf.use, 60)}.{k}.when", it.when)
+                       for k, it in enumerate(project.safe_sets[sf.use])]
+        for where, key, when in places:
+            if not isinstance(when, EventWindow):
+                continue
+            if not events:
+                kind = getattr(project.system, "kind", "analytic")
+                out.append(SpecError(
+                    "a window anchored on a contact event needs contact events in the state", location=where,
+                    key=key, expected="a rigid_body system with contact_events: true",
+                    found="an analytic system" if kind == "analytic" else "contact_events: false",
+                    hint="set contact_events: true under system, or give a clock window [t0, t1]", code="MPG108"))
+            else:
+                out.append(SpecError(
+                    "a window anchored on a contact event needs contacts that follow events, not the clock",
+                    location=where, key=key, expected="a primitive without contact_schedule or a trot controller",
+                    found="a contact schedule", hint="the schedule fixes the contact times: give a clock window",
+                    code="MPG108"))
+    return out
 
 
 def _format_arg(v: float) -> str:
@@ -358,9 +397,19 @@ def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = No
                                                 sorted(project.safe_sets) + list(BUILTIN_BLOCKS)), 300),
                                             found=clip_repr(sf.use), code="MPG302"))
                 else:
-                    resolved.extend(_within(item, sf.when) for item in project.safe_sets[sf.use])
+                    for k, item in enumerate(project.safe_sets[sf.use]):
+                        try:
+                            resolved.append(_within(item, sf.when))
+                        except ValueError as why:
+                            errors.append(SpecError(
+                                "cannot restrict this block to the use's window",
+                                location=loc_fn(("safe_set", j, "when")),
+                                key=f"primitive '{clip(p.name, 60)}': safe_set.{j}.when",
+                                expected="a use window only for block functions without one, or clock windows on both",
+                                found=f"{why} (safe_sets.{clip(sf.use, 60)}.{k}.when)", code="MPG104"))
             else:
                 resolved.append(sf)
+        errors += _event_window_errors(project, p, loc_fn, merged.locate)
         for name, arg in _expand(p):
             if name in names:
                 errors.append(SpecError("duplicate primitive name", location=loc_fn(("name",)),

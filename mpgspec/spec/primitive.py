@@ -1,10 +1,12 @@
 """Spec models of a motion primitive (Definition 1): setpoint, control law, safe set, explicit RoA."""
 from __future__ import annotations
 
+import difflib
 from enum import Enum
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
+from pydantic_core import PydanticCustomError
 
 from .base import Strict
 from .system import Expr, Number, Text
@@ -153,14 +155,87 @@ Controller = Annotated[
 ]
 
 
+class ContactEvent(str, Enum):
+    """Contact events a safe-set window can be anchored on, each at its first time since switch-in
+    (Section IV: T_c of Land, T_t of Jump). Detected at step ends, so known to one step."""
+
+    FIRST_TOUCHDOWN = "first_touchdown"  # T_c: a foot out of contact touches the ground
+    TAKEOFF = "takeoff"  # T_t: the last foot in contact lifts off, none is left on the ground
+
+
+def _contact_event(value):
+    """An event name; an unknown one is reported with the names there are and the nearest of them."""
+    names = [e.value for e in ContactEvent]
+    if isinstance(value, str) and value not in names:
+        near = difflib.get_close_matches(value, names, n=1, cutoff=0.5)
+        raise PydanticCustomError(
+            "contact_event", "unknown contact event",
+            {"found": repr(value)[:60], "expected": "one of " + ", ".join(names),
+             "hint": f"did you mean {near[0]!r}?" if near else ""})
+    return value
+
+
+Event = Annotated[ContactEvent, BeforeValidator(_contact_event)]
+
+
+class EventWindow(Strict):
+    """A window anchored on a contact event E at T_E, its first time since switch-in: `before: E`
+    is [0, T_E); `after: E` is [T_E + delay, T_E + delay + for), or from T_E + delay on without
+    `for`. Before E happens, `before` windows are active and `after` windows are not."""
+
+    model_config = ConfigDict(json_schema_extra={"oneOf": [{"required": ["before"]}, {"required": ["after"]}]})
+
+    before: Event | None = Field(default=None, description="contact event ending the window: active until it "
+                                                            "first happens (first_touchdown | takeoff)")
+    after: Event | None = Field(default=None, description="contact event opening the window: active from its "
+                                                          "first time on (first_touchdown | takeoff)")
+    delay: Number = Field(default=0.0, description="seconds after the event at which an `after` window opens",
+                          json_schema_extra={"minimum": 0})
+    for_: Number | None = Field(default=None, alias="for", description="length of an `after` window in seconds "
+                                "(omitted: to the end of the rollout)", json_schema_extra={"exclusiveMinimum": 0})
+
+    @field_validator("for_")
+    @classmethod
+    def _positive_length(cls, v):
+        if v is not None and v <= 0:
+            raise ValueError(f"'for' is the window's length in seconds and must be > 0; got {v:g}")
+        return v
+
+    @field_validator("delay")
+    @classmethod
+    def _later(cls, v):
+        if v < 0:
+            raise ValueError(f"'delay' must be >= 0: the window opens that long after the event; got {v:g}")
+        return v
+
+    @model_validator(mode="after")
+    def _one_anchor(self):
+        if (self.before is None) == (self.after is None):
+            raise ValueError("give exactly one of 'before' or 'after', each naming a contact event")
+        if self.before is not None and (self.for_ is not None or self.delay != 0):
+            raise ValueError("'for' and 'delay' go with 'after'; a 'before' window ends at the event")
+        return self
+
+
+def _window_kind(v):
+    return "event" if isinstance(v, (dict, EventWindow)) else "clock"
+
+
+Window = Annotated[
+    Union[Annotated[tuple[Number, Number], Tag("clock")], Annotated[EventWindow, Tag("event")]],
+    Discriminator(_window_kind),
+]
+"""`when`: a clock window [t0, t1) or a window anchored on a contact event."""
+
+
 class SafetyFunction(Strict):
-    """One h(x, t) >= 0 (`h`) or |g(x, t)| <= tol (`eq`), optionally active only for t in `when`."""
+    """One h(x, t) >= 0 (`h`) or |g(x, t)| <= tol (`eq`), optionally active only in the window `when`."""
 
     name: Text | None = None
     h: Expr | None = None
     eq: Expr | None = None
     tol: Number = Field(default=1e-3, gt=0)
-    when: tuple[Number, Number] | None = None
+    when: Window | None = None
     use: Text | None = Field(default=None, description="name of a reusable safe-set block of the project")
 
     @model_validator(mode="after")
@@ -170,7 +245,7 @@ class SafetyFunction(Strict):
             raise ValueError("give exactly one of 'h', 'eq' or 'use'")
         if self.use is None and not self.name:
             raise ValueError("a safety function needs a 'name'")
-        if self.when is not None and self.when[1] <= self.when[0]:
+        if isinstance(self.when, tuple) and self.when[1] <= self.when[0]:
             raise ValueError("'when' must be [start, end) with end > start")
         return self
 

@@ -6,6 +6,7 @@ from typing import Annotated, Literal, Union
 from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
 from .base import Strict
+from .crosscheck import CrossCheck
 from .primitive import Grid, Primitive, SafetyFunction
 from .system import Number, System, Text
 from .uncertainty import Uncertainty as UncertaintyModel
@@ -149,3 +150,5 @@ class Project(Strict):
     sequence: Sequence | None = None
     uncertainty: Uncertainty | None = Field(default=None, description="parameter ranges, disturbances and "
                                             "initial-state error the robust graph is checked against")
+    crosscheck: CrossCheck | None = Field(default=None, description="replay the sequence's runs in an "
+                                          "independent simulator (MuJoCo) and compare verdicts and trajectories")

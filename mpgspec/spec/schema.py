@@ -94,7 +94,8 @@ DESCRIPTIONS = {
     "until": "end of this phase in the primitive's clock (seconds)",
     "weight": "plan weight: duration, peak_input or hops",
     "weights": "diagonal of the weight matrix W of E",
-    "when": "clock window [a, b] in which the safety function is active",
+    "when": "window in which the safety function is active: [a, b] on the clock, or anchored on a contact "
+            "event: {before: E}, {after: E, delay: d, for: l} (E: first_touchdown | takeoff)",
 }
 
 

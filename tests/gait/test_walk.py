@@ -18,7 +18,7 @@ SPEEDS = {"Walk(in_place)": 0.0, "Walk(slow)": 0.2, "Walk(medium)": 0.4, "Walk(f
 
 @pytest.fixture(scope="module")
 def spec():
-    return load_project(A1 / "walks.yaml")
+    return load_project(A1 / "project.yaml")
 
 
 @pytest.fixture(scope="module")

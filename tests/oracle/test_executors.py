@@ -97,7 +97,7 @@ def hybrid_project(folder: Path) -> Path:
     (d / "project.yaml").write_text(p)
     lie = (d / "primitives" / "lie.yaml").read_text()
     weights = "0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1]"
-    lie = lie.replace(weights, weights[:-1] + ", 0,0,0,0]").replace("  profile: {duration: 1.0}\n", "")
+    lie = lie.replace(weights, weights[:-1] + ", 0,0,0,0, 0,0]").replace("  profile: {duration: 1.0}\n", "")
     (d / "primitives" / "lie.yaml").write_text(lie)
     drop = lie.replace("name: Lie", "name: Drop").replace("  feet_on_ground: true\n", "")
     drop = drop.replace("  named: &lie\n", "  named: &lie\n    base_z: 0.16\n").replace("roa:\n", "contacts: []\nroa:\n")

@@ -48,3 +48,14 @@ def test_graphml_round_trip(sample):
     assert attrs["class"] == e["class"] and attrs["duration"] == pytest.approx(e["duration"])
     assert attrs["method"] == "simulated"
     assert G.nodes["SwingUp"]["class"] == "transient" and G.nodes["SwingUp"]["next"] == "Balance"
+
+
+def test_nominal_only_edges_in_dot_and_graphml(sample):
+    dot = to_dot(sample)
+    lost = next(ln for ln in dot.splitlines() if ln.strip().startswith('"Balance" -> "SwingUp"'))
+    assert 'color="#D55E00"' in lost and "nominal only" in lost and "style=solid" in lost
+    assert dot.count("nominal only") == 1
+    G = nx.read_graphml(io.StringIO(to_graphml(sample)))
+    assert G.edges["Balance", "SwingUp"]["robust"] is False and G.edges["Hang", "Swing(1)"]["robust"] is True
+    G = nx.read_graphml(io.StringIO(to_graphml({**sample, "robust": None})))
+    assert "robust" not in G.edges["Balance", "SwingUp"]

@@ -132,3 +132,40 @@ def test_sequence_runs_share_their_y_axes(sample_text):
     for r in runs:
         one = run_limits([r], len(seq["state_names"]))
         assert both[0][0] <= one[0][0] and both[0][1] >= one[0][1]
+
+
+def _robust_sequence(safe: dict[str, int], runs: int = 8) -> dict:
+    def mode(n, switches):
+        return {"safe_fraction": n / runs, "safe_runs": n, "runs": runs, "final": ["Hang"] * runs,
+                "first_violation": [] if n == runs else [{"t": 2.01, "primitive": "Balance"}], "switches": switches}
+
+    return {"runs": runs, "seed": 3, "disturbance_hold_s": 0.5, "modes": {
+        "naive": mode(safe["naive"], [{"from": "Hang", "to": "Balance", "count": runs}]),
+        "graph": mode(safe["graph"], [{"from": "Balance", "to": "SwingUp", "count": 5},
+                                      {"from": "Hang", "to": "Swing(1)", "count": runs}]),
+        "robust_graph": mode(safe["robust_graph"], [{"from": "Hang", "to": "Swing(1)", "count": runs}])}}
+
+
+def test_robust_edges_in_summary_legend_and_sequence_fractions(sample_text):
+    report = json.loads(sample_text)
+    report["robust"]["sequence"] = _robust_sequence({"naive": 0, "graph": 6, "robust_graph": 8})
+    html = render_html(report)
+    assert "<b>19</b> robust edges" in html and "nominal only: Balance -&gt; SwingUp" in html
+    assert "disturbed sequence safe: naive 0/8, nominal graph 6/8, robust graph 8/8" in html
+    assert 'class="key nominal"' in html  # the graph legend
+    table = html[html.index('id="robust-sequence"'):]
+    table = table[: table.index("</table>")]
+    rows = table.split("<tr")[2:]
+    assert len(rows) == 3
+    assert "naive" in rows[0] and "0 / 8" in rows[0] and "0.0 %" in rows[0] and "t = 2.01 s in Balance" in rows[0]
+    assert "nominal graph" in rows[1] and "6 / 8" in rows[1] and "75.0 %" in rows[1]
+    assert "Balance → SwingUp ×5" in rows[1] and "Hang → Swing(1)" not in rows[1]  # only nominal-only edges
+    assert "robust graph" in rows[2] and "8 / 8" in rows[2] and "100.0 %" in rows[2] and "none" in rows[2]
+    assert 'class="fail"' in rows[1] and 'class="pass"' in rows[2]
+
+
+def test_no_robust_graph_no_robust_legend(sample_text):
+    report = json.loads(sample_text)
+    report["robust"] = None
+    html = render_html(report)
+    assert 'class="key nominal"' not in html and "robust edges" not in html and 'id="robust"' not in html

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from mpgspec.report.compact import expand_cells, run_rows
-from mpgspec.report.svg import VERMILLION, graph_svg, grid_svg, series_svg, trajectory_svg
+from mpgspec.report.svg import DASH, DOT, VERMILLION, graph_dot, graph_svg, grid_svg, series_svg, trajectory_svg
 
 SAMPLE = Path(__file__).with_name("data") / "sample_report.json"
 NS = "{http://www.w3.org/2000/svg}"
@@ -54,8 +54,9 @@ def test_text_is_escaped(sample):
 
 def test_graph_shapes(sample):
     root = _parse(graph_svg(sample))
-    dashed = [p for p in root.iter(NS + "path") if p.get("stroke-dasharray") and p.find(NS + "title") is not None]
-    assert len(dashed) == sum(e["class"] == 2 for e in sample["edges"])
+    lost = {tuple(x.split(" -> ")) for x in sample["robust"]["summary"]["nominal_only"]}
+    dashed = [p for p in root.iter(NS + "path") if p.get("stroke-dasharray") == DASH and p.find(NS + "title") is not None]
+    assert len(dashed) == sum(e["class"] == 2 and (e["from"], e["to"]) not in lost for e in sample["edges"])
     assert root.find(f".//{NS}polygon") is not None and root.find(f".//{NS}ellipse") is not None
     assert graph_svg(sample) == graph_svg(sample)
 
@@ -70,3 +71,38 @@ def test_grid_and_trajectory(sample):
         root = _parse(trajectory_svg(run_rows(run), seq["state_names"], seq["commands"]))
         labels = "".join(root.itertext())
         assert all(f"→ {s['to']}" in labels for s in run["switches"])
+
+
+def _edge_paths(root: ET.Element) -> dict[tuple[str, str], ET.Element]:
+    """Edge paths of the built-in graph by (from, to), read from their tooltips."""
+    out = {}
+    for p in root.iter(NS + "path"):
+        t = p.find(NS + "title")
+        if t is not None and " → " in t.text:
+            a, rest = t.text.split(" → ", 1)
+            out[(a, rest.split(":", 1)[0])] = p
+    return out
+
+
+def test_nominal_only_edges_are_dotted_vermillion_with_a_legend(sample):
+    lost = {tuple(x.split(" -> ")) for x in sample["robust"]["summary"]["nominal_only"]}
+    assert lost == {("Balance", "SwingUp")}
+    root = _parse(graph_svg(sample))
+    paths = _edge_paths(root)
+    assert set(paths) == {(e["from"], e["to"]) for e in sample["edges"]}
+    for pair, p in paths.items():
+        dotted = p.get("stroke-dasharray") == DOT
+        assert dotted == (pair in lost), pair
+        assert (p.get("stroke") == VERMILLION) == (pair in lost and next(
+            e for e in sample["edges"] if (e["from"], e["to"]) == pair).get("usable", True) is not False)
+        assert ("nominal only" in p.find(NS + "title").text) == (pair in lost)
+    assert "nominal only" in "".join(root.itertext())  # the legend entry
+    assert "nominal only" not in graph_svg({**sample, "robust": None})
+
+
+def test_nominal_only_edges_in_the_graphviz_layout(sample):
+    lines = {ln.split(" [", 1)[0].strip(): ln for ln in graph_dot(sample).splitlines() if " -> " in ln}
+    lost = lines.pop('"Balance" -> "SwingUp"')
+    assert "style=dotted" in lost and f'color="{VERMILLION}"' in lost and "nominal only" in lost
+    assert not any("style=dotted" in ln or "nominal only" in ln for ln in lines.values())
+    assert "style=dotted" not in graph_dot({**sample, "robust": None})

@@ -28,7 +28,7 @@ def drop_spec(tmp_path_factory):
     lie = lie.replace("  profile: {duration: 1.0}\n", "")
     lie = lie.replace("roa:\n", "contacts: []\nroa:\n")
     lie = lie.replace("0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1]",
-                      "0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0,0,0,0]")
+                      "0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0,0,0,0, 0,0]")
     lie = lie.replace("  - use: quadruped_ground\n", "  - use: joint_limits\n  - use: aerial\n")
     (d / "primitives" / "lie.yaml").write_text(lie)
     return load_project(d / "project.yaml")
@@ -82,7 +82,7 @@ def test_contact_schedule_sets_the_flags_by_the_clock(tmp_path):
                       "  - {until: 0.4, feet: [FL_foot, RR_foot]}\n"
                       "  - {until: 9.0, feet: [FL_foot, FR_foot, RL_foot, RR_foot]}\nroa:\n")
     lie = lie.replace("0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1]",
-                      "0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0,0,0,0]")
+                      "0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0,0,0,0, 0,0]")
     (d / "primitives" / "lie.yaml").write_text(lie)
     spec = load_project(d / "project.yaml")
     lie_p = compile_project(spec)["Lie"]

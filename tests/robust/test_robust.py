@@ -150,3 +150,75 @@ def test_sequence_under_uncertainty_naive_vs_graphs(rob):
     assert rob.sequence["runs"] == 8 and set(modes) == {"naive", "graph", "robust_graph"}
     assert modes["naive"]["safe_fraction"] == 0.0 and modes["naive"]["first_violation"][0]["primitive"] == "Balance"
     assert modes["graph"]["safe_fraction"] == 1.0 and modes["robust_graph"]["safe_fraction"] == 1.0
+
+
+def _balance_to_swingup(spec):
+    """The pendulum spec with a goal sequence that asks for SwingUp from Balance: the nominal graph's
+    shortest way is the nominal-only edge Balance -> SwingUp."""
+    import dataclasses
+
+    from mpgspec.spec.project import Sequence
+
+    seq = Sequence(start="Balance", duration=6, commands=[{"t": 0, "goal": "SwingUp"}])
+    return dataclasses.replace(spec, project=spec.project.model_copy(update={"sequence": seq}))
+
+
+def test_sequence_statistics_are_seeded_on_shared_draws_and_robust_mode_avoids_lost_edges(built, rob):
+    from mpgspec.plan.planner import lookup_table
+    from mpgspec.robust.sequence import sequence_under_uncertainty
+
+    cp, vg = built
+    spec = _balance_to_swingup(cp.spec)
+    graphs = {"graph": (vg.graph, lookup_table(vg.graph)), "robust_graph": (rob.graph, lookup_table(rob.graph))}
+    a = sequence_under_uncertainty(spec, cp.prims, cp.settings, graphs, 6, 11)
+    assert a == sequence_under_uncertainty(spec, cp.prims, cp.settings, graphs, 6, 11)
+    assert a["runs"] == 6 and a["seed"] == 11 and set(a["modes"]) == {"naive", "graph", "robust_graph"}
+    for m in a["modes"].values():
+        assert m["runs"] == 6 and m["safe_fraction"] == pytest.approx(m["safe_runs"] / 6)
+    used = {m: {(s["from"], s["to"]) for s in x["switches"]} for m, x in a["modes"].items()}
+    assert ("Balance", "SwingUp") in used["graph"]  # the nominal plan takes the edge lost under uncertainty
+    lost = {tuple(x.split(" -> ")) for x in rob.to_dict()["summary"]["nominal_only"]}
+    assert used["robust_graph"] and not used["robust_graph"] & lost
+    assert all(rob.graph.edge(*e) is not None for e in used["robust_graph"])
+    assert ("Balance", "Swing(2.6)") in used["robust_graph"]  # the robust way round, through the largest swing
+
+
+def _cli(capsys, *argv):
+    from mpgspec.cli import main
+
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_simulate_uncertain_from_the_report_and_rebuilt_agree(capsys, tmp_path):
+    import json
+
+    out = tmp_path / "reports"
+    rc, _, err = _cli(capsys, "verify", PEND, "--out", out, "-q")
+    assert rc == 0, err
+    rc, text, err = _cli(capsys, "simulate", PEND, "--out", out, "--uncertain", "--runs", "5", "--seed", "4",
+                         "--format", "json")
+    assert rc == 0 and "rebuild" not in err
+    doc = json.loads(text)
+    assert doc["runs"] == 5 and doc["seed"] == 4 and doc["uncertainty"]["parameters"] == {"m": [0.9, 1.2]}
+    modes = doc["modes"]
+    assert modes["naive"]["safe_runs"] == 0 and modes["naive"]["first_violation"][0]["primitive"] == "Balance"
+    assert modes["graph"]["safe_runs"] == 5 and modes["robust_graph"]["safe_fraction"] == 1.0
+    rc, text2, _ = _cli(capsys, "simulate", PEND, "--out", out, "--uncertain", "--runs", "5", "--seed", "4",
+                        "--format", "json", "--rebuild")
+    assert rc == 0 and json.loads(text2)["modes"] == modes  # the report's graphs run as the rebuilt ones
+    rc, text, _ = _cli(capsys, "simulate", PEND, "--out", out, "--uncertain", "--runs", "3")
+    assert rc == 0 and "3 seeded runs (seed 0)" in text
+    assert [ln.split()[0] for ln in text.splitlines()[1:]] == ["naive", "graph", "robust"]
+    assert "0 / 3 safe (0.0 %); first unsafe at t = 2.010 s in Balance" in text
+    rc, _, err = _cli(capsys, "simulate", PEND, "--out", out, "--runs", "3")
+    assert rc == 2 and "--uncertain" in err
+    rc, _, err = _cli(capsys, "simulate", PEND, "--out", out, "--uncertain", "--runs", "0")
+    assert rc == 2 and "--runs" in err
+
+
+def test_simulate_uncertain_needs_an_uncertainty_block(capsys, tmp_path):
+    path = _copy(tmp_path, None)
+    rc, _, err = _cli(capsys, "simulate", path, "--out", tmp_path / "r", "--uncertain")
+    assert rc == 2 and "declares no `uncertainty`" in err

@@ -16,10 +16,10 @@ SPECS = Path(__file__).resolve().parents[2] / "specs"
 
 
 def _spec_files() -> dict[Path, str]:
-    """Every project file under specs/ (project.yaml, a1/walks.yaml) and the primitive and system files it
+    """Every project file under specs/ (project.yaml) and the primitive and system files it
     names, with their kind."""
     out = {}
-    for proj in sorted([*SPECS.rglob("project.yaml"), SPECS / "a1" / "walks.yaml"]):
+    for proj in sorted(SPECS.rglob("project.yaml")):
         out[proj] = "project"
         doc = yaml.safe_load(proj.read_text(encoding="utf-8"))
         if isinstance(doc.get("system"), str):
@@ -70,6 +70,20 @@ def test_schemas_are_complete(kind, validators):
 
     missing = [n for n, sub in props(s) if isinstance(sub, dict) and not sub.get("description")]
     assert not missing
+
+
+@pytest.mark.parametrize("when, valid", [
+    ([0.5, 1.0], True),
+    ({"before": "first_touchdown"}, True),
+    ({"after": "takeoff", "delay": 0.02, "for": 0.01}, True),
+    ({"after": "touchdown"}, False),  # not an event
+    ({"after": "takeoff", "for": 0}, False),  # an empty window
+    ({"for": 0.01}, False),  # anchored on nothing
+])
+def test_windows_anchored_on_contact_events(validators, when, valid):
+    doc = yaml.safe_load((SPECS / "pendulum" / "primitives" / "hang.yaml").read_text())
+    doc["safe_set"] = [{"name": "h", "h": "1", "when": when}]
+    assert (not list(validators["primitive"].iter_errors(doc))) is valid
 
 
 def test_a_misspelled_key_is_invalid(validators):

@@ -10,6 +10,8 @@ zero. After every integration step the discrete part of the hybrid system runs:
 - lift-off: a foot with c_i = 1 whose normal force under the step's input is below 0 gets c_i = 0.
 
 Events are detected at step boundaries (no event localisation): their time is known to one step.
+After the flags the state holds the event clocks of compile/events.py (first touchdown: a foot
+touches down; takeoff: the last foot in contact lifts off), which the same update records.
 """
 from __future__ import annotations
 
@@ -61,21 +63,43 @@ def masked_impact(sys, q: ca.SX, v: ca.SX, c: ca.SX) -> ca.SX:
     return v + tree_solve_l(L, parents, ca.mtimes(DY, P))
 
 
+def touchdown_projection(sys, q: ca.SX, joined: list) -> ca.SX:
+    """q with each joining foot put on the ground by its own leg: one Gauss-Newton step on its
+    height over the leg's three joints (minimal norm). A scheduled touchdown finds the foot up to
+    a tracking error off the ground (millimetres); left there, the constraint's Baumgarte term
+    would move the foot after the impact. Legs follow the feet in joint order (quadrupeds)."""
+    m = sys.model
+    nq0 = 7 if m.n_base else 0
+    q_new = q
+    for i, f in enumerate(m.contact_frames):
+        leg = list(range(nq0 + 3 * i, nq0 + 3 * i + 3))
+        z0 = sys.extra_env[f"{f}_z"]
+        z, Jz = (ca.substitute(e, sys.x[:m.nq], q) for e in (z0, ca.jacobian(z0, sys.x[:m.nq])[:, leg]))
+        dq = -z * Jz.T / (ca.mtimes(Jz, Jz.T) + 1e-12)
+        step = ca.vertcat(*[dq[leg.index(k)] if k in leg else 0 for k in range(m.nq)])
+        q_new = q_new + ca.if_else(joined[i], step, ca.DM.zeros(m.nq))
+    return q_new
+
+
 def scheduled_contacts(sys, x_new: ca.SX, c_sched: ca.SX) -> ca.SX:
     """Set the flags to the scheduled set; feet that join it touch down with a plastic impact."""
     m = sys.model
-    nq, nv = m.nq, m.nv
-    q, v, c = x_new[:nq], x_new[nq:nq + nv], x_new[nq + nv:]
-    joined = sum(ca.logic_and(c_sched[i] > 0.5, c[i] < 0.5) for i in range(c.shape[0]))
+    nq, nv, nf = m.nq, m.nv, len(m.contact_frames)
+    q, v, c = x_new[:nq], x_new[nq:nq + nv], x_new[nq + nv:nq + nv + nf]
+    joined = sum(ca.logic_and(c_sched[i] > 0.5, c[i] < 0.5) for i in range(nf))
     v_new = ca.if_else(joined > 0, masked_impact(sys, q, v, c_sched), v)
-    return ca.vertcat(q, v_new, c_sched)
+    return ca.vertcat(q, v_new, c_sched, x_new[nq + nv + nf:])
 
 
-def contact_events(sys, x_new: ca.SX, u: ca.SX) -> ca.SX:
-    """The discrete update after a step: touchdowns (with impact) and lift-offs."""
+def contact_events(sys, x_new: ca.SX, u: ca.SX, s=ca.inf) -> ca.SX:
+    """The discrete update after a step ending s after switch-in: touchdowns (with impact) and
+    lift-offs, and the first touchdown and takeoff since switch-in on the event clocks."""
+    from ...spec.models import ContactEvent
+    from ..events import record
+
     m = sys.model
     nq, nv, nf = m.nq, m.nv, len(m.contact_frames)
-    q, v, c = x_new[:nq], x_new[nq:nq + nv], x_new[nq + nv:]
+    q, v, c = x_new[:nq], x_new[nq:nq + nv], x_new[nq + nv:nq + nv + nf]
     keys = [f"{f}_{k}" for f in m.contact_frames for k in ("z", "vz")]
     env = dict(zip(keys, ca.vertsplit(ca.substitute(ca.vertcat(*[sys.extra_env[k] for k in keys]), sys.x, x_new))))
     _, lam = masked_contact_dynamics(sys, q, v, u, c)
@@ -88,4 +112,8 @@ def contact_events(sys, x_new: ca.SX, u: ca.SX) -> ca.SX:
     c_new = ca.vertcat(*c_new)
     touched = sum(ca.logic_and(c_new[i] > 0.5, c[i] < 0.5) for i in range(nf))
     v_new = ca.if_else(touched > 0, masked_impact(sys, q, v, c_new), v)
-    return ca.vertcat(q, v_new, c_new)
+    now = {ContactEvent.FIRST_TOUCHDOWN: touched > 0,  # a foot touched down
+           ContactEvent.TAKEOFF: ca.logic_and(ca.sum1(c) > 0.5, ca.sum1(c_new) < 0.5)}  # the last one lifted off
+    tau = x_new[nq + nv + nf:]  # the event clocks, in the order of ContactEvent
+    clocks = [record(tau[k], now[e], s) for k, e in enumerate(ContactEvent)]
+    return ca.vertcat(q, v_new, c_new, *clocks)

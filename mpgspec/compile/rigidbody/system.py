@@ -15,6 +15,8 @@ import casadi as ca
 import numpy as np
 
 from ...errors import SpecError
+from ...spec.models import ContactEvent
+from ..events import NEVER, clock_name, clock_rate
 from ..system import CompiledSystem, OpenLoop
 from .constrained import Baumgarte, ContactDynamics
 from .dynamics import RigidBodyDynamics
@@ -44,14 +46,22 @@ class RigidBodyCompiledSystem(CompiledSystem):
         return self.dyn.model
 
     def default_state(self, contacts: tuple[str, ...] | None = None) -> np.ndarray:
-        """Zero, with a unit quaternion and (with contact events) the flags of `contacts` set."""
+        """Zero, with a unit quaternion and (with contact events) the flags of `contacts` set and the
+        event clocks at NEVER."""
         x = np.zeros(self.nx)
         x[self.state_names.index("base_qw")] = 1.0
         if self.events:
             on = self.model.contact_frames if contacts is None else contacts
             for f in on:
                 x[self.state_names.index(f"contact_{f}")] = 1.0
+            x[self.event_clocks] = NEVER
         return x
+
+    @property
+    def event_clocks(self) -> list[int]:
+        """State indices of the event clocks (compile/events.py), after the contact flags."""
+        n = self.model.nq + self.model.nv + len(self.model.contact_frames)
+        return list(range(n, self.nx)) if self.events else []
 
     def open_loop(self, contacts: list[str] | None) -> OpenLoop:
         """Constrained dynamics for `contacts` (None: all contact frames), with lambda in env."""
@@ -108,14 +118,15 @@ class RigidBodyCompiledSystem(CompiledSystem):
         y = dense_ldl_solve(ca.mtimes(AW, A.T) + 1e-9 * ca.DM.eye(A.shape[0]), g)
         return ca.mtimes(AW.T, y)[: m.nu]
 
-    def project(self, x: ca.SX, u: ca.SX | None = None) -> ca.SX:
-        """After each step: renormalise the base quaternion; with contact events, run them."""
+    def project(self, x: ca.SX, u: ca.SX | None = None, s=ca.inf) -> ca.SX:
+        """After each step (ending s after switch-in): renormalise the base quaternion; with contact
+        events, run them and record the first touchdown and takeoff on the event clocks."""
         nq = self.model.nq
         x = ca.vertcat(normalize_quaternion(self.model, x[:nq]), x[nq:])
         if self.events and u is not None:
             from .hybrid import contact_events
 
-            x = contact_events(self, x, u)
+            x = contact_events(self, x, u, s)
         return x
 
     def contact_mode(self, x: np.ndarray, default: tuple[str, ...] | list[str] | None = None) -> tuple[str, ...]:
@@ -201,7 +212,8 @@ class RigidBodyCompiledSystem(CompiledSystem):
         xq, xv = self.x[:m.nq], self.x[m.nq:m.nq + m.nv]
         c = ca.vertcat(*[mode[f] for f in m.contact_frames])
         a, lam = masked_contact_dynamics(self, xq, xv, self.u, c)
-        xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(self.nx - m.nq - m.nv))
+        xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(self.nx - m.nq - m.nv - len(self.event_clocks)),
+                          *[clock_rate(self.x[i]) for i in self.event_clocks])
         env = dict(self.extra_env)
         for k, f in enumerate(m.contact_frames):
             for j, ax in enumerate("xyz"):
@@ -292,6 +304,8 @@ def compile_rigid_body(spec) -> RigidBodyCompiledSystem:
     qn = (BASE_Q if model.n_base else []) + list(model.joint_names)
     vn = (BASE_V if model.n_base else []) + [f"{j}_dot" for j in model.joint_names]
     cn = [f"contact_{f}" for f in model.contact_frames] if s.contact_events else []
+    if s.contact_events:  # the event clocks of compile/events.py
+        cn += [clock_name(e) for e in ContactEvent]
     x = ca.SX.sym("x", model.nq + model.nv + len(cn))
     u = ca.SX.sym("u", model.nu)
     xq, xv = x[:model.nq], x[model.nq:model.nq + model.nv]

@@ -1,0 +1,111 @@
+"""Replay the sequence's runs in MuJoCo and compare them with mpgspec's own rollouts."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from ...compile.primitive import CompiledPrimitive
+from ..sequence import SequenceRun
+from .mjcf import MujocoRobot, build_robot
+from .replay import Replay, replay
+from .settings import CrossCheckSettings
+
+SERIES_POINTS = 200
+"""Samples kept of each compared series (for the report's plot)."""
+WORST = 10
+"""Kinds of safety functions listed per run (the least margin of each, least first)."""
+
+
+@dataclass
+class CrossCheckResult:
+    """Every replayed run, compared with mpgspec's; `agree` is True when every verdict matches."""
+
+    simulator: str
+    settings: CrossCheckSettings
+    model: dict
+    runs: dict[str, dict] = field(default_factory=dict)
+
+    @property
+    def agree(self) -> bool:
+        return all(r["agree"] for r in self.runs.values())
+
+    def to_dict(self) -> dict:
+        return {"simulator": self.simulator, "settings": self.settings.to_dict(), "model": self.model,
+                "agree": self.agree, "runs": self.runs}
+
+
+def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, SequenceRun], duration: float,
+                    settings: CrossCheckSettings, h_tolerance: float = 0.0,
+                    robot: MujocoRobot | None = None) -> CrossCheckResult:
+    """Replay each run named in settings.runs (that exists) for `duration` s and compare it."""
+    system = next(iter(prims.values())).system
+    robot = robot or build_robot(system, settings)
+    res = CrossCheckResult(settings.simulator, settings, dict(robot.info))
+    for mode in settings.runs:
+        if mode in runs:
+            rep = replay(robot, prims, runs[mode].switches, duration, settings, h_tolerance)
+            res.runs[mode] = compare(prims, rep, runs[mode], settings.control_rate)
+    return res
+
+
+def _com_function(system) -> ca.Function:
+    env = system.extra_env
+    return ca.Function("com", [system.x], [ca.vertcat(*[env[f"com_{a}"] for a in "xyz"])])
+
+
+def _decimate(n: int, most: int = SERIES_POINTS) -> np.ndarray:
+    return np.unique(np.linspace(0, n - 1, min(n, most)).round().astype(int)) if n else np.zeros(0, int)
+
+
+def compare(prims: dict[str, CompiledPrimitive], rep: Replay, run: SequenceRun, rate: float) -> dict:
+    """Verdicts, first violations, the largest CoM and joint divergence at mpgspec's samples (each
+    matched with the nearest control update), the least margins in MuJoCo and the contacts."""
+    system = next(iter(prims.values())).system
+    t = np.asarray(run.t, float)
+    X = np.asarray(run.x, float).reshape(len(t), -1)
+    k = np.clip(np.round(t * rate).astype(int), 0, len(rep.t) - 1)
+    ok = np.isfinite(rep.x[k]).all(axis=1) & np.isfinite(X).all(axis=1) if len(t) else np.zeros(0, bool)
+    t, X, k = t[ok], X[ok], k[ok]
+    div = {"samples": int(len(t)), "com": None, "joint": None, "until": None, "com_until": None, "joint_until": None}
+    com = np.asarray(_com_function(system).map(len(t))(X.T), float).T if len(t) else np.zeros((0, 3))
+    if len(t):
+        dc = np.linalg.norm(com - rep.com[k], axis=1)
+        i = int(np.argmax(dc))
+        div["com"] = {"max": float(dc[i]), "t": float(t[i]), "mpgspec": com[i].tolist(), "mujoco": rep.com[k[i]].tolist()}
+        bq, nq = (7 if system.model.floating_base else 0), system.model.nq
+        dq = np.abs(X[:, bq:nq] - rep.x[k, bq:nq])
+        i, j = np.unravel_index(int(np.argmax(dq)), dq.shape)
+        div["joint"] = {"max": float(dq[i, j]), "t": float(t[i]), "joint": system.state_names[bq + j]}
+        firsts = [v["t"] for v in (rep.first_violation, run.violations[0] if run.violations else None) if v]
+        if firsts:  # after a violation the two may part for good: the divergence on the way there
+            before = t <= min(firsts)
+            div["until"] = float(min(firsts))
+            div["com_until"] = float(dc[before].max()) if before.any() else None
+            div["joint_until"] = float(dq[before].max()) if before.any() else None
+    mpg_bad = {(v["primitive"], v["h"]) for v in run.violations}
+    families: dict[str, tuple] = {}  # the least margin of each kind of h (q_min, foot_still, ...)
+    for p, (least, when) in rep.worst.items():
+        for h, v, tt in zip(prims[p].h_names, least, when):
+            fam = h.split("[", 1)[0]
+            if np.isfinite(v) or v < 0:
+                if fam not in families or v < families[fam][2]:
+                    families[fam] = (p, h, float(v), float(tt))
+    worst = sorted(families.values(), key=lambda w: w[2])[:WORST]
+    mine = {"safe": rep.safe, "first_violation": rep.first_violation, "violation_samples": rep.violation_samples,
+            "failed": rep.failed}
+    theirs = {"safe": run.safe, "first_violation": run.violations[0] if run.violations else None,
+              "violation_samples": len(run.violations), "failed": run.failed}
+    d = _decimate(len(t))
+    least = np.asarray(run.min_h if len(run.min_h) == len(ok) else [None] * len(ok), dtype=float)[ok]
+    return {
+        "mode": run.mode, "agree": rep.safe == run.safe, "mujoco": mine, "mpgspec": theirs,
+        "switches": rep.switches,
+        "divergence": div,
+        "worst": [{"primitive": p, "h": h, "mujoco": v, "t": tt, "violated_in_mpgspec": (p, h) in mpg_bad}
+                  for p, h, v, tt in worst],
+        "contact": rep.contact, "start_offset": rep.start_offset, "wall_s": rep.wall_s,
+        "series": {"t": t[d].tolist(), "com_z": {"mujoco": rep.com[k[d], 2].tolist(), "mpgspec": com[d, 2].tolist()},
+                   "least_h": {"mujoco": rep.least_h[k[d]].tolist(), "mpgspec": least[d].tolist()}},
+    }

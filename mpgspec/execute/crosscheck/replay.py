@@ -1,0 +1,180 @@
+"""Replay a run's switches in MuJoCo under the primitives' compiled control laws.
+
+The run's switches (time, primitive, clock of the new primitive) are taken as they are; the law
+(x, t, s, x_sw) -> u of the active primitive (CompiledPrimitive.loop, which also gives h) is
+evaluated at the control rate from MuJoCo's state and the input held until the next update. At a
+switch the primitive's clock starts at the switch's clock, s at 0 and x_sw is MuJoCo's state.
+Before t = 0 the start primitive's law holds the start state x*(t0) for `settle` seconds with its
+clock frozen, so that the soft contacts carry the weight when the run begins.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...compile.primitive import INACTIVE, CompiledPrimitive
+from .mjcf import MujocoRobot
+from .settings import CrossCheckSettings
+
+
+@dataclass
+class Replay:
+    """What happened in MuJoCo: states, CoM and the least h at every control update; violations of
+    the active primitive's h (h < -tol); what the contacts did."""
+
+    t: np.ndarray
+    x: np.ndarray  # (samples, nx) in mpgspec's layout
+    com: np.ndarray  # (samples, 3), MuJoCo's own centre of mass
+    least_h: np.ndarray  # least active h at each sample
+    active: list[str]
+    switches: list[dict] = field(default_factory=list)  # as replayed, with the E margin of the primitive left
+    safe: bool = True
+    first_violation: dict | None = None
+    violation_samples: int = 0
+    worst: dict = field(default_factory=dict)  # primitive -> (least value of each h, when)
+    contact: dict = field(default_factory=dict)
+    start_offset: float = 0.0
+    failed: str = ""
+    wall_s: float = 0.0
+
+
+def held_feet(p: CompiledPrimitive, clock: float) -> tuple[str, ...] | None:
+    """Feet the primitive's dynamics hold at this clock (a contact schedule, else its contact set);
+    None when contact events decide."""
+    if p.system.events:
+        return None
+    sched = p.info.get("contact_schedule")
+    if sched:
+        c = clock % p.period if p.period else clock
+        return tuple(next((feet for until, feet in sched if c < until - 1e-9), sched[-1][1]))
+    return tuple(p.info.get("contacts", p.system.model.contact_frames))
+
+
+class _Sim:
+    """MuJoCo's model and data with the reads a replay needs."""
+
+    def __init__(self, robot: MujocoRobot):
+        import mujoco
+
+        self.mj, self.robot = mujoco, robot
+        self.m, self.d = robot.model, mujoco.MjData(robot.model)
+        self.root = 1 if robot.model.nbody > 1 else 0  # the robot's root link: its subtree is the robot
+        self._vel = np.zeros(6)
+
+    def set(self, x: np.ndarray) -> None:
+        self.d.qpos[:], self.d.qvel[:] = self.robot.state.to_mujoco(x)
+        self.mj.mj_forward(self.m, self.d)
+
+    def touching(self) -> np.ndarray:
+        """Whether each foot sphere touches the floor."""
+        d, r = self.d, self.robot
+        pairs = d.contact.geom[: d.ncon]
+        on = np.zeros(len(r.feet), bool)
+        for k, g in enumerate(r.foot_geoms):
+            on[k] = bool(np.any(((pairs[:, 0] == g) & (pairs[:, 1] == r.floor)) |
+                                ((pairs[:, 1] == g) & (pairs[:, 0] == r.floor))))
+        return on
+
+    def trunk_touching(self) -> bool:
+        pairs = self.d.contact.geom[: self.d.ncon]
+        return bool(np.isin(pairs, self.robot.trunk_geoms).any()) if len(self.robot.trunk_geoms) else False
+
+    def state(self) -> np.ndarray:
+        flags = self.touching().astype(float) if self.robot.state.nx > self.robot.state.nq + self.robot.state.nv else None
+        return self.robot.state.from_mujoco(self.d.qpos, self.d.qvel, flags)
+
+    def slip(self, k: int, radius: float) -> float:
+        """Horizontal speed of the lowest point of foot k's sphere (zero when it rolls or pivots)."""
+        self.mj.mj_objectVelocity(self.m, self.d, self.mj.mjtObj.mjOBJ_SITE, int(self.robot.foot_sites[k]),
+                                  self._vel, 0)
+        w, v = self._vel[:3], self._vel[3:]
+        return float(np.hypot(v[0] - radius * w[1], v[1] + radius * w[0]))  # v + w x (0, 0, -r)
+
+    def step(self, u: np.ndarray, n: int) -> None:
+        self.d.ctrl[self.robot.actuators] = u
+        for _ in range(n):
+            self.mj.mj_step(self.m, self.d)
+        self.mj.mj_forward(self.m, self.d)
+
+
+def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: list[dict], duration: float,
+           settings: CrossCheckSettings, tol: float = 0.0) -> Replay:
+    """Run `switches` (from a SequenceRun: t, to, clock; the first is the start) for `duration` s."""
+    t_wall = time.perf_counter()
+    sim, rate, n_sub = _Sim(robot), settings.control_rate, settings.substeps
+    first = switches[0]
+    p, clock0 = prims[first["to"]], float(first["clock"])
+    x0 = p.x_star(clock0)
+    sim.set(x0)
+    for _ in range(int(round(settings.settle * rate))):
+        sim.step(np.asarray(p.control(sim.state(), clock0, 0.0, x0)[1], float).ravel(), n_sub)
+    x = sim.state()
+    offset = float(np.linalg.norm((x - x0)[: robot.state.nq]))
+    n = int(np.floor(duration * rate + 1e-9)) + 1
+    T, X, C, L = np.arange(n) / rate, np.full((n, len(x)), np.nan), np.full((n, 3), np.nan), np.full(n, np.nan)
+    out = Replay(T, X, C, L, [], start_offset=offset)
+    out.switches.append({"t": 0.0, "from": None, "to": p.name, "clock": clock0, "roa_margin": None})
+    contact = {"max_penetration": 0.0, "max_slip_speed": 0.0, "slip_at": None, "lift_off": None,
+               "trunk_contact": None}
+    queue, sw = list(switches[1:]), (p, clock0, 0.0, x)
+    for k in range(n):
+        t = T[k]
+        x = sim.state()
+        while queue and queue[0]["t"] <= t + 0.5 / rate:
+            s = queue.pop(0)
+            left, c_left = sw[0], sw[1] + (t - sw[2])
+            margin = float(np.asarray(left.roa_margin(x, c_left), float).ravel()[0])
+            out.switches.append({"t": float(t), "from": left.name, "to": s["to"], "clock": float(s["clock"]),
+                                 "roa_margin": margin if np.isfinite(margin) else None})
+            sw = (prims[s["to"]], float(s["clock"]), t, x.copy())
+        p, c0, t_sw, x_sw = sw
+        clock = c0 + (t - t_sw)
+        if not np.isfinite(x).all():
+            out.safe, out.failed = False, f"non-finite state at t = {t:.3f} s in {p.name}"
+            break
+        _xdot, hv, _u_raw, u = (np.asarray(v, float).ravel() for v in p.loop(x, clock, t - t_sw, x_sw))
+        X[k], C[k] = x, sim.d.subtree_com[sim.root]
+        out.active.append(p.name)
+        act = hv < INACTIVE / 2
+        L[k] = float(hv[act].min()) if act.any() else np.nan
+        _judge(out, p, hv, act, t, tol)
+        _contacts(sim, contact, p, clock, t, settings.foot_radius)
+        sim.step(u, n_sub)
+    out.contact = contact
+    out.wall_s = time.perf_counter() - t_wall
+    return out
+
+
+def _judge(out: Replay, p: CompiledPrimitive, hv: np.ndarray, act: np.ndarray, t: float, tol: float) -> None:
+    least, when = out.worst.setdefault(p.name, (np.full(len(hv), np.inf), np.zeros(len(hv))))
+    v = np.where(act, np.nan_to_num(hv, nan=-np.inf), np.inf)
+    lower = v < least
+    least[lower], when[lower] = v[lower], t
+    bad = act & ~(hv >= -tol)  # NaN counts as violated
+    if bad.any():
+        out.safe = False
+        out.violation_samples += 1
+        if out.first_violation is None:
+            j = int(np.argmin(np.where(bad, np.nan_to_num(hv, nan=-np.inf), np.inf)))
+            out.first_violation = {"t": float(t), "primitive": p.name, "h": p.h_names[j],
+                                   "value": float(hv[j]) if np.isfinite(hv[j]) else None}
+
+
+def _contacts(sim: _Sim, c: dict, p: CompiledPrimitive, clock: float, t: float, radius: float) -> None:
+    """Penetration of the feet, slip of the held feet, the first lift-off of a held foot, the trunk."""
+    z = sim.d.site_xpos[sim.robot.foot_sites, 2]
+    c["max_penetration"] = max(c["max_penetration"], float(np.max(-z, initial=0.0)))
+    held = held_feet(p, clock)
+    on = sim.touching()
+    for k, f in enumerate(sim.robot.feet):
+        if held is not None and f in held:
+            if not on[k] and c["lift_off"] is None:
+                c["lift_off"] = {"t": float(t), "foot": f, "primitive": p.name}
+            if on[k]:
+                v = sim.slip(k, radius)
+                if v > c["max_slip_speed"]:
+                    c["max_slip_speed"], c["slip_at"] = v, {"t": float(t), "foot": f}
+    if c["trunk_contact"] is None and sim.trunk_touching():
+        c["trunk_contact"] = float(t)

@@ -1,0 +1,74 @@
+"""Settings of a cross-check replay, from the project's `crosscheck` block or defaults."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+
+
+@dataclass(frozen=True)
+class CrossCheckSettings:
+    """How runs are replayed: MuJoCo steps of `timestep`, the control law evaluated `control_rate`
+    times per second and held in between, the feet spheres of `foot_radius` on a floor that far
+    below z = 0, contacts of time constant `timeconst` (see mpgspec.spec.crosscheck)."""
+
+    simulator: str = "mujoco"
+    control_rate: float = 1000.0
+    timestep: float = 1e-4
+    integrator: str = "implicitfast"
+    foot_radius: float = 5e-4
+    settle: float = 0.2
+    timeconst: float = 5e-4
+    dampratio: float = 1.0
+    impratio: float = 1.0
+    noslip_iterations: int = 0
+    runs: tuple[str, ...] = ("naive", "graph")
+    require_agreement: bool = False
+
+    @classmethod
+    def from_spec(cls, cfg) -> "CrossCheckSettings":
+        """From a validated mpgspec.spec.crosscheck.CrossCheck."""
+        c = cfg.contact
+        return cls(simulator=cfg.simulator, control_rate=float(cfg.control_rate), timestep=float(cfg.timestep),
+                   integrator=cfg.integrator, foot_radius=float(cfg.foot_radius), settle=float(cfg.settle),
+                   timeconst=float(c.timeconst), dampratio=float(c.dampratio), impratio=float(c.impratio),
+                   noslip_iterations=int(c.noslip_iterations), runs=tuple(cfg.runs),
+                   require_agreement=bool(cfg.require_agreement))
+
+    @property
+    def substeps(self) -> int:
+        """Simulator steps per control period."""
+        return max(1, round(1.0 / (self.control_rate * self.timestep)))
+
+    def replace(self, **kw) -> "CrossCheckSettings":
+        return replace(self, **kw)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["runs"] = list(self.runs)
+        return d
+
+
+def settings_of(spec, force: bool = False) -> CrossCheckSettings | None:
+    """The cross-check a project asks for (its `crosscheck` block; with `force`, defaults when it has
+    none), or None. Raises a located SpecError when it cannot run: no sequence, not a rigid-body
+    system, or MuJoCo not installed."""
+    import importlib.util
+
+    from ...errors import SpecError
+
+    cfg = spec.project.crosscheck
+    if cfg is None and not force:
+        return None
+    where = spec.locate(("crosscheck",)) if cfg is not None else spec.locate(())
+    key = "crosscheck"
+    if spec.project.sequence is None:
+        raise SpecError("the cross-check replays the goal sequence's runs, and the project has none", location=where,
+                        key=key, expected="a `sequence` block", found="no sequence", code="MPG108")
+    if getattr(spec.system, "kind", None) != "rigid_body":
+        raise SpecError("the cross-check replays rigid-body robots only", location=where, key=key,
+                        expected="system kind rigid_body", found=f"kind {getattr(spec.system, 'kind', '?')}",
+                        code="MPG108")
+    if importlib.util.find_spec("mujoco") is None:
+        raise SpecError("the cross-check needs the mujoco package", location=where, key=key,
+                        expected="mujoco installed", found="not installed", code="MPG121",
+                        hint='pip install "mpgspec[xcheck]"')
+    return CrossCheckSettings.from_spec(cfg) if cfg is not None else CrossCheckSettings()

@@ -1,0 +1,62 @@
+"""Spec model of the cross-check: the goal sequence's runs replayed in an independent simulator."""
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, ValidationInfo, field_validator
+
+from .base import Strict
+from .system import Number
+
+
+class ContactModel(Strict):
+    """MuJoCo's soft contact between the feet and the floor (solref, elliptic cones)."""
+
+    timeconst: Number = Field(default=5e-4, gt=0, description="time constant of the contact's spring-damper "
+                              "(MuJoCo solref[0]), seconds; at least twice the timestep")
+    dampratio: Number = Field(default=1.0, gt=0, description="damping ratio of the contact (MuJoCo solref[1])")
+    impratio: Number = Field(default=1.0, ge=1, description="ratio of frictional to normal impedance (elliptic "
+                             "cones); above 1 the friction is stiffer")
+    noslip_iterations: int = Field(default=0, ge=0, le=100, description="iterations of MuJoCo's NoSlip "
+                                   "post-processing (0: off)")
+
+
+class CrossCheck(Strict):
+    """Replay the sequence's runs (their switches and switch clocks) in an independent simulator with the
+    same compiled control laws, and compare its safety verdict and trajectory with mpgspec's."""
+
+    simulator: Literal["mujoco"] = Field(default="mujoco", description="the simulator (needs the xcheck extra)")
+    control_rate: Number = Field(default=1000.0, gt=0, description="control updates per second (Hz); the input "
+                                 "is held between updates")
+    timestep: Number = Field(default=1e-4, gt=0, description="the simulator's integration step, seconds; "
+                             "1/control_rate must be a whole number of steps")
+    integrator: Literal["euler", "implicitfast", "rk4"] = Field(default="implicitfast",
+                                                                description="MuJoCo's integrator")
+    foot_radius: Number = Field(default=5e-4, gt=0, description="radius of the sphere at each contact frame, "
+                                "metres; the floor lies this far below z = 0, so a foot at z = 0 touches it")
+    settle: Number = Field(default=0.2, ge=0, le=10, description="seconds the start primitive's law holds the "
+                           "start state (clock frozen) before t = 0, so the soft contacts carry the weight")
+    contact: ContactModel = Field(default_factory=ContactModel, description="contact parameters")
+    runs: list[Literal["naive", "graph"]] = Field(default=["naive", "graph"], min_length=1,
+                                                  description="which sequence runs to replay")
+    require_agreement: bool = Field(default=False, description="fail the project when the simulator's safety "
+                                    "verdict of a replayed run differs from mpgspec's")
+
+    @field_validator("timestep")
+    @classmethod
+    def _whole_steps(cls, v, info: ValidationInfo):
+        rate = info.data.get("control_rate")
+        if rate is not None:
+            n = 1.0 / (rate * v)
+            if n < 1 - 1e-9 or abs(n - round(n)) > 1e-6 * max(1.0, n):
+                raise ValueError(f"1/control_rate ({1 / rate:g} s) must be a whole number of timesteps ({v:g} s)")
+        return v
+
+    @field_validator("contact")
+    @classmethod
+    def _stiff_enough(cls, v, info: ValidationInfo):
+        dt = info.data.get("timestep")
+        if dt is not None and v.timeconst < 2 * dt:
+            raise ValueError(f"contact.timeconst ({v.timeconst:g} s) must be at least twice the timestep ({dt:g} s); "
+                             "MuJoCo would raise it silently")
+        return v
