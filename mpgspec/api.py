@@ -292,6 +292,9 @@ def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progres
         progress(spec.name, "compile (closed loops as CasADi functions)", 0, len(spec.primitives))
     prims = compile_project(spec)
     _check_capabilities(spec, settings, prims)
+    for p in prims.values():  # a control period must be a whole number of oracle steps
+        if p.sampled is not None:
+            p.sampled.steps(settings.dt)
     t1 = time.perf_counter()
     if progress:
         progress(spec.name, "regions of attraction", 0, len(prims))
@@ -344,7 +347,7 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     if xcs is not None and runs:
         if progress:
             progress(spec.name, f"cross-check ({xcs.simulator})", 0, len(xcs.runs))
-        xc = crosscheck_runs(prims, runs, spec.project.sequence.duration, xcs, settings.h_tolerance)
+        xc = crosscheck_runs(prims, runs, spec.project.sequence.duration, xcs, settings.h_tolerance, memo=memo)
         if xcs.require_agreement:
             checks += agreement_assertions(xc, start=len(checks))
     t1 = time.perf_counter()

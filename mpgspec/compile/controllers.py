@@ -32,6 +32,7 @@ class ControlContext:
     contacts: tuple[str, ...] = ()
     info: dict = field(default_factory=dict)
     mode: dict | None = None  # rigid bodies: foot -> 1 while held (constant, or a function of the clock)
+    sampled: object | None = None  # hold.SampledLaw: set by a law the oracle solves at a control rate
 
 
 def cubic_profile(s, duration: float, p0, v0, pf, vf):

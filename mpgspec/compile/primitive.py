@@ -20,6 +20,7 @@ from ..spec.loader import PrimitiveInstance
 from ..spec.models import PrimitiveClass
 from .controllers import LAWS, ControlContext
 from .events import EventWindow, event_window
+from .hold import SampledLaw
 from .expr_casadi import interp_cubic, interp_linear
 from .exprs import ExprCompiler
 from .system import CompiledSystem, shadowing_error, taken_names
@@ -56,6 +57,9 @@ class CompiledPrimitive:
     # a clock window [t0, t1) or one anchored on a contact event (compile/events.py); None: always active
     boundaries: tuple[float, ...] = ()  # clock times where C or the contact schedule switches
     hybrid: bool = False  # the state jumps (contact events or a contact schedule), not only renormalised
+    sampled: SampledLaw | None = None  # a law the oracle solves at a control rate and holds in between
+    loop_u: ca.Function | None = None  # (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): the open loop under a
+    # given input, every safety function active (as loop_raw); set with `sampled`
     cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
 
     def __reduce__(self):
@@ -84,7 +88,9 @@ class CompiledPrimitive:
         """Content hash of everything that decides an oracle verdict of this closed loop."""
         if "digest" not in self.cache:
             parts = [f.serialize() for f in (self.loop_raw or self.loop, self.f_cl, self.roa_margin, self.setpoint,
-                                              self.jump) if f is not None]
+                                              self.jump, self.loop_u) if f is not None]
+            if self.sampled is not None:
+                parts += [self.sampled.solve.serialize(), repr(self.sampled.period)]
             nums = repr((self.name, self.cls.value, self.period, self.domain, self.next, self.horizon, self.h_names,
                          self.radius, self.windows, self.boundaries, self.hybrid, self.info.get("roa_W"),
                          self.system.u_lo.tolist(), self.system.u_hi.tolist()))
@@ -297,6 +303,10 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         loop_raw = _close_loop(ident + "_raw", args, u_raw, f_u, h_raw, sys)[3]
     else:
         loop_raw = loop_fn
+    loop_u = None
+    if ctx.sampled is not None:
+        h_all = h_raw if any(w is not None for w in windows) else h_u
+        loop_u = _open_loop(ident, args, f_u, h_all, sys)
     roa = p.roa
     if roa.matrix is not None:
         W = np.asarray(roa.matrix, float)
@@ -324,7 +334,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=radius,
         f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info, jump=jump,
         loop=loop_fn, loop_raw=loop_raw, windows=windows, boundaries=_boundaries(windows, schedule, period, domain),
-        hybrid=sys.events or schedule is not None,
+        hybrid=sys.events or schedule is not None, sampled=ctx.sampled, loop_u=loop_u,
     )
 
 
@@ -560,7 +570,8 @@ def _close_loop(ident: str, args: list, u_raw, f_u: ca.Function, h_u: ca.Functio
     """Compose the open loop and the safety functions with the control law.
 
     An expression law is inlined (SX); a law given as a Function (an optimisation-based law such
-    as the ID-QP) is called from an MX graph, so it is evaluated numerically at every RK4 stage.
+    as the ID-QP) is called from an MX graph, so f_cl, h and control solve it at every call (continuous
+    time). The oracle's chunks solve such a law at its control rate instead (`sampled`, `loop_u`).
     """
     k = u_raw if isinstance(u_raw, ca.Function) else ca.Function("k", args, [u_raw])
     sym = ca.SX.sym if k.is_a("SXFunction") else ca.MX.sym
@@ -573,6 +584,15 @@ def _close_loop(ident: str, args: list, u_raw, f_u: ca.Function, h_u: ca.Functio
     h = ca.Function(f"h_{ident}", a, [h_u(*a, ur)], names, ["h"])
     loop = ca.Function(f"loop_{ident}", a, [f_u(*a, ur), h_u(*a, ur), ur, us], names, ["xdot", "h", "u_raw", "u"])
     return f_cl, control, h, loop
+
+
+def _open_loop(ident: str, args: list, f_u: ca.Function, h_u: ca.Function, sys: CompiledSystem) -> ca.Function:
+    """(x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): the loop under a held input, saturated as the
+    closed loop saturates it."""
+    a = [ca.SX.sym(n, *arg.shape) for n, arg in zip(("x", "t", "s", "x_sw"), args)] + [ca.SX.sym("u", sys.nu)]
+    ur = a[4]
+    return ca.Function(f"loop_u_{ident}", a, [f_u(*a), h_u(*a), ur, saturate(ur, sys.u_lo, sys.u_hi)],
+                       ["x", "t", "s", "x_sw", "u_held"], ["xdot", "h", "u_raw", "u"])
 
 
 TABLE_KNOTS = 64

@@ -4,6 +4,12 @@ A chunk advances the augmented state z = [x; t; s; x_sw] by K steps with CasADi'
 returns, for each step's start state, the safety functions h, the RoA margin and the raw input.
 The chunk is jit-compiled once with the machine's C compiler; batches of start points are
 evaluated by mapping the compiled chunk, so one Python call advances many rollouts.
+
+A primitive whose law is sampled (compile/hold.py: an optimisation-based law with a control rate)
+is rolled out under a zero-order hold: the law is solved at the start of every m-th step (m =
+control period / dt) from the previous solve's warm start, and every stage, rate difference and
+end evaluation of the step uses the open loop loop_u with that input. The input, the warm start
+and the steps left until the next solve then ride in the augmented state (`hold_size`).
 """
 from __future__ import annotations
 
@@ -28,8 +34,9 @@ in an MX graph, so each Function is generated once and jit compilation stays qui
 
 
 def _sym(f: ca.Function, prim: CompiledPrimitive | None = None):
-    """SX for small SX loops (inlined); MX for large loops and for setpoints looked up in a table."""
-    table = prim is not None and not prim.roa_margin.is_a("SXFunction")
+    """SX for small SX loops (inlined); MX for large loops, for setpoints looked up in a table and for
+    sampled laws."""
+    table = prim is not None and (not prim.roa_margin.is_a("SXFunction") or prim.sampled is not None)
     return ca.SX.sym if f.is_a("SXFunction") and f.n_nodes() <= INLINE_NODES and not table else ca.MX.sym
 
 
@@ -140,7 +147,8 @@ class Chunk:
         """Augmented start states (one column per row of x0s), as initial_state."""
         X = np.asarray(x0s, float).T
         t = np.asarray(t0s, float)[None, :]
-        return np.vstack([X, t, np.zeros_like(t), X] + ([X] if self.rows.doubling else []))
+        block = np.repeat(hold_start(self.prim, self.rows.doubling)[:, None], X.shape[1], axis=1)
+        return np.vstack([X, t, np.zeros_like(t), X] + ([X] if self.rows.doubling else []) + [block])
 
     def run(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Advance the columns of Z (nz x n) by K steps; out has shape (rows, n, K).
@@ -165,9 +173,12 @@ def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
 
     With `boundaries`, a step never crosses a clock time where the safe set or the contact mode
     switches: it is shortened to end there. `error` is 'local' (embedded per-step estimates) or
-    'doubling' (see _build_doubling). Compiled chunks are remembered on the primitive, so oracles,
-    traces and executions share them.
+    'doubling' (see _build_doubling). A sampled law is held over m steps (see the module's
+    docstring); a control period that is not a whole number of steps of dt is a SpecError.
+    Compiled chunks are remembered on the primitive, so oracles, traces and executions share them.
     """
+    if prim.sampled is not None:
+        prim.sampled.steps(dt)
     key = (dt, K, jit, tuple(flags), with_state, boundaries, error)
     if key not in prim.cache:
         build = _build_doubling if error == "doubling" else _build_chunk
@@ -200,8 +211,9 @@ FD_STEP = 1e-6
 """Time step of the forward differences that give the rates of h along the flow in large loops."""
 
 
-def _ends(prim: CompiledPrimitive) -> tuple[ca.Function, ca.Function, ca.Function]:
-    """Functions for both ends of a step, and f_cl for the inner stages.
+def _ends(prim: CompiledPrimitive, held: bool = False) -> tuple[ca.Function, ca.Function, ca.Function]:
+    """Functions for both ends of a step, and f_cl for the inner stages; `held`: of the open loop
+    loop_u, each with the held input u as an argument after x_sw.
 
     start (x, t, s, x_sw) -> (k1, h, hdot, u_raw, u): the loop at the step's start with the rate
     of every (unwindowed) safety function along the flow, dh/dt = grad h . f + dh/dt + dh/ds.
@@ -213,7 +225,8 @@ def _ends(prim: CompiledPrimitive) -> tuple[ca.Function, ca.Function, ca.Functio
     (see _rate) and h(x_next) - h(x_next - e), which reuse the one compiled loop instead of generating
     derivative code several times its size.
     """
-    f, loop = prim.f_cl, _loop(prim)
+    loop = _loop(prim, held)
+    f = _xdot_of(loop) if held else prim.f_cl
     if not loop.is_a("SXFunction") or f.n_nodes() > INLINE_NODES:
         a = loop.mx_in()  # the inner stages take xdot from the same loop: its code is generated once
         return (*_ends_differences(loop), ca.Function("f_of_loop", a, [loop.call(a)[0]]))
@@ -237,25 +250,32 @@ def _at_end(prim: CompiledPrimitive, start: ca.Function) -> ca.Function:
     return ca.Function("at_end", a, [r[1], r[2]])
 
 
-def _loop(prim: CompiledPrimitive) -> ca.Function:
-    """The closed loop (x, t, s, x_sw) -> (xdot, h, u_raw, u); large SX loops with common
-    subexpressions eliminated, one Function object per primitive so that its code is generated once."""
-    loop = prim.loop_raw or prim.loop
-    if loop.is_a("SXFunction") and prim.f_cl.n_nodes() > INLINE_NODES:
-        if "cse_loop" not in prim.cache:
-            prim.cache["cse_loop"] = _with_cse(loop)
-        return prim.cache["cse_loop"]
+def _loop(prim: CompiledPrimitive, held: bool = False) -> ca.Function:
+    """The closed loop (x, t, s, x_sw) -> (xdot, h, u_raw, u), or with `held` the open loop loop_u
+    (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u); large SX loops with common subexpressions
+    eliminated, one Function object per primitive so that its code is generated once."""
+    loop = prim.loop_u if held else (prim.loop_raw or prim.loop)
+    key = "cse_loop_u" if held else "cse_loop"
+    if loop.is_a("SXFunction") and (loop.n_nodes() if held else prim.f_cl.n_nodes()) > INLINE_NODES:
+        if key not in prim.cache:
+            prim.cache[key] = _with_cse(loop)
+        return prim.cache[key]
     return loop
+
+
+def _xdot_of(loop: ca.Function) -> ca.Function:
+    a = loop.sx_in() if loop.is_a("SXFunction") else loop.mx_in()
+    return ca.Function("f_of_loop", a, [loop.call(a)[0]])
 
 
 def _rate(loop: ca.Function, a: list, xdot, hv):
     """dh/dt along the flow by one-sided differences, the smaller in magnitude of the two: a forward
     difference at a step's end (or a backward one at its start) can reach across a contact switch
     or the end of a motion profile, where h jumps; for smooth h the two agree to O(FD_STEP)."""
-    x, t, s, xs = a
+    x, t, s, xs, *held = a
     eps = FD_STEP
-    fwd = (loop(x + eps * xdot, t + eps, s + eps, xs)[1] - hv) / eps
-    bwd = (hv - loop(x - eps * xdot, t - eps, s - eps, xs)[1]) / eps
+    fwd = (loop(x + eps * xdot, t + eps, s + eps, xs, *held)[1] - hv) / eps
+    bwd = (hv - loop(x - eps * xdot, t - eps, s - eps, xs, *held)[1]) / eps
     return ca.if_else(ca.fabs(fwd) <= ca.fabs(bwd), fwd, bwd)
 
 
@@ -316,23 +336,66 @@ def _active(prim: CompiledPrimitive, tc, x=None, s=None, x_next=None, h=0.0):
     return ca.vertcat(*[on(w) for w in prim.windows]) if prim.windows else ca.DM(0, 1)
 
 
+def hold_size(prim: CompiledPrimitive, doubling: bool = False) -> int:
+    """Entries of the augmented state after [x; t; s; x_sw] (and x_c) that a sampled law needs: the
+    steps left before its next solve, then the held input and the warm start of the judged rollout
+    (and of the companion, under step doubling)."""
+    if prim.sampled is None:
+        return 0
+    return 1 + (prim.system.nu + prim.sampled.nw) * (2 if doubling else 1)
+
+
+def hold_start(prim: CompiledPrimitive, doubling: bool = False) -> np.ndarray:
+    """The hold's entries at switch-in: a solve due at once, from a cold start."""
+    return np.zeros(hold_size(prim, doubling))
+
+
+def _hold(prim: CompiledPrimitive, dt: float, block, rollouts: list) -> tuple[list, object]:
+    """The input each rollout holds over this step, and the hold's entries after it.
+
+    block = [c; u; w (; u_c; w_c)], c the steps left before the next solve; rollouts: (x, t, s, x_sw)
+    of the judged rollout (and of the companion). When c is 0 the law is solved from the warm start w
+    and c restarts at m - 1 (m steps per control period); otherwise u and w are kept.
+    """
+    law, nu = prim.sampled, prim.system.nu
+    if law is None:
+        return [], block
+    m, per = law.steps(dt), nu + law.nw
+    c = block[0]
+    if m > 1:
+        a = [*law.solve.mx_in(), ca.MX.sym("u", nu)]
+        solve = ca.Function("solve", a, law.solve.call(a[:5]))
+        keep = ca.Function("keep", a, [a[5], a[4]])
+        sample = ca.Function.if_else("sample", solve, keep)
+    us, after = [], []
+    for i, (x, t, s, xs) in enumerate(rollouts):
+        u, w = block[1 + i * per:1 + i * per + nu], block[1 + i * per + nu:1 + (i + 1) * per]
+        u, w = law.solve(x, t, s, xs, w) if m == 1 else sample(c < 0.5, x, t, s, xs, w, u)
+        us.append(u)
+        after += [u, w]
+    c_next = ca.if_else(c < 0.5, m - 1, c - 1) if m > 1 else c
+    return us, ca.vertcat(c_next, *after)
+
+
 def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: tuple[str, ...],
                  with_state: bool, boundaries: bool) -> Chunk:
     nx, nh = prim.system.nx, len(prim.h_names)
-    start, end, f = _ends(prim)
+    start, end, f = _ends(prim, prim.sampled is not None)
     jump = _jump_fn(prim)
-    z = _sym(prim.f_cl, prim)("z", 2 * nx + 2)
-    x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
+    nz = 2 * nx + 2 + hold_size(prim)
+    z = _sym(prim.f_cl, prim)("z", nz)
+    x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2]
+    U, hold_next = _hold(prim, dt, z[2 * nx + 2:], [(x, t, s, xs)])  # U: [u] of a sampled law, else []
     tc = _wrap(prim, t)
     h = _step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
-    k1, h0, d0, u_raw, u = start(x, t, s, xs)
-    k2 = f(x + h / 2 * k1, t + h / 2, s + h / 2, xs)
-    k3 = f(x + h / 2 * k2, t + h / 2, s + h / 2, xs)
+    k1, h0, d0, u_raw, u = start(x, t, s, xs, *U)
+    k2 = f(x + h / 2 * k1, t + h / 2, s + h / 2, xs, *U)
+    k3 = f(x + h / 2 * k2, t + h / 2, s + h / 2, xs, *U)
     # under a contact schedule, the step's end is seen from inside it: a mode switching there is not yet on
     te = h - ca.fmin(LEFT, h / 2) if prim.info.get("contact_schedule") else h
-    k4 = f(x + h * k3, t + te, s + te, xs)
+    k4 = f(x + h * k3, t + te, s + te, xs, *U)
     x_end = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    _k5, h1, d1, dh, e = end(x_end, t + te, s + te, xs, k4, h)
+    _k5, h1, d1, dh, e = end(x_end, t + te, s + te, xs, *U, k4, h)
     x_next = jump(x_end, u, t + h, s + h)
     act = _active(prim, _wrap(prim, t + h / 2), x, s, x_next, h)  # a step lies inside or outside each window
     L = ca.fmax(ca.fmax(ca.fabs(d0), ca.fabs(d1)), ca.fabs(h1 - h0) / h)
@@ -340,9 +403,9 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
     masked = (lambda v: ca.if_else(act, v, INACTIVE)) if nh else (lambda v: v)
     out = ca.vertcat(masked(h0), masked(lb), dh, prim.roa_margin(x, t), ca.norm_2(e), s, h, u_raw, u,
                      *([x] if with_state else []))
-    body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs), out])
+    body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out])
     acc = body.mapaccum("acc", K)
-    Z = ca.MX.sym("Z", 2 * nx + 2)
+    Z = ca.MX.sym("Z", nz)
     zs, outs = acc(Z)
     name = "chunk_" + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}{boundaries}".encode()).hexdigest()[:10]
     fn = ca.Function(name, [Z], [zs[:, -1], outs])
@@ -367,24 +430,30 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
     sample (and at each step's end, before the jump) estimates the judged rollout's error in h
     about 15 times over; likewise for the RoA margin. The estimate is the error the closed loop
     really propagates: it shrinks where the loop contracts instead of adding up step by step.
-    The augmented state is [x; t; s; x_sw; x_c]."""
+    The augmented state is [x; t; s; x_sw; x_c] and a sampled law's hold (hold_size)."""
     nx, nh = prim.system.nx, len(prim.h_names)
-    start, _end, f = _ends(prim)
-    loop = _loop(prim)
+    held = prim.sampled is not None
+    start, _end, f = _ends(prim, held)
+    loop = _loop(prim, held)
     jump = _jump_fn(prim)
-    z = _sym(prim.f_cl, prim)("z", 3 * nx + 2)
-    x, t, s, xs, xc = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2], z[2 * nx + 2:]
+    nz = 3 * nx + 2 + hold_size(prim, doubling=True)
+    z = _sym(prim.f_cl, prim)("z", nz)
+    x, t, s, xs, xc = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2], z[2 * nx + 2:3 * nx + 2]
+    # a sampled law: each rollout solves it at its own start state and holds it over the whole step
+    U, hold_next = _hold(prim, dt, z[3 * nx + 2:], [(x, t, s, xs), (xc, t, s, xs)])
+    Uj, Uc = U[:1], U[1:]
+    fj, fc = (lambda *a: f(*a, *Uj)), (lambda *a: f(*a, *Uc))
     tc = _wrap(prim, t)
     h = _step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
     te = h - ca.fmin(LEFT, h / 2) if prim.info.get("contact_schedule") else h
-    k1, h0, d0, u_raw, u = start(x, t, s, xs)
-    kc1, h0c, _uc_raw, uc = (loop(xc, t, s, xs)[i] for i in (0, 1, 2, 3))
+    k1, h0, d0, u_raw, u = start(x, t, s, xs, *Uj)
+    kc1, h0c, _uc_raw, uc = loop(xc, t, s, xs, *Uc)
     hh = h / 2
-    x_mid = _rk4(f, x, t, s, xs, hh, hh, k1)
-    x_end = _rk4(f, x_mid, t + hh, s + hh, xs, hh, te - hh)
-    xc_end = _rk4(f, xc, t, s, xs, h, te, kc1)
-    h1, d1 = _at_end(prim, start)(x_end, t + te, s + te, xs)  # h and its rate at the step's end
-    h1c = loop(xc_end, t + te, s + te, xs)[1]
+    x_mid = _rk4(fj, x, t, s, xs, hh, hh, k1)
+    x_end = _rk4(fj, x_mid, t + hh, s + hh, xs, hh, te - hh)
+    xc_end = _rk4(fc, xc, t, s, xs, h, te, kc1)
+    h1, d1 = _at_end(prim, start)(x_end, t + te, s + te, xs, *Uj)  # h and its rate at the step's end
+    h1c = loop(xc_end, t + te, s + te, xs, *Uc)[1]
     x_next, xc_next = jump(x_end, u, t + h, s + h), jump(xc_end, uc, t + h, s + h)
     act = _active(prim, _wrap(prim, t + h / 2), x, s, x_next, h)
     L = ca.fmax(ca.fmax(ca.fabs(d0), ca.fabs(d1)), ca.fabs(h1 - h0) / h)
@@ -393,9 +462,9 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
     m_f, m_c = prim.roa_margin(x, t), prim.roa_margin(xc, t)
     out = ca.vertcat(masked(h0), masked(lb), ca.fabs(h1 - h1c), m_f, ca.fabs(m_f - m_c), s, h, u_raw, u,
                      *([x] if with_state else []), ca.fabs(h0 - h0c))
-    body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next), out])
+    body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out])
     acc = body.mapaccum("acc", K)
-    Z = ca.MX.sym("Z", 3 * nx + 2)
+    Z = ca.MX.sym("Z", nz)
     zs, outs = acc(Z)
     name = "chunk2_" + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}{boundaries}".encode()).hexdigest()[:10]
     fn = ca.Function(name, [Z], [zs[:, -1], outs])
@@ -467,5 +536,6 @@ def build_first(prim: CompiledPrimitive, dt: float, jit: bool = True) -> ca.Func
 
 
 def initial_state(prim: CompiledPrimitive, x0: np.ndarray, t0: float) -> np.ndarray:
-    """z at switch-in: clock t0, zero time since switch, x_sw = x0."""
-    return np.concatenate([x0, [t0, 0.0], x0])
+    """z at switch-in of a chunk with error 'local': clock t0, zero time since switch, x_sw = x0 (and
+    a sampled law's hold, due at once)."""
+    return np.concatenate([x0, [t0, 0.0], x0, hold_start(prim)])

@@ -321,7 +321,8 @@ class CrossCheckWorst(_Strict):
     h: str
     mujoco: Num = Field(description="least value in the simulator")
     t: float
-    violated_in_mpgspec: bool
+    violated_in_mpgspec: bool = Field(description="whether it is among the violations mpgspec's run recorded "
+                                                  "(its first 50 violation samples)")
 
 
 class CrossCheckFoot(_Strict):

@@ -409,7 +409,8 @@ def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = No
                                 found=f"{why} (safe_sets.{clip(sf.use, 60)}.{k}.when)", code="MPG104"))
             else:
                 resolved.append(sf)
-        errors += _event_window_errors(project, p, loc_fn, merged.locate)
+        errors += [e for e in _event_window_errors(project, p, loc_fn, merged.locate)  # a block's: once
+                   if all((e.key, str(e.location)) != (o.key, str(o.location)) for o in errors)]
         for name, arg in _expand(p):
             if name in names:
                 errors.append(SpecError("duplicate primitive name", location=loc_fn(("name",)),

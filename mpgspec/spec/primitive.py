@@ -124,6 +124,11 @@ class IDQPController(Strict):
     posture_weight: Number = Field(default=0.01, ge=0)
     regularization: Number = Field(default=1e-8, gt=0)
     max_iter: int = Field(default=100, ge=1)
+    rate: Number | None = Field(default=None, gt=0, description="control rate (Hz): the QP is solved every "
+                                "1/rate seconds and its torques held in between; 1/rate must be a whole number "
+                                "of oracle steps. Omitted: solved at the start of every oracle step")
+    warm_start: bool = Field(default=True, description="start each solve from the previous solution and its "
+                             "active set")
 
 
 class TrotController(Strict):

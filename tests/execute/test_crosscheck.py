@@ -217,7 +217,7 @@ def test_unsafe_switch_fails_alike(tmp_path):
     path = _project(tmp_path)
     lie = (path.parent / "primitives" / "lie.yaml").read_text()
     (path.parent / "primitives" / "tall.yaml").write_text(
-        lie.replace("name: Lie", "name: StandTall").replace("1.25", "0.2").replace("-2.6", "-0.5"))
+        lie.replace("name: Lie", "name: StandTall").replace("1.25", "0.2").replace("-2.5", "-0.5"))
     doc = yaml.safe_load(path.read_text())
     doc["primitives"].append("primitives/tall.yaml")
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
@@ -241,3 +241,34 @@ def test_cli_refuses_a_crosscheck_it_cannot_run(capsys):
 
     assert main(["simulate", str(SPECS / "pendulum"), "--crosscheck"]) == 2
     assert "MPG108" in capsys.readouterr().err
+
+
+class _DictMemo:
+    def __init__(self):
+        self.d = {}
+
+    def key(self, *parts):
+        return repr(parts)
+
+    def get(self, key):
+        return self.d.get(key)
+
+    def put(self, key, value):
+        self.d[key] = json.loads(json.dumps(value))
+
+
+def test_comparisons_are_kept_by_content(a1, monkeypatch):
+    """A second cross-check of the same run takes the comparison from the memo, replaying nothing."""
+    from mpgspec.execute.crosscheck import compare as cmp
+
+    prims, settings, robot = a1
+    seq = Sequence(start="Lie", duration=0.05, commands=[GoalCommand(t=0.05, goal="Lie")])
+    run = simulate_sequence(prims, None, None, seq, settings, "naive")
+    memo, xs = _DictMemo(), CrossCheckSettings(runs=("naive",), settle=0.01)
+    first = crosscheck_runs(prims, {"naive": run}, seq.duration, xs, robot=robot, memo=memo)
+    assert len(memo.d) == 1 and first.runs["naive"]["mujoco"]["safe"]
+    other = crosscheck_runs(prims, {"naive": run}, seq.duration, xs.replace(settle=0.0), robot=robot, memo=memo)
+    assert len(memo.d) == 2 and other.runs["naive"]["start_offset"] < 1e-12  # other settings: replayed
+    monkeypatch.setattr(cmp, "replay", lambda *a, **k: pytest.fail("replayed again"))
+    again = crosscheck_runs(prims, {"naive": run}, seq.duration, xs, robot=robot, memo=memo)
+    assert again.runs["naive"]["divergence"] == first.runs["naive"]["divergence"]

@@ -93,7 +93,7 @@ def hybrid_project(folder: Path) -> Path:
     p = (d / "project.yaml").read_text()
     p = p.replace("  friction: 0.6\n", "  friction: 0.6\n  contact_events: true\n")
     p = p.replace("  - primitives/stand.yaml\n", "  - primitives/drop.yaml\n").replace("  - primitives/walk.yaml\n", "")
-    p = p[: p.index("assertions:")].replace("horizon: 2.5", "horizon: 0.6")
+    p = p[: p.index("sequence:")].replace("horizon: 2.5", "horizon: 0.6")
     (d / "project.yaml").write_text(p)
     lie = (d / "primitives" / "lie.yaml").read_text()
     weights = "0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1, 0.1,0.1,0.1]"

@@ -20,7 +20,7 @@ def drop_spec(tmp_path_factory):
     p = (d / "project.yaml").read_text()
     p = p.replace("  friction: 0.6\n", "  friction: 0.6\n  contact_events: true\n")
     p = p.replace("  - primitives/stand.yaml\n", "").replace("  - primitives/walk.yaml\n", "")
-    p = p[: p.index("assertions:")]
+    p = p[: p.index("sequence:")]  # the goal sequence and assertions name the primitives left out
     (d / "project.yaml").write_text(p)
     lie = (d / "primitives" / "lie.yaml").read_text()
     lie = lie.replace("name: Lie", "name: Fall").replace("  feet_on_ground: true\n", "")
@@ -76,7 +76,7 @@ def test_contact_schedule_sets_the_flags_by_the_clock(tmp_path):
     p = (d / "project.yaml").read_text()
     p = p.replace("  friction: 0.6\n", "  friction: 0.6\n  contact_events: true\n")
     p = p.replace("  - primitives/stand.yaml\n", "").replace("  - primitives/walk.yaml\n", "")
-    (d / "project.yaml").write_text(p[: p.index("assertions:")])
+    (d / "project.yaml").write_text(p[: p.index("sequence:")])
     lie = (d / "primitives" / "lie.yaml").read_text()
     lie = lie.replace("roa:\n", "contact_schedule:\n  - {until: 0.2, feet: [FL_foot, FR_foot, RL_foot, RR_foot]}\n"
                       "  - {until: 0.4, feet: [FL_foot, RR_foot]}\n"

@@ -9,8 +9,11 @@ J qddot + Jdot v = gamma (the same Baumgarte target as the plant), u in U, and l
 friction pyramid |lam_x|, |lam_y| <= mu / sqrt(2) lam_z, lam_z >= 0.
 
 The QP is solved with CasADi's active-set solver qrqp, which can be code-generated, so it runs
-inside the jit-compiled oracle. Control rate: the QP is solved afresh at every Runge-Kutta stage
-(continuous-time control; four solves per integration step).
+inside the jit-compiled oracle. Control rate: the oracle solves it at `rate` (default: at every
+oracle step's start) and holds the torques in between, each solve warm-started from the previous
+solution, whose multipliers give qrqp its initial active set (compile/hold.py). The continuous
+law k(x, t, s, x_sw) (a cold solve at every call) is what f_cl, h and the checks that take
+derivatives of the closed loop see.
 """
 from __future__ import annotations
 
@@ -19,7 +22,8 @@ import numpy as np
 
 from ...errors import SpecError
 from ..controllers import ControlContext, cubic_profile
-from .linalg import dof_parents, scale_rows, tree_ldl, tree_solve_l, tree_solve_lt
+from ..hold import SampledLaw, warm_or_cold
+from .linalg import dense_ldl_solve, dof_parents, scale_rows, tree_ldl, tree_solve_l, tree_solve_lt
 
 
 def _profile_acc(s, duration, p0, v0, pf, vf):
@@ -99,13 +103,58 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
     lbx[:nu], ubx[:nu] = sys.u_lo, sys.u_hi
     lbx[nu + 2::3] = 0.0
     args = [x, ctx.t, ctx.s, ctx.x_sw]
-    data = ca.Function("idqp_data", args, [ca.densify(Hqp), gqp, ca.densify(A), lba, uba])
+    w_eq, ok = _no_inequality_active(Aq, Q, c.regularization, gqp, A_con, con, A_fc, lbx, ubx, nu)
+    data = ca.Function("idqp_data", args, [ca.densify(Hqp), gqp, ca.densify(A), lba, uba, w_eq, ok])
     solver = ca.conic("idqp", "qrqp", {"h": ca.Sparsity.dense(nw, nw), "a": ca.Sparsity.dense(A.shape[0], nw)},
                       {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False,
                        "max_iter": c.max_iter})
+    na = int(A.shape[0])
+    nws = 2 * nw + na if c.warm_start else 0  # [X_ext; lam_x; lam_a] of the previous solve
+    # the QP's data, the warm start and the shortcut's solution; qrqp runs only when the shortcut fails
+    P = [ca.MX.sym(n, data.sparsity_out(i)) for i, n in enumerate(("H", "g", "A", "lba", "uba", "w_eq"))]
+    W = ca.MX.sym("w", nws)
+    warm = dict(x0=W[:nw], lam_x0=W[nw:2 * nw], lam_a0=W[2 * nw:]) if nws else {}
+    sol = solver(h=P[0], g=P[1], a=P[2], lba=P[3], uba=P[4], lbx=lbx, ubx=ubx, **warm)
+    active_set = ca.Function("idqp_active_set", P + [W],
+                             [sol["x"], ca.vertcat(sol["x"], sol["lam_x"], sol["lam_a"]) if nws else W])
+    shortcut = ca.Function("idqp_shortcut", P + [W], [P[5], ca.vertcat(P[5], ca.DM.zeros(nw + na)) if nws else W])
+    path = ca.Function.if_else("idqp_path", shortcut, active_set)
     X = [ca.MX.sym(n, *a.shape) for n, a in zip(("x", "t", "s", "x_sw"), args)]
-    Hm, gm, Am, lbam, ubam = data(*X)
-    sol = solver(h=Hm, g=gm, a=Am, lba=lbam, uba=ubam, lbx=lbx, ubx=ubx)
-    ctx.info["id_qp"] = {"solver": "qrqp", "variables": nw, "constraints": int(A.shape[0]),
-                         "control_rate": "every Runge-Kutta stage"}
-    return ca.Function("k_idqp", X, [sol["x"][:nu]])
+    Xw = ca.MX.sym("w", nws)
+    *Dm, ok_m = data(*X)
+    w_sol, w_next = path(ok_m, *Dm, Xw)
+    solve = ca.Function("k_idqp_warm", X + [Xw], [w_sol[:nu], warm_or_cold(w_next) if nws else Xw],
+                        ["x", "t", "s", "x_sw", "w"], ["u", "w_next"])
+    where = ("controller", "rate") if c.rate is not None else ("controller", "type")
+    ctx.sampled = SampledLaw(1.0 / c.rate if c.rate is not None else None, solve, nws, ctx.ec.locate(where),
+                             f"{ctx.ec.owner}: controller.rate")
+    ctx.info["id_qp"] = {"solver": "qrqp", "variables": nw, "constraints": na,
+                         "control_rate": ctx.sampled.describe(), "warm_start": bool(c.warm_start)}
+    return ca.Function("k_idqp", X, [solve(*X, ca.DM.zeros(nws))[0]])
+
+
+def _no_inequality_active(Aq, Q, sigma: float, gqp, A_con, con, A_fc, lbx, ubx, nu: int):
+    """The QP's optimum when no inequality is active, and 1 when it satisfies them all (it is then
+    the optimum: the inequality multipliers are zero), else 0.
+
+    The contact rows fix lam given u: G lam = con - P u with [P, G] = A_con (G = J D^-1 J^T), so
+    w = w0 + T u with T = [I; L_u], and the equality-constrained QP is an SPD system in u alone.
+    """
+    nw = A_con.shape[1]
+    P, G = A_con[:, :nu], A_con[:, nu:]
+    if G.shape[0]:
+        sol = dense_ldl_solve(G, ca.horzcat(con, -P))
+        lam0, L_u = sol[:, 0], sol[:, 1:]
+    else:
+        lam0, L_u = ca.SX(0, 1), ca.SX(0, nu)
+    T = ca.vertcat(ca.SX.eye(nu), L_u)
+    w0 = ca.vertcat(ca.SX.zeros(nu), lam0)
+    AT, Aw0 = ca.mtimes(Aq, T), ca.mtimes(Aq, w0)
+    Hr = 2 * (ca.mtimes([AT.T, Q, AT]) + sigma * ca.mtimes(T.T, T))
+    gr = ca.mtimes(T.T, 2 * (ca.mtimes([Aq.T, Q, Aw0]) + sigma * w0) + gqp)
+    w = w0 + ca.mtimes(T, -dense_ldl_solve(Hr, gr))
+    lo, hi = np.isfinite(lbx), np.isfinite(ubx)
+    slack = ca.vertcat(w[np.flatnonzero(lo).tolist()] - ca.DM(lbx[lo]), ca.DM(ubx[hi]) - w[np.flatnonzero(hi).tolist()],
+                       -ca.mtimes(A_fc, w))
+    ok = ca.sum1(slack >= 0) + ca.sum1(ca.fabs(w) < ca.inf) == slack.shape[0] + nw  # NaN fails both
+    return w, ok

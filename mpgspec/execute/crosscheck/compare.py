@@ -1,6 +1,8 @@
 """Replay the sequence's runs in MuJoCo and compare them with mpgspec's own rollouts."""
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -37,17 +39,34 @@ class CrossCheckResult:
 
 
 def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, SequenceRun], duration: float,
-                    settings: CrossCheckSettings, h_tolerance: float = 0.0,
-                    robot: MujocoRobot | None = None) -> CrossCheckResult:
-    """Replay each run named in settings.runs (that exists) for `duration` s and compare it."""
+                    settings: CrossCheckSettings, h_tolerance: float = 0.0, robot: MujocoRobot | None = None,
+                    memo=None) -> CrossCheckResult:
+    """Replay each run named in settings.runs (that exists) for `duration` s and compare it.
+
+    memo (mpgspec.oracle.cache.Memo, optional) keeps each comparison by the content hash of what
+    decides it: the run, the primitives' closed loops, the settings and the simulator's version."""
     system = next(iter(prims.values())).system
     robot = robot or build_robot(system, settings)
     res = CrossCheckResult(settings.simulator, settings, dict(robot.info))
     for mode in settings.runs:
-        if mode in runs:
+        if mode not in runs:
+            continue
+        key = _memo_key(memo, prims, runs[mode], duration, settings, h_tolerance, robot) if memo is not None else None
+        known = memo.get(key) if key is not None else None
+        if known is None:
             rep = replay(robot, prims, runs[mode].switches, duration, settings, h_tolerance)
-            res.runs[mode] = compare(prims, rep, runs[mode], settings.control_rate)
+            known = compare(prims, rep, runs[mode], settings.control_rate)
+            if key is not None:
+                memo.put(key, known)
+        res.runs[mode] = known
     return res
+
+
+def _memo_key(memo, prims, run: SequenceRun, duration, settings, h_tolerance, robot) -> str:
+    used = sorted({s["to"] for s in run.switches})
+    text = json.dumps(run.to_dict(), sort_keys=True, default=float)
+    return memo.key("crosscheck", hashlib.sha256(text.encode()).hexdigest(), [prims[n].digest() for n in used],
+                    duration, sorted(settings.to_dict().items()), h_tolerance, sorted(robot.info.items()))
 
 
 def _com_function(system) -> ca.Function:

@@ -92,11 +92,15 @@ class _Sim:
         w, v = self._vel[:3], self._vel[3:]
         return float(np.hypot(v[0] - radius * w[1], v[1] + radius * w[0]))  # v + w x (0, 0, -r)
 
-    def step(self, u: np.ndarray, n: int) -> None:
+    def step(self, u: np.ndarray, n: int) -> bool:
+        """n steps with the input u held; False when MuJoCo diverged (it then resets the state)."""
+        bad = self.d.warning[self.mj.mjtWarning.mjWARN_BADQACC]
+        before = bad.number
         self.d.ctrl[self.robot.actuators] = u
         for _ in range(n):
             self.mj.mj_step(self.m, self.d)
         self.mj.mj_forward(self.m, self.d)
+        return bad.number == before
 
 
 def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: list[dict], duration: float,
@@ -108,13 +112,15 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
     p, clock0 = prims[first["to"]], float(first["clock"])
     x0 = p.x_star(clock0)
     sim.set(x0)
-    for _ in range(int(round(settings.settle * rate))):
-        sim.step(np.asarray(p.control(sim.state(), clock0, 0.0, x0)[1], float).ravel(), n_sub)
+    settled = all(sim.step(_evaluate(p, sim.state(), clock0, 0.0, x0)[1], n_sub)
+                  for _ in range(int(round(settings.settle * rate))))
     x = sim.state()
     offset = float(np.linalg.norm((x - x0)[: robot.state.nq]))
     n = int(np.floor(duration * rate + 1e-9)) + 1
     T, X, C, L = np.arange(n) / rate, np.full((n, len(x)), np.nan), np.full((n, 3), np.nan), np.full(n, np.nan)
     out = Replay(T, X, C, L, [], start_offset=offset)
+    if not settled:
+        out.safe, out.failed, n = False, f"the simulator diverged while {p.name} held the start state", 0
     out.switches.append({"t": 0.0, "from": None, "to": p.name, "clock": clock0, "roa_margin": None})
     contact = {"max_penetration": 0.0, "max_slip_speed": 0.0, "slip_at": None, "lift_off": None,
                "trunk_contact": None}
@@ -134,17 +140,28 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
         if not np.isfinite(x).all():
             out.safe, out.failed = False, f"non-finite state at t = {t:.3f} s in {p.name}"
             break
-        _xdot, hv, _u_raw, u = (np.asarray(v, float).ravel() for v in p.loop(x, clock, t - t_sw, x_sw))
+        hv, u = _evaluate(p, x, clock, t - t_sw, x_sw)
         X[k], C[k] = x, sim.d.subtree_com[sim.root]
         out.active.append(p.name)
         act = hv < INACTIVE / 2
         L[k] = float(hv[act].min()) if act.any() else np.nan
         _judge(out, p, hv, act, t, tol)
         _contacts(sim, contact, p, clock, t, settings.foot_radius)
-        sim.step(u, n_sub)
+        if not sim.step(u, n_sub):
+            out.safe, out.failed = False, f"the simulator diverged after t = {t:.3f} s in {p.name}"
+            break
     out.contact = contact
     out.wall_s = time.perf_counter() - t_wall
     return out
+
+
+def _evaluate(p: CompiledPrimitive, x, clock: float, s: float, x_sw) -> tuple[np.ndarray, np.ndarray]:
+    """(h, u): the safety functions and the saturated input of the primitive's compiled loop."""
+    if p.loop is not None:
+        _xdot, hv, _u_raw, u = p.loop(x, clock, s, x_sw)
+    else:
+        hv, u = p.h(x, clock, s, x_sw), p.control(x, clock, s, x_sw)[1]
+    return np.asarray(hv, float).ravel(), np.asarray(u, float).ravel()
 
 
 def _judge(out: Replay, p: CompiledPrimitive, hv: np.ndarray, act: np.ndarray, t: float, tol: float) -> None:

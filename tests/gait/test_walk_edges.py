@@ -1,0 +1,82 @@
+"""Switches into and out of the A1's walks through the safety oracle with step doubling, and its
+error estimate against a reference integrated eight times finer.
+
+Walk(in_place) is sized by its own verifier (floquet on the discrete flow, as `mpgspec verify`
+does); Stand's E is given by the spec."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mpgspec.api import compile_project, settings_for
+from mpgspec.certify.roa import _estimate
+from mpgspec.oracle import SafetyOracle
+from mpgspec.oracle.integrator import build_chunk
+from mpgspec.spec.loader import load_project
+
+A1 = Path(__file__).parents[2] / "specs" / "a1" / "project.yaml"
+
+
+@pytest.fixture(scope="module")
+def setup():
+    spec = load_project(A1)
+    settings = settings_for(spec)
+    assert settings.error == "doubling"
+    prims = compile_project(spec)
+    inst = next(i for i in spec.primitives if i.name == "Walk(in_place)")
+    res = _estimate(inst.spec.roa.method, prims["Walk(in_place)"], inst.spec.roa.options)
+    assert res.level == "empirical" and 0.002 < res.radius < 0.05
+    prims["Walk(in_place)"] = prims["Walk(in_place)"].with_radius(float(res.radius))
+    return prims, settings
+
+
+def _call(prims, settings, a, b, t_a, t_b, **kw):
+    return SafetyOracle(prims[b], settings.replace(**kw)).evaluate(prims[a].x_star(t_a)[None], np.array([t_b]))[0]
+
+
+def test_stand_to_walk_in_place_is_safe_at_double_support_only(setup):
+    prims, s = setup
+    ev = _call(prims, s, "Stand", "Walk(in_place)", 0.0, 0.0)
+    assert ev.status == "safe" and 0.3 < ev.t_enter < 1.0
+    assert ev.entry_margin > ev.entry_error > 0
+    mid = _call(prims, s, "Stand", "Walk(in_place)", 0.0, 0.09)  # a pair is lifted from standing at once
+    assert mid.status == "unsafe" and mid.violated.startswith("qdot_max")
+
+
+def test_summed_local_estimates_cannot_resolve_the_walks_tube(setup):
+    """The same switch judged with summed per-step estimates stays inconclusive: their sum on E's
+    margin outgrows the tube while the flow converges."""
+    prims, s = setup
+    ev = _call(prims, s, "Stand", "Walk(in_place)", 0.0, 0.0, error="local")
+    assert ev.status == "inconclusive"
+
+
+def test_walks_are_left_for_stand_only_in_place_and_at_double_support(setup):
+    prims, s = setup
+    assert _call(prims, s, "Walk(in_place)", "Stand", 0.0, 0.0).status == "safe"
+    assert _call(prims, s, "Walk(in_place)", "Stand", 0.09, 0.0).status == "unsafe"  # a foot in the air
+
+
+def test_doubling_error_estimate_covers_the_true_error(setup):
+    """E's margin along Stand -> Walk(in_place) at the oracle's step, against the same closed loop
+    integrated at dt/8: the true error of the judged rollout stays below the doubling estimate."""
+    prims, s = setup
+    p = prims["Walk(in_place)"]
+    x0 = prims["Stand"].x_star(0.0)
+    fine = build_chunk(p, s.dt, 64, True, s.jit_flags, error="doubling")
+    ref = build_chunk(p, s.dt / 8, 64, True, s.jit_flags, error="local")
+    Z, M, E = fine.start(x0[None], [0.0]), [], []
+    for _ in range(8):
+        Z, out = fine.run(Z)
+        M.append(out[fine.rows.margin][0])
+        E.append(out[fine.rows.err][0])
+    M, E = np.concatenate(M), np.concatenate(E)
+    Zr, Mr = ref.start(x0[None], [0.0]), []
+    for _ in range(64):
+        Zr, out = ref.run(Zr)
+        Mr.append(out[ref.rows.margin][0])
+    Mr = np.concatenate(Mr)[::8][: M.size]
+    true = np.abs(M - Mr)
+    assert true.max() > 0
+    assert (true <= E + 1e-12).all(), f"worst ratio {np.max(true / np.maximum(E, 1e-300)):.3g}"
+    assert np.median(E[E > 0] / np.maximum(true[E > 0], 1e-300)) > 3  # an over-estimate, as RK4's 16x says
