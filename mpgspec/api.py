@@ -36,7 +36,7 @@ from .oracle.oracle import CapabilityError, require_capabilities
 from .oracle.registry import get_backend
 from .plan.planner import lookup_table, shortest_plan
 from .report.build import build_report
-from .robust.check import check_uncertainty
+from .robust.check import check_uncertainty, check_uncertainty_compiled
 from .robust.graph import RobustResult, robust_stage
 from .settings import OracleSettings
 from .spec.loader import ProjectSpec, discover, load_project
@@ -291,6 +291,7 @@ def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progres
     if progress:
         progress(spec.name, "compile (closed loops as CasADi functions)", 0, len(spec.primitives))
     prims = compile_project(spec)
+    check_uncertainty_compiled(spec, prims)
     _check_capabilities(spec, settings, prims)
     for p in prims.values():  # a control period must be a whole number of oracle steps
         if p.sampled is not None:

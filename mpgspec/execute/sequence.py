@@ -4,12 +4,15 @@ naive: switch to each goal at once, with the goal's clock at its start.
 graph: follow the lookup table; leave a primitive only after its flow entered its E, and only at
 a grid time t_A where the oracle verified the transition, switching in at the verified t_B.
 Transients hand over to their `next` at the end of their domain in both modes. Safety (every h of
-the active primitive) is monitored throughout.
+the active primitive) is monitored throughout. For floating-base rigid bodies each run also records
+its CoM height and trunk roll / pitch / yaw per sample and the robot's stick figure at the start,
+each switch, the first violation and the end (Fig. 6 of the paper).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import casadi as ca
 import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
@@ -21,7 +24,12 @@ from ..spec.models import PrimitiveClass, Sequence
 
 @dataclass
 class SequenceRun:
-    """Result of one mode: switches made, safety violations and a decimated trajectory."""
+    """Result of one mode: switches made, safety violations and a decimated trajectory.
+
+    body: com_z (m) and roll, pitch, yaw (rad, Z-Y-X Euler angles of the base, yaw unwrapped) at the
+    samples of t; poses: stick figures in world coordinates (see body_points), each with its time,
+    primitive and event (POSE_EVENTS). Both are empty for systems without a floating base.
+    """
 
     mode: str
     safe: bool = True
@@ -33,9 +41,74 @@ class SequenceRun:
     active: list[str] = field(default_factory=list)
     final_primitive: str = ""
     failed: str = ""
+    body: dict[str, list[float]] = field(default_factory=dict)
+    poses: list[dict] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+POSE_EVENTS = ("start", "switch", "first_violation", "end")
+TRUNK_HEIGHT = 0.3
+"""Half-height of the drawn trunk as a fraction of its half-length (hip to hip)."""
+
+
+def body_points(system) -> tuple[ca.Function, list[int]] | None:
+    """x -> (CoM, trunk outline, leg points) of a floating-base rigid body, and the number of points
+    of each leg; None for other systems.
+
+    The trunk outline is the rectangle in the base's x-z plane spanning the legs' first joints (four
+    corners, world frame); each leg is the world position of every joint from the base down to its
+    contact frame, then the contact frame (for the A1: hip, thigh, knee, foot).
+    """
+    if not system.is_rigid_body or "base_qw" not in system.state_names:
+        return None
+    model = system.model
+    tree = system.dyn.state(system.x[:model.nq])
+    legs, first = [], []
+    for f in model.contact_frames:
+        chain = [j for j in reversed(tree.support(model.frame(f).joint)) if model.joints[j].kind != "free"]
+        legs.append([tree.world[j].p for j in chain] + [tree.frame_position(f)])
+        if chain and model.joints[chain[0]].parent == 0:
+            first.append(float(model.joints[chain[0]].translation[0]))
+    lo, hi = (min(first), max(first)) if first else (-0.1, 0.1)
+    dz = TRUNK_HEIGHT * max(hi - lo, 1e-3) / 2
+    base = tree.world[0]
+    corners = np.array([[lo, hi, hi, lo], [0.0] * 4, [-dz, -dz, dz, dz]])
+    trunk = ca.repmat(base.p, 1, 4) + ca.mtimes(base.R, ca.DM(corners))
+    com = ca.vertcat(*[system.extra_env[f"com_{a}"] for a in "xyz"])
+    pts = ca.horzcat(*[p for leg in legs for p in leg]) if legs else ca.SX.zeros(3, 0)
+    return ca.Function("body_points", [system.x], [com, trunk, pts]), [len(leg) for leg in legs]
+
+
+def euler_zyx(quat: np.ndarray) -> np.ndarray:
+    """Roll, pitch, yaw (rad) of quaternions given as rows (x, y, z, w), pinocchio's order."""
+    q = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return np.stack([roll, pitch, yaw], axis=-1)
+
+
+def _record_body(run: SequenceRun, system, snaps: list[tuple]) -> None:
+    """Fill run.body from the stored samples and run.poses from the snapshots (t, primitive, event, x)."""
+    got = body_points(system)
+    if got is None or not run.x:
+        return
+    fun, sizes = got
+    X = np.asarray(run.x, float)
+    qi = [system.state_names.index(f"base_q{a}") for a in "xyzw"]
+    rpy = euler_zyx(X[:, qi])
+    rpy[:, 2] = np.unwrap(rpy[:, 2])
+    com = np.asarray(fun.map(len(X))(X.T)[0], float)
+    run.body = {"com_z": com[2].tolist(), "roll": rpy[:, 0].tolist(), "pitch": rpy[:, 1].tolist(),
+                "yaw": rpy[:, 2].tolist()}
+    ends = np.cumsum([0] + sizes)
+    for t, prim, event, x in snaps:
+        c, trunk, pts = (np.asarray(v, float) for v in fun(x))
+        run.poses.append({"t": float(t), "primitive": prim, "event": event, "com": c[:, 0].tolist(),
+                          "trunk": trunk.T.tolist(), "legs": [pts[:, a:b].T.tolist() for a, b in zip(ends, ends[1:])]})
 
 
 def _start_clock(p: CompiledPrimitive) -> float:
@@ -51,16 +124,21 @@ def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiv
     and is unsafe, with the reason in `failed`; it never raises.
     """
     run = SequenceRun(mode)
+    snaps: list[tuple] = []
     try:
-        _simulate(run, prims, graph, table, seq, settings, mode, max_points)
+        _simulate(run, prims, graph, table, seq, settings, mode, max_points, snaps)
     except (ArithmeticError, ValueError, RuntimeError, KeyError, IndexError) as err:
         run.safe = False
         run.failed = run.failed or f"the simulation stopped: {type(err).__name__}: {str(err)[:200]}"
+    if run.t and (not snaps or snaps[-1][2] != "end"):  # stopped early: the last stored sample
+        snaps.append((run.t[-1], run.active[-1], "end", np.asarray(run.x[-1], float)))
+    _record_body(run, prims[seq.start].system, snaps)
     return run
 
 
 def _simulate(run: SequenceRun, prims: dict[str, CompiledPrimitive], graph: MotionPrimitiveGraph | None,
-              table: dict | None, seq: Sequence, settings: OracleSettings, mode: str, max_points: int) -> None:
+              table: dict | None, seq: Sequence, settings: OracleSettings, mode: str, max_points: int,
+              snaps: list[tuple]) -> None:
     dt, tol = settings.dt, settings.h_tolerance
     cur = seq.start
     clock = _start_clock(prims[cur])
@@ -77,11 +155,13 @@ def _simulate(run: SequenceRun, prims: dict[str, CompiledPrimitive], graph: Moti
         run.safe = False
         run.failed = f"the setpoint of {cur} is not finite at its start clock {clock:g}"
         return
+    snaps.append((0.0, cur, "start", np.array(x, float)))
 
     def switch(to: str, t_B: float | None, why: str, x_now: np.ndarray, t_now: float):
         nonlocal cur, z, converged
         t_B = _start_clock(prims[to]) if t_B is None else t_B
         run.switches.append({"t": t_now, "from": cur, "to": to, "clock": float(t_B), "reason": why})
+        snaps.append((t_now, to, "switch", np.array(x_now, float)))
         cur, converged = to, False
         run.final_primitive = cur
         z = initial_state(prims[to], x_now, t_B)
@@ -89,7 +169,12 @@ def _simulate(run: SequenceRun, prims: dict[str, CompiledPrimitive], graph: Moti
     while k < nsteps:
         p = prims[cur]
         ch = build_chunk(p, dt, 64, settings.jit, settings.jit_flags, with_state=True, boundaries=False)
-        zf, out = ch.run(z[:, None])
+        try:
+            zf, out = ch.run(z[:, None])
+        except RuntimeError as err:  # the run cannot go on; what it did so far is kept
+            run.safe = False
+            run.failed = f"{cur} at t = {k * dt:.3f} s: {err}"
+            break
         r, nx = ch.rows, p.system.nx
         nh = r.nh
         H, M, X = out[r.h, 0], out[r.margin, 0], out[r.x, 0]
@@ -109,6 +194,8 @@ def _simulate(run: SequenceRun, prims: dict[str, CompiledPrimitive], graph: Moti
             hv = H[:, i]
             if nh and ((hv < -tol) | ~np.isfinite(hv)).any():
                 run.safe = False
+                if not run.violations:
+                    snaps.append((t_now, cur, "first_violation", np.array(xi, float)))
                 if len(run.violations) < 50:
                     j = int(np.argmin(np.where(np.isfinite(hv), hv, -np.inf)))
                     v = float(hv[j]) if np.isfinite(hv[j]) else None
@@ -155,9 +242,11 @@ def _simulate(run: SequenceRun, prims: dict[str, CompiledPrimitive], graph: Moti
         i, kind, arg = event
         t_now = (k + i) * dt
         k += i
-        if kind == "end":
-            break
         xi = X[:, i]
+        if kind == "end":
+            if np.isfinite(xi).all():
+                snaps.append((t_now, cur, "end", np.array(xi, float)))
+            break
         if kind == "naive":
             switch(arg, None, "commanded", xi, t_now)
         elif kind == "transient_end":

@@ -161,6 +161,12 @@ class Chunk:
         nz = zin.size // n
         zin.reshape(nz, n, order="F")[:] = Z
         ev()
+        status = self._buffers[n][0].ret()
+        if status:  # the outputs were not written: never judge the previous call's numbers again
+            zf[:] = np.nan
+            out[:] = np.nan
+            raise RuntimeError(f"the compiled rollout failed (status {status}): an evaluation inside it "
+                               "(e.g. an optimisation-based control law) returned an error")
         rows = out.size // (n * self.K)
         return (zf.reshape(nz, n, order="F").copy(),
                 np.array(out.reshape(rows, n * self.K, order="F")).reshape(rows, n, self.K))

@@ -15,12 +15,20 @@ def trace(prim: CompiledPrimitive, x0: np.ndarray, t0: float, horizon: float, se
     n = int(np.ceil(horizon / settings.dt - 1e-9)) + 1
     z = initial_state(prim, np.asarray(x0, float), t0)
     outs = []
+    failed = None
     while sum(o.shape[1] for o in outs) < n:
-        zf, out = ch.run(z[:, None])
+        try:
+            zf, out = ch.run(z[:, None])
+        except RuntimeError as err:  # the trace ends where the compiled rollout failed
+            failed = str(err)
+            break
         outs.append(out[:, 0, :])
         z = zf[:, 0]
         if not np.isfinite(z).all():
             break
+    if not outs:
+        return {"t": [], "h": {name: [] for name in prim.h_names}, "roa_margin": [], "u": [[] for _ in range(prim.system.nu)],
+                "x": [[] for _ in range(prim.system.nx)], "failed": failed}
     O = np.concatenate(outs, axis=1)[:, :n]
     r = ch.rows
     stride = max(1, O.shape[1] // max_points)
@@ -36,4 +44,5 @@ def trace(prim: CompiledPrimitive, x0: np.ndarray, t0: float, horizon: float, se
         "roa_margin": clean(O[r.margin, sel]),
         "u": [clean(O[r.u.start + i, sel]) for i in range(r.nu)],
         "x": [clean(O[r.x.start + i, sel]) for i in range(prim.system.nx)],
+        **({"failed": failed} if failed else {}),
     }

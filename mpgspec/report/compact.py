@@ -9,8 +9,8 @@ floats, and the functions that turn them back into one dict per cell or one row 
   messages are listed sparsely as `[i_A, i_B, text]`; the verdict of a cell is the transition's
   `verdicts[i_A][i_B]`.
 - A sequence run stores at most MAX_RUN samples, its states by column (`x[k]` is state k over
-  `t`) and the active primitive as runs `[[name, samples], ...]`; switches and violations are
-  kept in full.
+  `t`) and the active primitive as runs `[[name, samples], ...]`; its `body` series (CoM height,
+  trunk angles) are sampled at the same `t`; switches, violations and poses are kept in full.
 - Floats keep 6 significant digits (oracle evidence, times; error bounds 3); plotted traces keep 4
   and at most MAX_TRACE samples (every k-th, the last, and the first at or after the decision).
 """
@@ -149,6 +149,9 @@ def compact_run(run: dict) -> dict:
     out["active"] = active
     out["switches"] = rnd(run.get("switches") or [])
     out["violations"] = rnd(run.get("violations") or [])
+    out["body"] = {k: rnd([v[i] for i in idx if i < len(v)], TRACE_DIGITS) for k, v in (run.get("body") or {}).items()}
+    out["poses"] = [{**rnd({k: v for k, v in p.items() if k != "t"}, TRACE_DIGITS), "t": rnd(p["t"])}
+                    for p in run.get("poses") or []]
     return out
 
 

@@ -13,8 +13,9 @@ from functools import lru_cache
 import jinja2
 from markupsafe import Markup
 
-from . import svg
+from . import fig6, svg
 from .compact import readable
+from .traversal import command_rows
 
 SYMBOLS = {"fixed": "□", "periodic": "○", "transient": "◇"}
 EVIDENCE = (("certified", "a checked certificate"),
@@ -228,7 +229,10 @@ def _sequence(report: dict) -> dict | None:
     runs = [{"name": name, "run": run,
              "svg": Markup(svg.trajectory_svg(run, seq["state_names"], seq["commands"], limits=lims))}
             for name, run in seq["runs"].items()]
-    return {"seq": seq, "runs": runs}
+    body = fig6.body_svg(seq["runs"], seq["commands"], [p["name"] for p in report["primitives"]], seq["duration"])
+    tiles = [{**row, "tiles": [Markup(t) for t in row["tiles"]]} for row in fig6.gait_tiles(seq["runs"])]
+    return {"seq": seq, "runs": runs, "commands": command_rows(seq), "body_svg": Markup(body) if body else None,
+            "tiles": tiles, "colors": {m: fig6.run_color(m, k) for k, m in enumerate(seq["runs"])}}
 
 
 def view(report: dict) -> dict:

@@ -256,6 +256,20 @@ class Violation(_Strict):
     value: Num
 
 
+Point = tuple[Num, Num, Num]
+
+
+class Pose(_Strict):
+    """The robot's stick figure at one instant of a run, world coordinates in metres."""
+
+    t: float
+    primitive: str = Field(description="the primitive active from this instant on")
+    event: Literal["start", "switch", "first_violation", "end"]
+    com: Point
+    trunk: list[Point] = Field(description="corners of the trunk's rectangle in the base's x-z plane")
+    legs: list[list[Point]] = Field(description="per contact frame: the joints from the base down, then the frame")
+
+
 class Run(_Strict):
     """One execution of the sequence; samples decimated for pictures, switches and violations in full."""
 
@@ -269,6 +283,11 @@ class Run(_Strict):
     active: list[tuple[str, int]] = Field(description="the active primitive as runs [name, samples]")
     final_primitive: str
     failed: str
+    body: dict[str, list[Num]] = Field(default_factory=dict, description=(
+        "rigid bodies with a floating base: com_z (m) and roll, pitch, yaw (rad, Z-Y-X Euler angles of the "
+        "base, yaw unwrapped) at the samples of t"))
+    poses: list[Pose] = Field(default_factory=list, description="stick figures at the start, each switch, the "
+                                                                "first violation and the end")
 
 
 class Sequence(_Strict):

@@ -13,65 +13,127 @@ def _hint(word: str, choices) -> str:
     return f"did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
 
 
+RIGID_PARAMETERS = ("mass_scale", "friction")
+"""Uncertain parameters of a rigid-body system: every link's mass and inertia times k, and mu."""
+
+
+def _err(errors, message, where, key, code, expected="", found="", hint=""):
+    errors.append(SpecError(message, location=where, key=f"uncertainty.{key}" if key else "uncertainty",
+                            expected=expected, found=found, hint=hint, code=code))
+
+
 def check_uncertainty(spec: ProjectSpec) -> None:
     """Raise SpecErrors for unknown parameters, inputs, states and primitives, a nominal value that
-    is not the system's, an unsupported system kind and assertion kinds the robust graph cannot answer."""
+    is not the system's, what a system kind does not support and assertion kinds the robust graph
+    cannot answer."""
     unc = spec.project.uncertainty
     if unc is None:
         return
     errors: list[SpecError] = []
     loc = lambda *k: spec.locate(("uncertainty", *k))  # noqa: E731
     sys = spec.system
-    if getattr(sys, "kind", "analytic") != "analytic":
-        errors.append(SpecError("uncertainty is supported for analytic systems only", location=loc(),
-                                key="uncertainty", expected="an analytic system (states, dynamics)",
-                                found=f"a {sys.kind} system", code="MPG104"))
+    kind = getattr(sys, "kind", "analytic")
+    if kind not in ("analytic", "rigid_body"):
+        _err(errors, "uncertainty is supported for analytic and rigid-body systems only", loc(), "", "MPG104",
+             "an analytic or a rigid-body system", f"a {kind} system")
         raise SpecErrors(errors)
-    params = dict(sys.parameters)
+    rigid = kind == "rigid_body"
+    if rigid:
+        params = {"mass_scale": 1.0, "friction": float(sys.friction)}
+    else:
+        params = dict(sys.parameters)
     for name, pr in unc.parameters.items():
         if name not in params:
-            errors.append(SpecError("unknown parameter", location=loc("parameters", name),
-                                    key=f"uncertainty.parameters.{name}",
-                                    expected="one of " + ", ".join(sorted(params)) if params else "no parameters",
-                                    found=repr(str(name)[:60]), hint=_hint(name, params), code="MPG107"))
+            _err(errors, "unknown parameter", loc("parameters", name), f"parameters.{name}", "MPG107",
+                 "one of " + ", ".join(sorted(params)) if params else "no parameters", repr(str(name)[:60]),
+                 _hint(name, params))
             continue
         if pr.nominal is not None and pr.nominal != params[name]:
-            errors.append(SpecError("nominal differs from the system's value", location=loc("parameters", name, "nominal"),
-                                    key=f"uncertainty.parameters.{name}.nominal", expected=f"{params[name]:g}",
-                                    found=f"{pr.nominal:g}", code="MPG104"))
+            _err(errors, "nominal differs from the system's value", loc("parameters", name, "nominal"),
+                 f"parameters.{name}.nominal", "MPG104", f"{params[name]:g}", f"{pr.nominal:g}")
         elif not pr.range[0] <= params[name] <= pr.range[1]:
-            errors.append(SpecError("the system's value lies outside the range", location=loc("parameters", name, "range"),
-                                    key=f"uncertainty.parameters.{name}.range",
-                                    expected=f"a range containing {params[name]:g}", found=f"{list(pr.range)}",
-                                    code="MPG104"))
-    if unc.disturbance is not None:
-        for i, u in enumerate(unc.disturbance.inputs):
-            if u not in sys.inputs:
-                errors.append(SpecError("unknown input", location=loc("disturbance", "inputs", i),
-                                        key=f"uncertainty.disturbance.inputs.{i}",
-                                        expected="one of " + ", ".join(sys.inputs) if sys.inputs else "no inputs",
-                                        found=repr(str(u)[:60]), hint=_hint(u, sys.inputs), code="MPG107"))
-    for name in unc.initial_state:
+            _err(errors, "the system's value lies outside the range", loc("parameters", name, "range"),
+                 f"parameters.{name}.range", "MPG104", f"a range containing {params[name]:g}", f"{list(pr.range)}")
+        elif pr.range[0] <= 0 and rigid:
+            _err(errors, f"{name} must stay positive", loc("parameters", name, "range"),
+                 f"parameters.{name}.range", "MPG104", "a range above 0", f"{list(pr.range)}")
+    dist = unc.disturbance
+    if dist is not None and dist.force is not None and not rigid:
+        _err(errors, "a force disturbance needs a rigid-body system", loc("disturbance", "force"),
+             "disturbance.force", "MPG104", "disturbance: {inputs: [...], bound: ...}", "force")
+    if dist is not None and dist.inputs is not None:
+        if rigid:
+            _err(errors, "rigid bodies take a push, not an input disturbance", loc("disturbance", "inputs"),
+                 "disturbance.inputs", "MPG104", "disturbance: {force: {frame: ..., bound: [x, y, z]}}", "inputs")
+        else:
+            for i, u in enumerate(dist.inputs):
+                if u not in sys.inputs:
+                    _err(errors, "unknown input", loc("disturbance", "inputs", i), f"disturbance.inputs.{i}", "MPG107",
+                         "one of " + ", ".join(sys.inputs) if sys.inputs else "no inputs", repr(str(u)[:60]),
+                         _hint(u, sys.inputs))
+    if rigid and dist is not None and unc.search > 0:
+        _err(errors, "the adversarial search needs gradients through the control law; rigid bodies run the "
+             "constant pushes only", loc("search") if "search" in unc.model_fields_set else loc(), "search",
+             "MPG104", "search: 0", str(unc.search))
+    if rigid and spec.project.sequence is not None and unc.runs > 0:
+        _err(errors, "runs of the goal sequence under uncertainty are supported for analytic systems only",
+             loc("runs") if "runs" in unc.model_fields_set else loc(), "runs", "MPG104", "runs: 0", str(unc.runs))
+    for name in unc.initial_state if not rigid else ():  # rigid bodies: checked once compiled
         if name not in sys.states:
-            errors.append(SpecError("unknown state", location=loc("initial_state", name),
-                                    key=f"uncertainty.initial_state.{name}", expected="one of " + ", ".join(sys.states),
-                                    found=repr(str(name)[:60]), hint=_hint(name, sys.states), code="MPG107"))
+            _err(errors, "unknown state", loc("initial_state", name), f"initial_state.{name}", "MPG107",
+                 "one of " + ", ".join(sys.states), repr(str(name)[:60]), _hint(name, sys.states))
     nodes = {p.name for p in spec.primitives}
+    chosen = set(unc.nodes) if unc.nodes is not None else nodes
 
-    def node(n: str, path: tuple, key: str):
-        if n not in nodes:
-            errors.append(SpecError("unknown primitive", location=loc(*path), key=f"uncertainty.{key}",
-                                    expected="one of " + ", ".join(sorted(nodes)), found=repr(str(n)[:60]),
-                                    hint=_hint(n, nodes), code="MPG304"))
+    def node(n: str, path: tuple, key: str, among: set, what: str = "unknown primitive"):
+        if n not in among:
+            _err(errors, what, loc(*path), key, "MPG304", "one of " + ", ".join(sorted(among)),
+                 repr(str(n)[:60]), _hint(n, among))
 
+    for i, n in enumerate(unc.nodes or ()):
+        node(n, ("nodes", i), f"nodes.{i}", nodes)
     for i, a in enumerate(unc.assertions):
         base = ("assertions", i)
         refs = node_refs(a)
         for name, where in refs or ():
-            node(name, base + where, ".".join(map(str, base + where)))
+            among, what = (nodes, "unknown primitive") if name not in nodes else (chosen, "primitive not in uncertainty.nodes")
+            node(name, base + where, ".".join(map(str, base + where)), among, what)
         if refs is None:
-            errors.append(SpecError("this assertion does not apply to the robust graph", location=loc(*base),
-                                    key=f"uncertainty.assertions.{i}", expected="edge, no_edge, plan or reachable_from",
-                                    found=type(a).__name__, code="MPG104"))
+            _err(errors, "this assertion does not apply to the robust graph", loc(*base), f"assertions.{i}",
+                 "MPG104", "edge, no_edge, plan or reachable_from", type(a).__name__)
+    if errors:
+        raise SpecErrors(errors)
+
+
+def check_uncertainty_compiled(spec: ProjectSpec, prims: dict) -> None:
+    """What only the compiled rigid body knows: the push's frame, state names, and that each robust
+    node has one contact set and no safety windows (the no-slip rows are re-evaluated on the plant)."""
+    unc = spec.project.uncertainty
+    if unc is None or not prims:
+        return
+    sys = next(iter(prims.values())).system
+    if not sys.is_rigid_body:
+        return
+    errors: list[SpecError] = []
+    loc = lambda *k: spec.locate(("uncertainty", *k))  # noqa: E731
+    force = unc.disturbance.force if unc.disturbance is not None else None
+    if force is not None and force.frame not in sys.base_frames():
+        frames = sys.base_frames()
+        _err(errors, "the push acts on a frame of the floating base", loc("disturbance", "force", "frame"),
+             "disturbance.force.frame", "MPG107", "one of " + ", ".join(frames) if frames else "a floating base",
+             repr(str(force.frame)[:60]), _hint(force.frame, frames))
+    for name in unc.initial_state:
+        if name not in sys.state_names:
+            _err(errors, "unknown state", loc("initial_state", name), f"initial_state.{name}", "MPG107",
+                 "a state of the system", repr(str(name)[:60]), _hint(name, sys.state_names))
+    names = unc.nodes if unc.nodes is not None else list(prims)
+    for i, n in enumerate(names):
+        p = prims[n]
+        if p.hybrid or sys.events or any(w is not None for w in p.windows):
+            where = ("nodes", i) if unc.nodes is not None else ()
+            _err(errors, f"primitive '{n}' switches contacts or safety functions; the robust check takes "
+                 "primitives with one contact set and no `when` windows", loc(*where),
+                 f"nodes.{i}" if unc.nodes is not None else "nodes", "MPG104",
+                 "nodes: [...] without it", n)
     if errors:
         raise SpecErrors(errors)

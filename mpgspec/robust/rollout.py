@@ -58,19 +58,53 @@ class RobustRollout:
     BATCH = 128
     CHUNK = 100  # steps per compiled call; rollouts stop once decided
 
-    def __init__(self, prim: CompiledPrimitive, plant_fn: ca.Function, dist_inputs: list[int], segments: int,
-                 settings: OracleSettings, horizon: float):
+    def __init__(self, prim: CompiledPrimitive, plant_fn, dist_inputs: list[int], segments: int,
+                 settings: OracleSettings, horizon: float, duration: float | None = None):
         self.prim, self.settings = prim, settings
-        nx, nu = prim.system.nx, prim.system.nu
-        self.nth, self.nd, self.K = plant_fn.size1_in(2), len(dist_inputs), segments
+        self.K = segments
         dt = settings.dt
         self.N = max(1, int(math.ceil(horizon / dt - 1e-9)))
         self.dt = dt
-        Bd = np.zeros((nu, self.nd))
+        # steps under the disturbance (its `duration`, else the horizon), cut into K pieces; K: none
+        na = self.N if duration is None else min(self.N, max(1, int(math.ceil(duration / dt - 1e-9))))
+        n = np.arange(self.N)
+        self.seg = np.where(n < na, np.minimum((n * self.K) // na, self.K - 1), self.K)
+        step, first, self.nth, self.nd, self.nhold = self._loop(prim, plant_fn, dist_inputs, dt)
+        nx = prim.system.nx
+        x0, t0 = ca.MX.sym("x0", nx), ca.MX.sym("t0")
+        TH, D = ca.MX.sym("theta", self.nth), ca.MX.sym("D", self.nd, self.K)
+        name = f"robust_{prim.digest()[:16]}_{self.N}_{self.K}_{na}"
+        f0 = first(x0, t0, TH, D[:, 0] if self.nd else ca.MX(0, 1))
+        self.nh = f0[0].shape[0] - 1
+        self.nz = step.size1_in(0)
+        jit = (lambda fn: compile_cached(fn, settings.jit_flags)) if settings.jit else (lambda fn: fn)
+        self.first = jit(ca.Function(name + "_first", [x0, t0, TH, D], [ca.vertcat(*f0)]))
+        zc, Dc = ca.MX.sym("z", self.nz), ca.MX.sym("Dc", self.nd, self.CHUNK)
+        zL, outs_c = step.mapaccum("robust_chunk", self.CHUNK)(zc, Dc)
+        self.chunk = jit(ca.Function(name + "_chunk", [zc, Dc], [ca.vertcat(zL[:, -1], ca.vec(outs_c))]))
+        self.grad = None
+        if self.nd and self.nhold == 0:  # reverse mode: the gradient of one weighted sample w'vec(Y) wrt D
+            S = np.zeros((self.K, self.N))
+            on = self.seg < self.K
+            S[self.seg[on], n[on]] = 1.0
+            z0 = ca.vertcat(x0, t0, ca.MX(0), x0, TH)
+            _, outs = step.mapaccum("robust_acc", self.N)(z0, ca.mtimes(D, ca.DM(S)))
+            Y = ca.horzcat(f0[0], outs)  # (nh + 1) x (N + 1)
+            w = ca.MX.sym("w", Y.numel())
+            self.grad = jit(ca.Function(name + "_grad", [x0, t0, TH, D, w],
+                                        [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))]))
+        self._maps: dict[tuple, ca.Function] = {}
+
+    def _loop(self, prim: CompiledPrimitive, plant_fn: ca.Function, dist_inputs: list[int], dt: float):
+        """(step (z, d) -> (z next, [h; RoA margin] at it), first (x0, t0, theta, d) -> ([h; margin],
+        hold), nth, nd, hold size) for z = [x; t; s; x_sw; theta; hold]."""
+        nx, nu = prim.system.nx, prim.system.nu
+        nth, nd = plant_fn.size1_in(2), len(dist_inputs)
+        Bd = np.zeros((nu, nd))
         for k, i in enumerate(dist_inputs):
             Bd[i, k] = 1.0
         x, t, s = ca.SX.sym("x", nx), ca.SX.sym("t"), ca.SX.sym("s")
-        xsw, th, d = ca.SX.sym("xsw", nx), ca.SX.sym("th", self.nth), ca.SX.sym("d", self.nd)
+        xsw, th, d = ca.SX.sym("xsw", nx), ca.SX.sym("th", nth), ca.SX.sym("d", nd)
 
         def f(xx, tt, ss):
             u = prim.control(xx, tt, ss, xsw)[1]
@@ -84,33 +118,9 @@ class RobustRollout:
         out = ca.vertcat(prim.h(xn, t + dt, s + dt, xsw), prim.roa_margin(xn, t + dt))
         z = ca.vertcat(x, t, s, xsw, th)
         step = ca.Function("robust_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th), out])
-        acc = step.mapaccum("robust_acc", self.N)
-        x0, t0 = ca.MX.sym("x0", nx), ca.MX.sym("t0")
-        TH, D = ca.MX.sym("theta", self.nth), ca.MX.sym("D", self.nd, self.K)
-        seg = np.minimum((np.arange(self.N) * self.K) // self.N, self.K - 1)
-        S = np.zeros((self.K, self.N))
-        S[seg, np.arange(self.N)] = 1.0
-        Dfull = ca.mtimes(D, ca.DM(S)) if self.nd else ca.MX(0, self.N)
-        z0 = ca.vertcat(x0, t0, ca.MX(0), x0, TH)
-        _, outs = acc(z0, Dfull)
-        first = ca.vertcat(prim.h(x0, t0, 0, x0), prim.roa_margin(x0, t0))
-        Y = ca.horzcat(first, outs)  # (nh + 1) x (N + 1)
-        name = f"robust_{prim.digest()[:16]}_{self.N}_{self.K}"
-        self.nh = Y.shape[0] - 1
-        self.nz = z.numel()
-        jit = (lambda fn: compile_cached(fn, settings.jit_flags)) if settings.jit else (lambda fn: fn)
-        self.first = jit(ca.Function(name + "_first", [x0, t0], [first]))
-        zc, Dc = ca.MX.sym("z", self.nz), ca.MX.sym("Dc", self.nd, self.CHUNK)
-        zL, outs_c = step.mapaccum("robust_chunk", self.CHUNK)(zc, Dc)
-        self.chunk = jit(ca.Function(name + "_chunk", [zc, Dc], [ca.vertcat(zL[:, -1], ca.vec(outs_c))]))
-        self.seg = seg
-        if self.nd:  # reverse mode: the gradient of one weighted sample w'vec(Y) with respect to D
-            w = ca.MX.sym("w", Y.numel())
-            gf = ca.Function(name + "_grad", [x0, t0, TH, D, w], [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))])
-            self.grad = jit(gf)
-        else:
-            self.grad = None
-        self._maps: dict[tuple, ca.Function] = {}
+        first = ca.Function("robust_first", [x, t, th, d], [ca.vertcat(prim.h(x, t, 0, x), prim.roa_margin(x, t)),
+                                                         ca.SX(0, 1)])
+        return step, first, nth, nd, 0
 
     def _map(self, fn: ca.Function, n: int) -> ca.Function:
         key = (fn.name(), n)
@@ -154,9 +164,12 @@ class RobustRollout:
         n, nh, N, L = len(X0), self.nh, self.N, self.CHUNK
         limit = np.full(n, N) if limit is None else np.minimum(np.asarray(limit, int), N)
         Y = np.full((n, nh + 1, N + 1), np.nan)
-        Y[:, :, 0] = self._call(self.first, n, [X0.T, T0[None, :]]).T
+        D = np.asarray(D, float).reshape(n, self.nd, self.K)
+        f0 = self._call(self.first, n, [X0.T, T0[None, :], self._th(TH, n), self._d(D, n)])
+        Y[:, :, 0] = f0[: nh + 1].T
         last = np.zeros(n, int)
-        Z = np.vstack([X0.T, T0[None, :], np.zeros((1, n)), X0.T, self._th(TH, n)])
+        Z = np.vstack([X0.T, T0[None, :], np.zeros((1, n)), X0.T, self._th(TH, n), f0[nh + 1:]])
+        D = np.concatenate([D, np.zeros((n, self.nd, 1))], axis=2)  # segment K: no disturbance
 
         def hits(y, upto):  # decided within the samples up to index `upto` of y
             k = np.arange(y.shape[2])[None, :] <= upto[:, None]

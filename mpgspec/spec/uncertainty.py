@@ -1,4 +1,7 @@
-"""Spec model of model uncertainty and disturbances, for the robust graph (mpgspec.robust)."""
+"""Spec model of model uncertainty and disturbances, for the robust graph (mpgspec.robust).
+
+Rigid-body systems take the parameters `mass_scale` (every link's mass and inertia times k) and
+`friction` (the feet's Coulomb coefficient), and a push `force` at a frame of the base."""
 from __future__ import annotations
 
 from typing import Annotated
@@ -28,16 +31,41 @@ class ParameterRange(Strict):
         return self
 
 
-class Disturbance(Strict):
-    """Additive disturbance on inputs, |d_i(t)| <= bound, added after saturation."""
+class Force(Strict):
+    """A push: a world-frame force at a frame of a rigid body's base, |F_i| <= bound_i per axis."""
 
-    inputs: list[Text] = Field(min_length=1)
-    bound: Positive | list[Positive] = Field(description="one bound for all inputs or one per input")
+    frame: Text = Field(description="a frame attached to the floating base, e.g. the trunk")
+    bound: tuple[NonNegative, NonNegative, NonNegative] = Field(description="N per world axis x, y, z")
+    duration: Positive | None = Field(default=None, description="seconds after switch-in the push lasts "
+                                                                "(default: the whole horizon)")
+
+    @model_validator(mode="after")
+    def _some_force(self):
+        if not any(self.bound):
+            raise ValueError("bound must be > 0 on at least one axis, got [0, 0, 0]")
+        return self
+
+
+class Disturbance(Strict):
+    """Additive disturbance on inputs, |d_i(t)| <= bound, added after saturation; or a force on a
+    rigid body's base."""
+
+    inputs: list[Text] | None = Field(default=None, min_length=1)
+    bound: Positive | list[Positive] | None = Field(default=None,
+                                                    description="one bound for all inputs or one per input")
+    force: Force | None = None
     segments: int = Field(default=8, ge=1, le=200,
-                          description="piecewise-constant pieces over the horizon for the adversarial search")
+                          description="piecewise-constant pieces over the horizon (or the push) for the "
+                                      "adversarial search")
 
     @model_validator(mode="after")
     def _one_bound_per_input(self):
+        if (self.inputs is None) == (self.force is None):
+            raise ValueError("give either inputs (with bound) or force")
+        if self.inputs is not None and self.bound is None:
+            raise ValueError("inputs need a bound")
+        if self.force is not None and self.bound is not None:
+            raise ValueError("a force takes its bound inside force: {frame, bound: [x, y, z]}")
         if isinstance(self.bound, list) and len(self.bound) != len(self.inputs):
             raise ValueError(f"bound needs one value per input ({len(self.inputs)}), got {len(self.bound)}")
         return self
@@ -59,3 +87,6 @@ class Uncertainty(Strict):
     runs: int = Field(default=8, ge=0, le=1000,
                       description="seeded runs of the goal sequence under sampled uncertainty, per mode")
     seed: int = 0
+    nodes: list[Text] | None = Field(default=None, min_length=1,
+                                     description="primitives whose edges among each other are re-checked "
+                                                 "(default: all); the robust graph has only these")

@@ -108,6 +108,10 @@ class ContactDynamics:
     @cached_property
     def solution(self) -> tuple[ca.SX, ca.SX]:
         """(a, lam) as SX expressions of (dyn.q, dyn.v, self.u)."""
+        return self.solve(self.tau_expr)
+
+    def solve(self, tau: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """(a, lam) under the generalized force tau (B u, plus any external force mapped by J^T)."""
         dyn = self.dyn
         J = self.jacobian_expr
         drift = dyn.contact_drift_expr(self.contacts) if self.contacts else ca.SX(0, 1)
@@ -115,8 +119,7 @@ class ContactDynamics:
         if self.baumgarte is not None and self.contacts:
             positions = ca.horzcat(*[dyn.tree.frame_position(n) for n in self.contacts])
             gamma = contact_acceleration_target(J, dyn.v, positions, self.baumgarte)
-        return solve_contact(dyn.M_expr, dyn.nle_expr, self.tau_expr, J, drift, self.parents,
-                             gamma)
+        return solve_contact(dyn.M_expr, dyn.nle_expr, tau, J, drift, self.parents, gamma)
 
     def _fun(self, name: str, inputs: list, in_names: list, outputs: list,
              out_names: list) -> ca.Function:

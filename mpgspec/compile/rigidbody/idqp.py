@@ -36,6 +36,26 @@ def _profile_acc(s, duration, p0, v0, pf, vf):
     return pos, vel, acc
 
 
+def _com_target(sys, x, com, x_sw, x_star):
+    """The CoM goal: the setpoint's CoM height, and its horizontal place relative to the feet
+    carried to where the feet stand at switch-in (rotated by the trunk's yaw then). On flat
+    ground Stand is so invariant under the ground symmetry (x, y, yaw) that E leaves free; the
+    setpoint's absolute x, y would pull a robot that walked away back across the floor."""
+    feet = sys.model.contact_frames
+    if not feet or not sys.model.n_base:
+        return ca.Function("com_abs", [x], [com])(x_star)
+    cx = sum(sys.extra_env[f"{f}_x"] for f in feet) / len(feet)
+    cy = sum(sys.extra_env[f"{f}_y"] for f in feet) / len(feet)
+    qx, qy, qz, qw = (x[i] for i in range(3, 7))
+    yaw = ca.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy**2 + qz**2))
+    geo = ca.Function("feet_com", [x], [ca.vertcat(cx, cy), com, yaw])
+    c_sw, _, yaw_sw = geo(x_sw)
+    c_st, com_st, yaw_st = geo(x_star)
+    d = yaw_sw - yaw_st
+    R = ca.vertcat(ca.horzcat(ca.cos(d), -ca.sin(d)), ca.horzcat(ca.sin(d), ca.cos(d)))
+    return ca.vertcat(c_sw + ca.mtimes(R, com_st[:2] - c_st), com_st[2])
+
+
 def idqp_law(c, ctx: ControlContext) -> ca.Function:
     """k(x, t, s, x_sw) = the torque part of the ID-QP solution, as a Function callable in MX."""
     sys = ctx.sys
@@ -62,7 +82,7 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
     drift_c = ca.jtimes(comdot, q, qd)
     com_fn = ca.Function("com", [x], [com, comdot])
     y0, y0dot = com_fn(ctx.x_sw)
-    yf, _ = com_fn(ctx.x_star)
+    yf = _com_target(sys, x, com, ctx.x_sw, ctx.x_star)
     kp, kd = ca.DM(c.kp), ca.DM(c.kd)
     yd, yd_dot, yd_acc = _profile_acc(ctx.s, c.profile_duration, y0, y0dot, yf, ca.DM.zeros(3))
     a_d = yd_acc - kp * (com - yd) - kd * (comdot - yd_dot)
@@ -153,8 +173,7 @@ def _no_inequality_active(Aq, Q, sigma: float, gqp, A_con, con, A_fc, lbx, ubx, 
     Hr = 2 * (ca.mtimes([AT.T, Q, AT]) + sigma * ca.mtimes(T.T, T))
     gr = ca.mtimes(T.T, 2 * (ca.mtimes([Aq.T, Q, Aw0]) + sigma * w0) + gqp)
     w = w0 + ca.mtimes(T, -dense_ldl_solve(Hr, gr))
-    lo, hi = np.isfinite(lbx), np.isfinite(ubx)
-    slack = ca.vertcat(w[np.flatnonzero(lo).tolist()] - ca.DM(lbx[lo]), ca.DM(ubx[hi]) - w[np.flatnonzero(hi).tolist()],
-                       -ca.mtimes(A_fc, w))
+    lo, hi = np.flatnonzero(np.isfinite(lbx)).tolist(), np.flatnonzero(np.isfinite(ubx)).tolist()
+    slack = ca.vertcat(w[lo] - ca.DM(lbx[lo]), ca.DM(ubx[hi]) - w[hi], -ca.mtimes(A_fc, w))
     ok = ca.sum1(slack >= 0) + ca.sum1(ca.fabs(w) < ca.inf) == slack.shape[0] + nw  # NaN fails both
     return w, ok

@@ -22,7 +22,7 @@ from .constrained import Baumgarte, ContactDynamics
 from .dynamics import RigidBodyDynamics
 from .frames import center_of_mass
 from .linalg import dense_ldl_solve
-from .liegroup import normalize_quaternion, qdot
+from .liegroup import normalize_quaternion, qdot, quat_to_rotation
 from .model import RigidBodyModel, find_urdf
 
 BASE_Q = ["base_x", "base_y", "base_z", "base_qx", "base_qy", "base_qz", "base_qw"]
@@ -197,6 +197,32 @@ class RigidBodyCompiledSystem(CompiledSystem):
                 out[self.state_names.index(f"contact_{f}")] = float(f in contacts)
         return out
 
+    def base_frames(self) -> list[str]:
+        """Frames rigidly attached to the floating base (where a push on the trunk may act)."""
+        return [f.name for f in self.model.frames if self.model.n_base and f.joint == 0]
+
+    def uncertain_plant(self, contacts: tuple[str, ...], frame: str) -> ca.Function:
+        """(x, u, k, F) -> (xdot, lam): the dynamics holding `contacts` with every link's mass and
+        inertia scaled by k and a world-frame force F at `frame` (attached to the base).
+
+        k M a + k H = B u + J_f^T F + J^T lam is M a + H = (B u + J_f^T F) / k + J^T (lam / k): the
+        nominal dynamics under the generalized force divided by k, with the ground forces k times the
+        nominal solution's. With the base twist in the base frame, J_f^T F = [R^T F; p x R^T F; 0]
+        for the frame at p in the base frame.
+        """
+        m = self.model
+        k, F = ca.SX.sym("k"), ca.SX.sym("F", 3)
+        fr = m.frame(frame)
+        xq, xv = self.x[:m.nq], self.x[m.nq:m.nq + m.nv]
+        cd = ContactDynamics(self.dyn, contacts, self.baumgarte)
+        f_base = ca.mtimes(quat_to_rotation(self.dyn.q[3:7]).T, F)
+        w = ca.vertcat(f_base, ca.cross(ca.DM(fr.translation), f_base), ca.DM.zeros(m.nv - 6))
+        a, lam = cd.solve((cd.tau_expr + w) / k)
+        a, lam = ca.substitute([a, lam], [self.dyn.q, self.dyn.v, cd.u], [xq, xv, self.u])
+        xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(self.nx - m.nq - m.nv))
+        return ca.Function("uncertain_plant", [self.x, self.u, k, F], [xdot, k * lam], ["x", "u", "k", "F"],
+                           ["xdot", "lam"])
+
     def _when_in_contact(self, frame: str, h: ca.SX, mode: dict | None = None) -> ca.SX:
         """A contact condition binds only while the foot is held: by the scheduled mode, or with
         contact events while the foot's flag is set."""
@@ -249,16 +275,20 @@ class RigidBodyCompiledSystem(CompiledSystem):
         elif name == "no_slip":  # lambda in the friction cone, lambda_z >= 0
             forces = loop_env if loop_env is not None else self.open_loop(list(contacts)).env
             for f in contacts:
-                fx, fy, fz = (forces[f"{f}_f{a}"] for a in "xyz")
-                out += [(f"normal_force[{f}]", self._when_in_contact(f, fz, mode)),
-                        (f"friction_cone[{f}]", self._when_in_contact(
-                            f, self.friction * fz - ca.sqrt(fx**2 + fy**2 + 1e-12), mode))]
+                normal, cone = no_slip(*(forces[f"{f}_f{a}"] for a in "xyz"), self.friction)
+                out += [(f"normal_force[{f}]", self._when_in_contact(f, normal, mode)),
+                        (f"friction_cone[{f}]", self._when_in_contact(f, cone, mode))]
         elif name == "aerial":  # C_aerial: no foot below the ground
             for f in m.contact_frames:  # a foot resting on the ground sits at 0 up to the contact drift
                 out.append((f"above_ground[{f}]", env[f"{f}_z"] + tol))
         else:
             raise KeyError(name)
         return out
+
+
+def no_slip(fx, fy, fz, mu) -> tuple:
+    """(lambda_z, mu lambda_z - ||lambda_t||): the ground force pushes and stays in the friction cone."""
+    return fz, mu * fz - ca.sqrt(fx**2 + fy**2 + 1e-12)
 
 
 def _urdf_path(spec, urdf: str) -> Path:

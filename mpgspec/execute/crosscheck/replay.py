@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...compile.events import NEVER, happened
 from ...compile.primitive import INACTIVE, CompiledPrimitive
 from .mjcf import MujocoRobot
 from .settings import CrossCheckSettings
@@ -52,6 +53,28 @@ def held_feet(p: CompiledPrimitive, clock: float) -> tuple[str, ...] | None:
     return tuple(p.info.get("contacts", p.system.model.contact_frames))
 
 
+class _Events:
+    """The contact flags and event clocks of a system with contact events, kept from MuJoCo's contacts
+    as mpgspec keeps them (mpgspec.compile.events): a clock is set to 0 when its event first happens
+    after switch-in and advances at rate 1 (at rest at NEVER)."""
+
+    def __init__(self, x0: np.ndarray, n0: int, n_feet: int):
+        self.flags = np.asarray(x0[n0:n0 + n_feet], float) > 0.5
+        self.tau = np.array(x0[n0 + n_feet:], float)  # first_touchdown, takeoff (ContactEvent's order)
+
+    def extra(self) -> np.ndarray:
+        return np.concatenate([self.flags.astype(float), self.tau])
+
+    def advance(self, touching: np.ndarray, s: float, dt: float) -> None:
+        """After a control period ending s after switch-in, with the feet touching as given."""
+        self.tau = np.where(self.tau < NEVER, self.tau + dt, self.tau)
+        now = [bool(np.any(touching & ~self.flags)), bool(self.flags.any() and not touching.any())]
+        for k, e in enumerate(now[: len(self.tau)]):
+            if e and not bool(happened(self.tau[k], s)):
+                self.tau[k] = 0.0
+        self.flags = touching.copy()
+
+
 class _Sim:
     """MuJoCo's model and data with the reads a replay needs."""
 
@@ -62,6 +85,7 @@ class _Sim:
         self.m, self.d = robot.model, mujoco.MjData(robot.model)
         self.root = 1 if robot.model.nbody > 1 else 0  # the robot's root link: its subtree is the robot
         self._vel = np.zeros(6)
+        self.events: _Events | None = None
 
     def set(self, x: np.ndarray) -> None:
         self.d.qpos[:], self.d.qvel[:] = self.robot.state.to_mujoco(x)
@@ -82,8 +106,8 @@ class _Sim:
         return bool(np.isin(pairs, self.robot.trunk_geoms).any()) if len(self.robot.trunk_geoms) else False
 
     def state(self) -> np.ndarray:
-        flags = self.touching().astype(float) if self.robot.state.nx > self.robot.state.nq + self.robot.state.nv else None
-        return self.robot.state.from_mujoco(self.d.qpos, self.d.qvel, flags)
+        extra = self.events.extra() if self.events is not None else None
+        return self.robot.state.from_mujoco(self.d.qpos, self.d.qvel, extra)
 
     def slip(self, k: int, radius: float) -> float:
         """Horizontal speed of the lowest point of foot k's sphere (zero when it rolls or pivots)."""
@@ -112,6 +136,9 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
     p, clock0 = prims[first["to"]], float(first["clock"])
     x0 = p.x_star(clock0)
     sim.set(x0)
+    sm = robot.state
+    if sm.nx > sm.nq + sm.nv:
+        sim.events = _Events(x0, sm.nq + sm.nv, len(robot.feet))
     settled = all(sim.step(_evaluate(p, sim.state(), clock0, 0.0, x0)[1], n_sub)
                   for _ in range(int(round(settings.settle * rate))))
     x = sim.state()
@@ -150,6 +177,8 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
         if not sim.step(u, n_sub):
             out.safe, out.failed = False, f"the simulator diverged after t = {t:.3f} s in {p.name}"
             break
+        if sim.events is not None:
+            sim.events.advance(sim.touching(), t + 1.0 / rate - t_sw, 1.0 / rate)
     out.contact = contact
     out.wall_s = time.perf_counter() - t_wall
     return out

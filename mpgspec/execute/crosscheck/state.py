@@ -1,8 +1,8 @@
 """mpgspec's state x <-> MuJoCo's (qpos, qvel).
 
 mpgspec (pinocchio's conventions): x = [p, quat (x, y, z, w), q_joints, v_base, w_base, qdot_joints,
-contact flags], with v_base and w_base the base's linear and angular velocity in the base frame.
-MuJoCo's free joint: qpos = [p, quat (w, x, y, z)], qvel = [v in the world frame, w in the body
+contact flags, event clocks], with v_base and w_base the base's linear and angular velocity in the
+base frame. MuJoCo's free joint: qpos = [p, quat (w, x, y, z)], qvel = [v in the world frame, w in the body
 frame]; joints in the URDF's tree order, matched here by name. So v_mujoco = R v_base,
 w_mujoco = w_base, with R the base's rotation (body to world).
 """
@@ -80,8 +80,9 @@ class StateMap:
         qvel[self.dof] = x[nq + bv:nq + self.nv]
         return qpos, qvel
 
-    def from_mujoco(self, qpos, qvel, flags=None) -> np.ndarray:
-        """mpgspec's state of (qpos, qvel); the contact flags (systems with contact events) given."""
+    def from_mujoco(self, qpos, qvel, extra=None) -> np.ndarray:
+        """mpgspec's state of (qpos, qvel); the states after them (contact flags and event clocks of
+        systems with contact events) given as `extra`."""
         qpos, qvel = np.asarray(qpos, float), np.asarray(qvel, float)
         x = np.zeros(self.nx)
         bq, bv, nq = self.n_base_q, self.n_base_v, self.nq
@@ -93,6 +94,6 @@ class StateMap:
             x[nq + 3:nq + 6] = qvel[d + 3:d + 6]
         x[bq:nq] = qpos[self.qpos]
         x[nq + bv:nq + self.nv] = qvel[self.dof]
-        if flags is not None:
-            x[nq + self.nv:] = flags
+        if extra is not None:
+            x[nq + self.nv:] = extra
         return x
