@@ -22,11 +22,12 @@ import numpy as np
 from ..check.assertions import AssertionResult, evaluate_assertions
 from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
+from .rigid import RigidRobustRollout
 from .rollout import RobustRollout, judge, plant
 from .sequence import sequence_under_uncertainty
 
 LABEL = "empirical"
-RECORD = 2
+RECORD = 3
 """Layout of the memoised robust record (part of its key)."""
 NOTE = ("falsification, not proof: a robust edge withstood every scenario tried (parameter-box corners, seeded "
         "samples and an adversarial disturbance search); no certificate backs it")
@@ -52,12 +53,13 @@ class RobustResult:
                 "timing": self.timing}
 
 
-def _scenarios(unc, sys, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+def _scenarios(unc, sys, rng: np.random.Generator, nominal: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                           list[str]]:
     """(theta (S, P), start error (S, nx), disturbance sign (S,), kind) of every scenario of a cell."""
     names = list(unc.parameters)
     lo = [unc.parameters[n].range[0] for n in names]
     hi = [unc.parameters[n].range[1] for n in names]
-    nom = [sys.parameters[n] for n in names]
+    nom = [nominal[n] for n in names]
     states = [sys.state_names.index(s) for s in unc.initial_state]
     eb = [float(unc.initial_state[s]) for s in unc.initial_state]
     lo, hi = np.array(lo + [-b for b in eb], float), np.array(hi + eb, float)
@@ -112,22 +114,40 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
     known = memo.get(key) if memo is not None else None
     if known is not None:
         edges = known["edges"]
-        rg = _robust_graph(g, edges)
+        rg = _robust_graph(g, edges, unc.nodes)
         return RobustResult(rg, edges, _assertions(unc, rg), known["scenarios"],
                             {"robust_s": time.perf_counter() - t0, "robust_cache_hit": 1.0}, known["sequence"])
     sys = next(iter(prims.values())).system
     names = list(unc.parameters)
-    P = plant(spec, names)
     dist = unc.disturbance
-    dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
-    bound = (np.broadcast_to(np.asarray(dist.bound, float), (len(dist_idx),)).copy() if dist is not None
-             else np.zeros(0))
+    force = dist.force if dist is not None else None
+    if sys.is_rigid_body:
+        nominal_values = {"mass_scale": 1.0, "friction": float(sys.friction)}
+        frame = force.frame if force is not None else sys.base_frames()[0]
+        dist_names = [f"force_{a}" for a in "xyz"] if force is not None else []
+        bound = np.asarray(force.bound, float) if force is not None else np.zeros(0)
+
+        def rollout(B, horizon):
+            return RigidRobustRollout(B, names, frame, force is not None, K, settings, horizon,
+                                      force.duration if force is not None else None)
+    else:
+        nominal_values = dict(sys.parameters)
+        P = plant(spec, names)
+        dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
+        dist_names = list(dist.inputs) if dist is not None else []
+        bound = (np.broadcast_to(np.asarray(dist.bound, float), (len(dist_idx),)).copy() if dist is not None
+                 else np.zeros(0))
+
+        def rollout(B, horizon):
+            return RobustRollout(B, P, dist_idx, K, settings, horizon)
     K = dist.segments if dist is not None else 1
     rng = np.random.default_rng(unc.seed)
-    TH, ERR, SG, KIND = _scenarios(unc, sys, rng)
+    TH, ERR, SG, KIND = _scenarios(unc, sys, rng, nominal_values)
     S = len(TH)
     tol = settings.h_tolerance
-    nominal = {k: tr for k, tr in g.transitions.items() if tr.cls is not TransitionClass.NONE}
+    among = set(unc.nodes) if unc.nodes is not None else set(prims)
+    nominal = {(a, b): tr for (a, b), tr in g.transitions.items()
+               if tr.cls is not TransitionClass.NONE and a in among and b in among}
     edges, n_roll, build_s = [], 0, 0.0
     by_target: dict[str, list] = {}
     for (a, b), tr in nominal.items():
@@ -144,14 +164,14 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                 cells.append((a, tr, i, j, prims[a].x_star(float(tr.t_A[i])), float(tb)))
         hz = B.horizons(settings.horizon, [c[5] for c in cells])
         tb0 = time.perf_counter()
-        rr = RobustRollout(B, P, dist_idx, K, settings, float(hz.max()))
+        rr = rollout(B, float(hz.max()))
         build_s += time.perf_counter() - tb0
         nsteps = np.minimum(np.ceil(hz / settings.dt - 1e-9).astype(int), rr.N)
         C = len(cells)
         X0 = np.concatenate([c[4][None, :] + ERR for c in cells])
         T0 = np.repeat([c[5] for c in cells], S)
         THb = np.tile(TH, (C, 1))
-        D = np.tile((SG[:, None, None] * bound[None, :, None]) * np.ones((1, len(dist_idx), K)), (C, 1, 1))
+        D = np.tile((SG[:, None, None] * bound[None, :, None]) * np.ones((1, len(bound), K)), (C, 1, 1))
         Y, last = rr.run(X0, T0, THb, D, np.repeat(nsteps, S), tol)
         n_roll += len(X0)
         res = [judge(Y[r, :-1], Y[r, -1], int(min(nsteps[r // S], last[r])), tol) for r in range(len(X0))]
@@ -164,7 +184,7 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                           "all_safe": all(res[q][0] for q in rs), "Y": Y[r]})
         for _ in range(unc.search if dist is not None else 0):
             live = [c for c in range(C) if worst[c]["all_safe"]]
-            if not live:
+            if not live or rr.grad is None:
                 break
             targets = []  # per live cell: the binding h sample before entry, and the RoA margin at entry
             for c in live:
@@ -199,7 +219,7 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                                "initial_error": {s: float(w["err"][sys.state_names.index(s)])
                                                  for s in unc.initial_state},
                                "disturbance": {u: [float(v) for v in w["D"][k]] for k, u in enumerate(
-                                   dist.inputs)} if dist is not None else {}},
+                                   dist_names)}},
                 "_ij": (i, j)})
         for a, tr in items:
             checked = per_edge.get(a, [])
@@ -211,11 +231,14 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                                                                    **worst["worst_case"]},
                           "cells": {"row": [int(c["_ij"][0]) for c in checked],  # t_A rows, at the nominal best t_B
                                     "robust_safe": [int(c["robust_safe"]) for c in checked], "worst_margin": margins}})
-    rg = _robust_graph(g, edges)
+    rg = _robust_graph(g, edges, unc.nodes)
     scen = {"per_cell": S, "corners": KIND.count("corner"), "samples": unc.samples, "search_rounds": unc.search,
             "disturbance_segments": K, "parameters": {n: list(unc.parameters[n].range) for n in names},
             "initial_state": dict(unc.initial_state),
-            "disturbance": {"inputs": list(dist.inputs), "bound": bound.tolist()} if dist is not None else None,
+            "disturbance": None if dist is None else {"inputs": list(dist.inputs), "bound": bound.tolist()}
+            if force is None else {"force": {"frame": force.frame, "bound": bound.tolist(),
+                                             "duration": force.duration}},
+            "nodes": sorted(among),
             "seed": unc.seed, "cells_per_edge": unc.cells}
     t1 = time.perf_counter()
     seq = None
@@ -241,10 +264,11 @@ def _assertions(unc, rg: MotionPrimitiveGraph) -> list[AssertionResult]:
     return checks
 
 
-def _robust_graph(g: MotionPrimitiveGraph, edges: list[dict]) -> MotionPrimitiveGraph:
-    """The nominal graph with each edge's transition cut to its robust cells; fills each edge record's
-    robust class, windows and weights."""
-    trs = dict(g.transitions)
+def _robust_graph(g: MotionPrimitiveGraph, edges: list[dict], nodes: list[str] | None = None) -> MotionPrimitiveGraph:
+    """The nominal graph (on `nodes` only, when given) with each edge's transition cut to its robust
+    cells; fills each edge record's robust class, windows and weights."""
+    keep = set(g.G.nodes) if nodes is None else set(nodes)
+    trs = {k: tr for k, tr in g.transitions.items() if k[0] in keep and k[1] in keep}
     for e in edges:
         tr = g.transitions[(e["from"], e["to"])]
         ok = {(i, int(np.argmin(np.abs(tr.t_B - tr.best_t_B[i]))))
@@ -256,4 +280,4 @@ def _robust_graph(g: MotionPrimitiveGraph, edges: list[dict]) -> MotionPrimitive
         trs[(e["from"], e["to"])] = rt
         e.update(robust_class=int(rt.cls), survives=rt.cls is not TransitionClass.NONE, cells_robust=len(ok),
                  robust_windows=[list(w) for w in rt.windows], robust_weights=dict(rt.weights))
-    return MotionPrimitiveGraph({n: dict(g.G.nodes[n]) for n in g.G.nodes}, trs)
+    return MotionPrimitiveGraph({n: dict(g.G.nodes[n]) for n in g.G.nodes if n in keep}, trs)

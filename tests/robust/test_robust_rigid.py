@@ -1,0 +1,199 @@
+"""Robust edges of a rigid body (the A1's Lie and Stand): mass scale, friction, a push on the trunk."""
+from __future__ import annotations
+
+import dataclasses
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from mpgspec import api
+from mpgspec.compile.rigidbody.system import no_slip
+from mpgspec.errors import SpecErrors
+from mpgspec.robust.check import check_uncertainty, check_uncertainty_compiled
+from mpgspec.robust.graph import robust_stage
+from mpgspec.robust.rigid import RigidRobustRollout, no_slip_rows
+from mpgspec.robust.rollout import judge
+from mpgspec.spec.loader import load_project
+
+A1 = Path(__file__).resolve().parents[2] / "specs" / "a1"
+PEND = Path(__file__).resolve().parents[2] / "specs" / "pendulum"
+
+
+def _lie_stand(spec):
+    return dataclasses.replace(spec, primitives=[p for p in spec.primitives if p.name in ("Lie", "Stand")])
+
+
+@pytest.fixture(scope="module")
+def built():
+    spec = _lie_stand(load_project(A1 / "project.yaml"))
+    return api.build(spec, api.settings_for(spec))
+
+
+@pytest.fixture(scope="module")
+def system(built):
+    return built[0].prims["Stand"].system
+
+
+def _random_state(sys, rng):
+    m = sys.model
+    q = m.random_configuration(rng)
+    v = rng.normal(size=m.nv)
+    return q, v, np.concatenate([q, v])
+
+
+def _scaled(model: pin.Model, k: float) -> pin.Model:
+    mk = model.copy()
+    for i in range(1, mk.njoints):
+        y = mk.inertias[i]
+        mk.inertias[i] = pin.Inertia(k * y.mass, y.lever, k * y.inertia)
+    return mk
+
+
+def test_mass_scale_is_the_nominal_dynamics_under_tau_over_k(system):
+    rng = np.random.default_rng(3)
+    m = system.model
+    model, k = m.pin_model, 1.07
+    mk = _scaled(model, k)
+    q, v, x = _random_state(system, rng)
+    u = rng.normal(size=m.nu) * 5
+    tau = m.actuation_matrix @ u
+    a_scaled = pin.aba(mk, mk.createData(), q, v, tau)
+    assert np.allclose(a_scaled, pin.aba(model, model.createData(), q, v, tau / k), atol=1e-9)
+    aerial = system.uncertain_plant((), "trunk")
+    xdot = np.array(aerial(x, u, k, np.zeros(3))[0]).ravel()
+    assert np.allclose(xdot[m.nq:], a_scaled, atol=1e-8)
+    held = system.uncertain_plant(tuple(m.contact_frames), "trunk")  # ground forces scale with k
+    _, lam_k = held(x, u, k, np.zeros(3))
+    _, lam_1 = held(x, u / k, 1.0, np.zeros(3))
+    assert np.allclose(np.array(lam_k), k * np.array(lam_1), atol=1e-8)
+
+
+def test_push_changes_the_base_acceleration_by_its_generalized_force(system):
+    rng = np.random.default_rng(5)
+    m = system.model
+    model, data = m.pin_model, m.pin_model.createData()
+    q, v, x = _random_state(system, rng)
+    u, F = rng.normal(size=m.nu), np.array([20.0, -12.0, 5.0])
+    aerial = system.uncertain_plant((), "trunk")
+    da = (np.array(aerial(x, u, 1.0, F)[0]) - np.array(aerial(x, u, 1.0, np.zeros(3))[0])).ravel()[m.nq:]
+    R = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()
+    fext = [pin.Force.Zero() for _ in range(model.njoints)]
+    p = m.frame("trunk").translation
+    fext[1] = pin.Force(R.T @ F, np.cross(p, R.T @ F))  # at the trunk, in the base joint's frame
+    tau = m.actuation_matrix @ u
+    ref = pin.aba(model, data, q, v, tau, fext) - pin.aba(model, data, q, v, tau)
+    assert np.allclose(da, ref, atol=1e-9)
+    pin.centerOfMass(model, data, q, np.zeros(m.nv), da)  # the centre of mass accelerates by F / m
+    assert np.allclose(data.acom[0] * m.total_mass, F, atol=1e-8)
+    a_k = (np.array(aerial(x, u, 1.1, F)[0]) - np.array(aerial(x, u, 1.1, np.zeros(3))[0])).ravel()[m.nq:]
+    assert np.allclose(a_k, da / 1.1, atol=1e-9)  # a heavier robot is pushed less
+
+
+def test_friction_reaches_the_cone_function_with_the_plants_ground_forces(built):
+    cp, vg = built
+    stand, lie = cp.prims["Stand"], cp.prims["Lie"]
+    rr = RigidRobustRollout(stand, ["mass_scale", "friction"], "trunk", True, 4, cp.settings, 2.5, 0.2)
+    x0 = lie.x_star(0.0)
+    rows = no_slip_rows(stand)
+    assert sorted(k for _, k in rows.values()) == [0] * 4 + [1] * 4
+    F = np.array([7.5, -7.5, 0.0])
+    y = {mu: np.array(rr.first(x0, 0.0, [1.1, mu], np.tile(F[:, None], (1, 4)))).ravel() for mu in (0.4, 0.8)}
+    sys = stand.system
+    u = np.clip(y[0.4][rr.nh + 2:rr.nh + 2 + sys.nu], sys.u_lo, sys.u_hi)  # after [h; margin; c]: the held input
+    lam = np.array(rr.plant_fn(x0, u, 1.1, F)[1]).ravel()
+    for j, (foot, kind) in rows.items():
+        fx, fy, fz = lam[3 * foot:3 * foot + 3]
+        for mu in (0.4, 0.8):
+            assert y[mu][j] == pytest.approx(float(no_slip(fx, fy, fz, mu)[kind]), abs=1e-9)
+        assert y[0.8][j] - y[0.4][j] == pytest.approx(0.4 * fz if kind else 0.0, abs=1e-9)
+    others = [j for j in range(len(stand.h_names)) if j not in rows]
+    assert np.allclose(y[0.4][others], y[0.8][others])
+    # the nominal scenario is the oracle's rollout
+    Y, last = rr.run(x0[None], np.zeros(1), np.array([[1.0, 0.6]]), np.zeros((1, 3, 4)))
+    ok, margin, k = judge(Y[0, :-1], Y[0, -1], int(last[0]), 0.0)
+    ev = vg.graph.edge("Lie", "Stand").evidence[0][0]
+    assert ok and ev.verdict == 1 and k * cp.settings.dt == pytest.approx(ev.t_enter, abs=0.01)
+
+
+def test_a1_robust_lie_stand_reports_worst_cases(built):
+    rob = robust_stage(*built)
+    d = rob.to_dict()
+    edges = {(e["from"], e["to"]): e for e in d["edges"]}
+    assert set(edges) == {("Lie", "Stand"), ("Stand", "Lie")} and d["scenarios"]["nodes"] == ["Lie", "Stand"]
+    up, down = edges[("Lie", "Stand")], edges[("Stand", "Lie")]
+    assert not up["survives"] and up["worst_margin"] < 0  # Stand settles outside E with the mass 10 % off
+    assert up["worst_case"]["parameters"]["mass_scale"] in (0.9, 1.1)
+    assert down["survives"] and down["robust_class"] == 1 and down["worst_margin"] >= 0
+    assert max(abs(v) for v in down["worst_case"]["disturbance"]["force_x"]) <= 7.5
+    assert d["scenarios"]["disturbance"]["force"] == {"frame": "trunk", "bound": [7.5, 7.5, 0.0], "duration": 0.2}
+    assert all(a.status == "pass" for a in rob.assertions), [a.message for a in rob.assertions]
+    assert set(rob.graph.nodes) == {"Lie", "Stand"} and rob.graph.edge("Stand", "Lie") is not None
+
+
+def _a1_with(tmp_path: Path, block: str) -> Path:
+    dst = tmp_path / "a1"
+    shutil.copytree(A1, dst)
+    text = (dst / "project.yaml").read_text()
+    (dst / "project.yaml").write_text(text[: text.index("\nuncertainty:")] + "\n" + block)
+    return dst / "project.yaml"
+
+
+BASE = "uncertainty:\n  nodes: [Lie, Stand]\n  search: 0\n  runs: 0\n"
+
+
+@pytest.mark.parametrize("block, key, hint", [
+    (BASE + "  parameters: {mass_scal: {range: [0.9, 1.1]}}\n", "uncertainty.parameters.mass_scal",
+     "did you mean 'mass_scale'"),
+    (BASE + "  parameters: {friction: {nominal: 0.5, range: [0.4, 0.8]}}\n", "uncertainty.parameters.friction.nominal",
+     ""),
+    (BASE + "  parameters: {mass_scale: {range: [1.05, 1.1]}}\n", "uncertainty.parameters.mass_scale.range", ""),
+    ("uncertainty:\n  nodes: [Lie, Stnd]\n  search: 0\n  runs: 0\n", "uncertainty.nodes.1", "did you mean 'Stand'"),
+    (BASE + "  assertions:\n    - edge: {from: Stand, to: Walk(fast)}\n", "uncertainty.assertions.0.edge.to", ""),
+    ("uncertainty:\n  nodes: [Lie, Stand]\n  runs: 0\n  disturbance: {force: {frame: trunk, bound: [5, 5, 0]}}\n",
+     "uncertainty.search", ""),
+    (BASE.replace("  runs: 0\n", ""), "uncertainty.runs", ""),
+    (BASE + "  disturbance: {inputs: [tau_FL_hip_joint], bound: 1}\n", "uncertainty.disturbance.inputs", ""),
+])
+def test_rigid_uncertainty_names_are_checked_with_located_errors(tmp_path, block, key, hint):
+    spec = load_project(_a1_with(tmp_path, block))
+    with pytest.raises(SpecErrors) as ei:
+        check_uncertainty(spec)
+    err = ei.value.errors[0]
+    assert err.key.startswith(key) and err.location.line > 0 and str(err.location.file).endswith("project.yaml")
+    assert hint in err.hint
+
+
+def test_push_frame_and_node_kinds_are_checked_once_compiled(tmp_path, built):
+    spec = load_project(_a1_with(tmp_path, BASE + "  disturbance: {force: {frame: trunkk, bound: [5, 5, 0]}}\n"))
+    with pytest.raises(SpecErrors) as ei:
+        check_uncertainty_compiled(spec, built[0].prims)
+    err = ei.value.errors[0]
+    assert err.key == "uncertainty.disturbance.force.frame" and "did you mean 'trunk'" in err.hint
+    assert err.location.line > 0
+
+
+@pytest.mark.parametrize("block, what", [
+    ("uncertainty:\n  disturbance: {force: {frame: trunk, bound: [0, 0, 0]}}\n", "at least one axis"),
+    ("uncertainty:\n  disturbance: {force: {frame: trunk, bound: [5, 5]}}\n", "bound"),
+    ("uncertainty:\n  disturbance: {force: {frame: trunk, bound: [5, 5, 0]}, bound: 3}\n", "inside force"),
+    ("uncertainty:\n  disturbance: {segments: 3}\n", "either inputs"),
+])
+def test_force_structure_errors(tmp_path, block, what):
+    with pytest.raises(SpecErrors) as ei:
+        load_project(_a1_with(tmp_path, block))
+    text = ei.value.errors[0].format()
+    assert "uncertainty" in text and what in text and "project.yaml:" in text
+
+
+def test_a_push_needs_a_rigid_body(tmp_path):
+    dst = tmp_path / "pendulum"
+    shutil.copytree(PEND, dst)
+    text = (dst / "project.yaml").read_text()
+    block = "uncertainty:\n  disturbance: {force: {frame: trunk, bound: [1, 0, 0]}}\n"
+    (dst / "project.yaml").write_text(text[: text.index("uncertainty:")] + block)
+    with pytest.raises(SpecErrors) as ei:
+        check_uncertainty(load_project(dst / "project.yaml"))
+    assert ei.value.errors[0].key == "uncertainty.disturbance.force"
