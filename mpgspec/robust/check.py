@@ -96,7 +96,8 @@ def check_uncertainty(spec: ProjectSpec) -> None:
         base = ("assertions", i)
         refs = node_refs(a)
         for name, where in refs or ():
-            among, what = (nodes, "unknown primitive") if name not in nodes else (chosen, "primitive not in uncertainty.nodes")
+            among, what = ((nodes, "unknown primitive") if name not in nodes
+                           else (chosen, "primitive not in uncertainty.nodes"))
             node(name, base + where, ".".join(map(str, base + where)), among, what)
         if refs is None:
             _err(errors, "this assertion does not apply to the robust graph", loc(*base), f"assertions.{i}",

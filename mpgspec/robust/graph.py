@@ -1,11 +1,12 @@
 """The robust graph: each nominal edge's switch cells re-run under the project's uncertainty.
 
-For every nominal transition A -> B, up to `cells` t_A rows that have a verified t_B are taken
-(the t_B the plan would switch in at). Each such cell is run for a set of scenarios: the corners
-of the box of uncertain parameters and start errors (at most `corners` of them, seeded), its
-centre, `samples` seeded random points, each with the disturbance at 0, +bound and -bound; then
-`search` rounds of an adversarial bang-bang disturbance from the worst scenario (the sign of the
-gradient, through CasADi, of the binding h sample before entry and of the RoA margin at entry).
+For every nominal transition A -> B (among `nodes`, when given), up to `cells` t_A rows that have
+a verified t_B are taken (the t_B the plan would switch in at). Each such cell is run for a set of
+scenarios: the corners of the box of uncertain parameters and start errors (at most `corners` of
+them, seeded), its centre, `samples` seeded random points, each with the disturbance at 0, +bound
+and -bound; then `search` rounds of an adversarial bang-bang disturbance from the worst scenario
+(the sign of the gradient, through CasADi, of the binding h sample before entry and of the RoA
+margin at entry).
 A cell is robust-safe when every scenario is safe; the robust transition keeps only those cells
 and is classified like the nominal one. This is falsification: a robust edge withstood every
 scenario tried, it is not proven to withstand the whole set.
