@@ -68,6 +68,32 @@ def main() -> None:
         e = np.concatenate(e)[: int(round(p.period / dt))]
         print(f"summed local-error bound over one stride at dt = {dt:g}: {e.sum():.3g} "
               f"(largest step {e.max():.3g}, median {np.median(e):.2g})")
+    # step doubling: the judged rollout at dt/2 beside one at dt; its error estimate of E's margin
+    # is the difference of the two margins (absolute, not summed), from Stand's setpoint into the walk
+    ch2 = build_chunk(p, s.dt, 64, True, s.jit_flags, error="doubling")
+    ch1 = build_chunk(p, s.dt, 64, True, s.jit_flags)
+    x0 = prims["Stand"].x_star(0.0)
+    z, e2, e1 = ch2.start(x0[None], [0.0]), [], []
+    for _ in range(int(round(3 * p.period / s.dt / 64)) + 1):
+        z, out = ch2.run(z)
+        e2.append(out[ch2.rows.err][0])
+    z = ch1.start(x0[None], [0.0])
+    for _ in range(int(round(3 * p.period / s.dt / 64)) + 1):
+        z, out = ch1.run(z)
+        e1.append(out[ch1.rows.err][0])
+    n = int(round(3 * p.period / s.dt))
+    e2, e1 = np.concatenate(e2)[:n], np.concatenate(e1)[:n] * np.sqrt(np.max(np.linalg.eigvalsh(np.asarray(p.info["roa_W"]))))
+    print(f"E-margin error estimate after three strides from Stand's setpoint, dt = {s.dt:g}: step doubling "
+          f"{e2[-1]:.3g} (largest {e2.max():.3g}), summed local {e1.sum():.3g}")
+    starts2 = {"Walk(slow)": ch2.start(p.x_star(0.0)[None], [0.0])}
+
+    def horizon2():
+        z = starts2["Walk(slow)"]
+        for _ in range(40):
+            z = ch2.run(z)[0]
+
+    t2 = rounds({"local": lambda: horizon("Walk(slow)"), "doubling": horizon2}, 3)
+    print(f"2.56 s of oracle steps, Walk(slow), step doubling vs local: {med_ratio(t2['doubling'], t2['local']):.2f}x")
 
 
 if __name__ == "__main__":
