@@ -66,7 +66,7 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
     m, dyn = sys.model, sys.dyn
     nq, nv, nu = m.nq, m.nv, m.nu
     x, contacts = sys.x, ctx.contacts
-    q, v = x[:nq], x[nq:]
+    q, v = x[:nq], x[nq:nq + nv]  # contact flags and event clocks may follow
     sub = lambda e: ca.substitute(e, ca.vertcat(dyn.q, dyn.v), ca.vertcat(q, v))  # noqa: E731
     M, H = sub(dyn.M_expr), sub(dyn.nle_expr)  # D(q), H(q, v)
     J, drift = sub(dyn.contact_jacobian_expr(contacts)), sub(dyn.contact_drift_expr(contacts))
