@@ -245,6 +245,8 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     setpoint = ca.Function(f"setpoint_{_ident(inst.name)}", [t], [x_star])
     if table is not None and len(table[0]) > TABLE_KNOTS:  # a lookup, not a tree of thousands of branches
         setpoint = _table_setpoint(f"setpoint_{_ident(inst.name)}", *table, period)
+    if sys.is_rigid_body and sys.events and schedule is not None:
+        setpoint = _scheduled_flags(setpoint, sys, schedule, period)
     for i, n in enumerate(sys.state_names):
         env[f"{n}_star"] = x_star[i]
         env[f"{n}_star_dot"] = x_star_dot[i]
@@ -444,28 +446,39 @@ def _jump(inst: PrimitiveInstance, sys: CompiledSystem, t: ca.SX, schedule, peri
     and time since switch-in s after it (s dates contact events, compile/events.py).
 
     Under a contact schedule, feet that join the mode at the step's end are put on the ground by
-    their legs and touch down with a plastic impact; with contact flags in the state the flags are set to the scheduled mode.
+    their legs and touch down with a plastic impact; contact flags in the state follow the schedule.
     """
     u = ca.SX.sym("u", sys.nu)
     x = sys.x
     s = ca.SX.sym("s")
     if schedule is None:
         return ca.Function("jump", [x, u, t, s], [sys.project(x, u, s)])
-    from .rigidbody.hybrid import masked_impact, scheduled_contacts, touchdown_projection
+    from .rigidbody.hybrid import masked_impact, touchdown_projection
 
     feet = sys.model.contact_frames
     mode = scheduled_mode(schedule, feet, t, period)
     c = ca.vertcat(*[mode[f] for f in feet])
-    if sys.events:
-        x_unit = ca.vertcat(sys.project(x)[: sys.model.nq], x[sys.model.nq:])
-        return ca.Function("jump", [x, u, t, s], [scheduled_contacts(sys, x_unit, c)])
     nq, nv = sys.model.nq, sys.model.nv
     before = scheduled_mode(schedule, feet, t, period, before=True)  # the mode the step ran in
     joins = [ca.logic_and(mode[f] > 0.5, before[f] < 0.5) for f in feet]
-    xu = sys.project(x)
-    q_new = touchdown_projection(sys, xu[:nq], joins)
-    v_new = ca.if_else(sum(joins) > 0, masked_impact(sys, q_new, xu[nq:nq + nv], c), xu[nq:nq + nv])
-    return ca.Function("jump", [x, u, t, s], [ca.vertcat(q_new, v_new, xu[nq + nv:])])
+    q, v = sys.project(x)[:nq], x[nq:nq + nv]
+    q_new = touchdown_projection(sys, q, joins)
+    v_new = ca.if_else(sum(joins) > 0, masked_impact(sys, q_new, v, c), v)
+    # with contact flags in the state, they follow the schedule; event clocks are left as they are
+    tail = ca.vertcat(c, x[nq + nv + len(feet):]) if sys.events else x[nq + nv:]
+    return ca.Function("jump", [x, u, t, s], [ca.vertcat(q_new, v_new, tail)])
+
+
+def _scheduled_flags(setpoint: ca.Function, sys: CompiledSystem, schedule, period) -> ca.Function:
+    """x*(t) with its contact flags set to the mode the schedule holds at t, whatever the table says."""
+    feet = sys.model.contact_frames
+    ts = ca.SX.sym("t")
+    mode = scheduled_mode(schedule, feet, ts, period)
+    flags = ca.Function("flags", [ts], [ca.vertcat(*[mode[f] for f in feet])])
+    t = ca.MX.sym("t")
+    x = setpoint(t)
+    i = sys.model.nq + sys.model.nv
+    return ca.Function(setpoint.name(), [t], [ca.vertcat(x[:i], flags(t), x[i + len(feet):])])
 
 
 def held_feet(prim: "CompiledPrimitive"):

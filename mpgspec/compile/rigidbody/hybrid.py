@@ -81,18 +81,6 @@ def touchdown_projection(sys, q: ca.SX, joined: list) -> ca.SX:
     return q_new
 
 
-def scheduled_contacts(sys, x_new: ca.SX, c_sched: ca.SX) -> ca.SX:
-    """Set the flags to the scheduled set; feet that join it are put on the ground by their legs
-    (touchdown_projection) and touch down with a plastic impact."""
-    m = sys.model
-    nq, nv, nf = m.nq, m.nv, len(m.contact_frames)
-    q, v, c = x_new[:nq], x_new[nq:nq + nv], x_new[nq + nv:nq + nv + nf]
-    joins = [ca.logic_and(c_sched[i] > 0.5, c[i] < 0.5) for i in range(nf)]
-    q = touchdown_projection(sys, q, joins)
-    v_new = ca.if_else(sum(joins) > 0, masked_impact(sys, q, v, c_sched), v)
-    return ca.vertcat(q, v_new, c_sched, x_new[nq + nv + nf:])
-
-
 def contact_events(sys, x_new: ca.SX, u: ca.SX, s=ca.inf) -> ca.SX:
     """The discrete update after a step ending s after switch-in: touchdowns (with impact) and
     lift-offs, and the first touchdown and takeoff since switch-in on the event clocks."""
