@@ -206,15 +206,12 @@ def rk4_jump(f, k, jump, x, t, h: float, left: float = 0.0, s: float = np.inf):
     """x after one oracle step of h from clock t, without the error bookkeeping: RK4 on
     xdot = f(x, t) with the last stage `left` before the step's end (see LEFT), then the jump with
     the input k(x, t) of the step's start (s: time since switch-in, inf for a settled orbit)."""
-    k1 = f(x, t)
-    k2 = f(x + h / 2 * k1, t + h / 2)
-    k3 = f(x + h / 2 * k2, t + h / 2)
-    k4 = f(x + h * k3, t + h - min(left, h / 2))
-    return jump(x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), k(x, t), t + h, s + h)
+    x_end, _ = _rk4(lambda xx, tt, _s, _xs: f(xx, tt), x, t, 0.0, None, h, h - min(left, h / 2))
+    return jump(x_end, k(x, t), t + h, s + h)
 
 
 FD_STEP = 1e-6
-"""Time step of the forward differences that give the rates of h along the flow in large loops."""
+"""Time step of the one-sided differences that give the rates of h along the flow in large loops."""
 
 
 def _ends(prim: CompiledPrimitive, held: bool = False) -> tuple[ca.Function, ca.Function, ca.Function]:
@@ -395,37 +392,54 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
     tc = _wrap(prim, t)
     h = _step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
     k1, h0, d0, u_raw, u = start(x, t, s, xs, *U)
-    k2 = f(x + h / 2 * k1, t + h / 2, s + h / 2, xs, *U)
-    k3 = f(x + h / 2 * k2, t + h / 2, s + h / 2, xs, *U)
-    # under a contact schedule, the step's end is seen from inside it: a mode switching there is not yet on
-    te = h - ca.fmin(LEFT, h / 2) if prim.info.get("contact_schedule") else h
-    k4 = f(x + h * k3, t + te, s + te, xs, *U)
-    x_end = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    te = _step_end(prim, h)
+    x_end, k4 = _rk4(lambda *a: f(*a, *U), x, t, s, xs, h, te, k1)
     _k5, h1, d1, dh, e = end(x_end, t + te, s + te, xs, *U, k4, h)
     x_next = jump(x_end, u, t + h, s + h)
     act = _active(prim, _wrap(prim, t + h / 2), x, s, x_next, h)  # a step lies inside or outside each window
-    L = ca.fmax(ca.fmax(ca.fabs(d0), ca.fabs(d1)), ca.fabs(h1 - h0) / h)
-    lb = (h0 + h1) / 2 - L * h / 2  # least value of a function with |dh/dt| <= L taking h0 and h1 at the ends
-    masked = (lambda v: ca.if_else(act, v, INACTIVE)) if nh else (lambda v: v)
-    out = ca.vertcat(masked(h0), masked(lb), dh, prim.roa_margin(x, t), ca.norm_2(e), s, h, u_raw, u,
-                     *([x] if with_state else []))
+    out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), dh, prim.roa_margin(x, t),
+                     ca.norm_2(e), s, h, u_raw, u, *([x] if with_state else []))
     body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out])
-    acc = body.mapaccum("acc", K)
-    Z = ca.MX.sym("Z", nz)
-    zs, outs = acc(Z)
-    name = "chunk_" + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}{boundaries}".encode()).hexdigest()[:10]
-    fn = ca.Function(name, [Z], [zs[:, -1], outs])
+    fn = _accumulate("chunk_", prim, dt, K, with_state, boundaries, body, nz)
     return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
                  Rows(nh, prim.system.nu, nx if with_state else 0))
 
 
 def _rk4(f, x, t, s, xs, h, te, k1=None):
-    """One RK4 step of h (last stage at te); k1 given when already evaluated."""
+    """(x after one RK4 step of h with its last stage at te, that stage's k4); k1 given when
+    already evaluated."""
     k1 = f(x, t, s, xs) if k1 is None else k1
     k2 = f(x + h / 2 * k1, t + h / 2, s + h / 2, xs)
     k3 = f(x + h / 2 * k2, t + h / 2, s + h / 2, xs)
     k4 = f(x + h * k3, t + te, s + te, xs)
-    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), k4
+
+
+def _step_end(prim: CompiledPrimitive, h):
+    """Where a step's last stage and end sample sit: under a contact schedule the end is seen from
+    inside the step (LEFT before it), so a mode switching there is not yet on."""
+    return h - ca.fmin(LEFT, h / 2) if prim.info.get("contact_schedule") else h
+
+
+def _sample_bound(h0, h1, d0, d1, h):
+    """The least value over a step of a function with |dh/dt| <= L taking h0 and h1 at its ends,
+    L the largest of the end rates and the secant slope."""
+    L = ca.fmax(ca.fmax(ca.fabs(d0), ca.fabs(d1)), ca.fabs(h1 - h0) / h)
+    return (h0 + h1) / 2 - L * h / 2
+
+
+def _masked(act, nh: int, *values):
+    """Each of the h-rows `values` with INACTIVE where the step lies outside the function's window."""
+    return [ca.if_else(act, v, INACTIVE) for v in values] if nh else list(values)
+
+
+def _accumulate(prefix: str, prim: CompiledPrimitive, dt: float, K: int, with_state: bool, boundaries: bool,
+                body: ca.Function, nz: int) -> ca.Function:
+    """Z -> (Z after K steps of `body`, every step's outputs), named by what it was built from."""
+    Z = ca.MX.sym("Z", nz)
+    zs, outs = body.mapaccum("acc", K)(Z)
+    name = prefix + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}{boundaries}".encode()).hexdigest()[:10]
+    return ca.Function(name, [Z], [zs[:, -1], outs])
 
 
 def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: tuple[str, ...],
@@ -451,29 +465,22 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
     fj, fc = (lambda *a: f(*a, *Uj)), (lambda *a: f(*a, *Uc))
     tc = _wrap(prim, t)
     h = _step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
-    te = h - ca.fmin(LEFT, h / 2) if prim.info.get("contact_schedule") else h
+    te = _step_end(prim, h)
     k1, h0, d0, u_raw, u = start(x, t, s, xs, *Uj)
     kc1, h0c, _uc_raw, uc = loop(xc, t, s, xs, *Uc)
     hh = h / 2
-    x_mid = _rk4(fj, x, t, s, xs, hh, hh, k1)
-    x_end = _rk4(fj, x_mid, t + hh, s + hh, xs, hh, te - hh)
-    xc_end = _rk4(fc, xc, t, s, xs, h, te, kc1)
+    x_mid, _ = _rk4(fj, x, t, s, xs, hh, hh, k1)
+    x_end, _ = _rk4(fj, x_mid, t + hh, s + hh, xs, hh, te - hh)
+    xc_end, _ = _rk4(fc, xc, t, s, xs, h, te, kc1)
     h1, d1 = _at_end(prim, start)(x_end, t + te, s + te, xs, *Uj)  # h and its rate at the step's end
     h1c = loop(xc_end, t + te, s + te, xs, *Uc)[1]
     x_next, xc_next = jump(x_end, u, t + h, s + h), jump(xc_end, uc, t + h, s + h)
     act = _active(prim, _wrap(prim, t + h / 2), x, s, x_next, h)
-    L = ca.fmax(ca.fmax(ca.fabs(d0), ca.fabs(d1)), ca.fabs(h1 - h0) / h)
-    lb = (h0 + h1) / 2 - L * h / 2
-    masked = (lambda v: ca.if_else(act, v, INACTIVE)) if nh else (lambda v: v)
     m_f, m_c = prim.roa_margin(x, t), prim.roa_margin(xc, t)
-    out = ca.vertcat(masked(h0), masked(lb), ca.fabs(h1 - h1c), m_f, ca.fabs(m_f - m_c), s, h, u_raw, u,
-                     *([x] if with_state else []), ca.fabs(h0 - h0c))
+    out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), ca.fabs(h1 - h1c), m_f,
+                     ca.fabs(m_f - m_c), s, h, u_raw, u, *([x] if with_state else []), ca.fabs(h0 - h0c))
     body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out])
-    acc = body.mapaccum("acc", K)
-    Z = ca.MX.sym("Z", nz)
-    zs, outs = acc(Z)
-    name = "chunk2_" + hashlib.sha1(f"{prim.name}{dt}{K}{with_state}{boundaries}".encode()).hexdigest()[:10]
-    fn = ca.Function(name, [Z], [zs[:, -1], outs])
+    fn = _accumulate("chunk2_", prim, dt, K, with_state, boundaries, body, nz)
     return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
                  Rows(nh, prim.system.nu, nx if with_state else 0, doubling=True))
 
