@@ -86,7 +86,7 @@ os.environ["MPGSPEC_CACHE"] = _JIT_DIR
 
 import casadi as ca
 import common  # noqa: E402  (bench/common.py)
-from common import med_ratio, rounds  # noqa: E402
+from common import med_ratio, rounds, write_section  # noqa: E402
 import pinocchio as pin  # noqa: E402
 import yaml  # noqa: E402
 
@@ -606,14 +606,7 @@ def _run(args, R, T0, mach, tmp) -> int:
     log("\n" + section)
     if not args.no_write:
         out = ROOT / "bench" / "RESULTS.md"
-        text = out.read_text() if out.exists() else "# Oracle benchmark results\n"
-        i = text.find(HEADING)
-        if i >= 0:  # replace our previous section only
-            j = text.find("\n## ", i + len(HEADING))
-            text = text[:i] + section + ("\n" + text[j + 1:] if j >= 0 else "")
-        else:
-            text = text.rstrip("\n") + "\n\n" + section
-        out.write_text(text)
+        write_section(out, HEADING, section)
         log(f"wrote the '{HEADING[3:]}' section of {out.relative_to(ROOT)}")
     log(f"targets ({VARIANTS[0][0]}, plain joint PD): oracle within 1.5x of the RHS cost "
         f"{'met' if ok_rhs else 'MISSED'} ({A['r_rhs']:.2f}); >= 8x faster than pinocchio from Python "

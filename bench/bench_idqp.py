@@ -52,7 +52,7 @@ os.environ["MPGSPEC_CACHE"] = _JIT_DIR
 import casadi as ca  # noqa: E402
 import common  # noqa: E402  (bench/common.py)
 import yaml  # noqa: E402
-from common import med_ratio, rounds  # noqa: E402
+from common import med_ratio, rounds, write_section  # noqa: E402
 
 from mpgspec.api import compile_project, settings_for  # noqa: E402
 from mpgspec.oracle.integrator import build_chunk  # noqa: E402
@@ -189,14 +189,7 @@ def _run(args, R: int, tmp: Path) -> int:
     log("\n" + section)
     if not args.no_write:
         out = ROOT / "bench" / "RESULTS.md"
-        text = out.read_text() if out.exists() else "# Oracle benchmark results\n"
-        i = text.find(HEADING)
-        if i >= 0:
-            j = text.find("\n## ", i + len(HEADING))
-            text = text[:i] + section + ("\n" + text[j + 1:] if j >= 0 else "")
-        else:
-            text = text.rstrip("\n") + "\n\n" + section
-        out.write_text(text)
+        write_section(out, HEADING, section)
         log(f"wrote the '{HEADING[3:]}' section of {out.relative_to(ROOT)}")
     ok = ratio <= TARGET and evs["Stand"].verdict == 1 and evs["Lie"].verdict == 1
     log(f"target: held ID-QP step within {TARGET:g}x of a PD step {'met' if ok else 'MISSED'} ({ratio:.2f}x)")

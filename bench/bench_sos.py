@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from common import machine, revision  # noqa: E402
+from common import machine, revision, write_section  # noqa: E402
 
 from verifiers import sos  # noqa: E402
 from verifiers.roa_common import RoAProblem  # noqa: E402
@@ -86,15 +86,7 @@ def main() -> int:
     section = f"{HEADING}\n\n{head}\n\n" + "\n".join(table) + "\n"
     print(section)
     if not args.no_write:
-        out = ROOT / "bench" / "RESULTS.md"
-        text = out.read_text()
-        i = text.find(HEADING)
-        if i >= 0:
-            j = text.find("\n## ", i + len(HEADING))
-            text = text[:i] + section + ("\n" + text[j + 1:] if j >= 0 else "")
-        else:
-            text = text.rstrip("\n") + "\n\n" + section
-        out.write_text(text)
+        write_section(ROOT / "bench" / "RESULTS.md", HEADING, section)
     ok = all(res.level == "certified" and res.radius <= TRUE_BALL for _, res, _, _ in rows)
     return 0 if ok and rows[-1][1].radius >= 0.9 * TRUE_BALL else 1
 

@@ -89,3 +89,15 @@ def run_build(build, spec, settings, oracle_cls):
         return oracles[name]
 
     return prims, g, timing, oracle_of
+
+
+def write_section(results: Path, heading: str, section: str) -> None:
+    """Replace the `heading` section of the results file with `section` (append it if missing)."""
+    text = results.read_text() if results.exists() else "# Oracle benchmark results\n"
+    i = text.find(heading)
+    if i >= 0:  # replace this benchmark's previous section only
+        j = text.find("\n## ", i + len(heading))
+        text = text[:i] + section + ("\n" + text[j + 1:] if j >= 0 else "")
+    else:
+        text = text.rstrip("\n") + "\n\n" + section
+    results.write_text(text)
