@@ -559,7 +559,8 @@ def cmd_gait(args) -> int:
     tables = generate(path, progress=say)
     gf = load_gait_file(path)
     names = compile_system(load_project(path.parent / gf.project)).state_names
-    bad = [t.node for t in tables if t.orbit.status != "converged" or not t.orbit.spectral_radius < 1]
+    bad = [t.node for t in tables if hasattr(t, "orbit") and (t.orbit.status != "converged"
+                                                              or not t.orbit.spectral_radius < 1)]
     if args.check:
         problems = compare(tables, names)
         for p_ in problems:

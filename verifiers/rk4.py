@@ -107,14 +107,18 @@ class RK4Runner:
             Zp = Z if size == m else np.concatenate([Z, np.repeat(Z[:, :1], size - m, axis=1)], axis=1)
             try:
                 Zf, out = ch.run(Zp)
-            except Exception as err:  # a crash is the evidence of the calls in this batch
-                for b in range(m):
+                Zf, out = Zf[:, :m], out[:, :m, :]
+            except Exception:  # a crash is the evidence of the calls that crash, each run alone
+                Zf, out, errors = _alone(ch, Z)
+                for b, err in errors.items():
                     results[order[ids[b]]] = OracleEvidence(0, Reason.ERROR, 0.0, status="inconclusive",
                                                             message=str(err)[:500])
-                Z, ids = Z[:, :0], ids[:0]
-                carry.keep(np.zeros(m, bool))
-                continue
-            Zf, out = Zf[:, :m], out[:, :m, :]
+                ok = ~np.isin(np.arange(m), list(errors))
+                Z, ids, Zf, out = Z[:, ok], ids[ok], Zf[:, ok], out[:, ok, :]
+                carry.keep(ok)
+                m = ids.size
+                if not m:
+                    continue
             finite = np.isfinite(out).all(axis=0)
             end_ok = np.isfinite(Zf).all(axis=0)
             finite[:, -1] &= end_ok
@@ -131,6 +135,24 @@ class RK4Runner:
             Z, ids = Zf[:, keep], ids[keep]
             carry.keep(keep)
         return results  # type: ignore[return-value]
+
+
+def _alone(ch, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Advance each column of Z in a chunk call of its own (after a batch failed): the outputs of
+    those that run, NaN for the others, and the error of each column that fails."""
+    Zf, outs, errors = np.full(Z.shape, np.nan), [], {}
+    for b in range(Z.shape[1]):
+        try:
+            zf, out = ch.run(Z[:, b:b + 1])
+            Zf[:, b] = zf[:, 0]
+        except Exception as err:
+            errors[b] = err
+            out = None
+        outs.append(out)
+    shape = next((o.shape for o in outs if o is not None), None)
+    if shape is None:
+        return Zf, np.zeros((0, Z.shape[1], 0)), errors
+    return Zf, np.concatenate([o if o is not None else np.full(shape, np.nan) for o in outs], axis=1), errors
 
 
 def _non_finite(out: np.ndarray, r, end_state: bool) -> str:

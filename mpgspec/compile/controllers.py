@@ -265,4 +265,10 @@ def trot(c, ctx: ControlContext):
     return trot_law(c, ctx)
 
 
-LAWS = {"expression": expression_law, "pd": pd_law, "lqr": lqr_law, "id_qp": idqp, "trot": trot}
+def jump(c, ctx: ControlContext):
+    from .rigidbody.jump import jump_law
+
+    return jump_law(c, ctx)
+
+
+LAWS = {"expression": expression_law, "pd": pd_law, "lqr": lqr_law, "id_qp": idqp, "trot": trot, "jump": jump}

@@ -194,7 +194,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     trot = _trot_setup(inst, sys, ec, consts) if p.controller.type == "trot" else None
     schedule = _schedule(inst, sys, trot)
     mode = None  # the contact mode: foot -> 1 while held, a function of the clock under a schedule
-    if schedule is not None and not sys.events:
+    if schedule is not None:  # the clock sets the contact set (flags in the state follow it, see _jump)
         mode = scheduled_mode(schedule, sys.model.contact_frames, t, period)
         loop = sys.scheduled_loop(mode)
     elif sys.is_rigid_body:
@@ -270,7 +270,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         path = ("safe_set", j)
         if sf.use is not None:
             try:
-                scheduled = schedule is not None and not sys.events  # contact conditions bind by the mode
+                scheduled = schedule is not None  # contact conditions bind by the mode
                 items = sys.builtin_safe_set(sf.use, loop.contacts, mode=mode if scheduled else None,
                                              env=loop.env if scheduled else None)
             except KeyError:

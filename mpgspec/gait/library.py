@@ -28,12 +28,22 @@ from .orbit import Orbit, StrideMap, find_orbit
 TOLERANCE = 1e-6  # tables agree when every state differs by less than this (the Newton tolerance is 1e-10)
 
 
+class TransientEntry(Strict):
+    """A transient primitive whose setpoint table is its closed loop's own flow."""
+
+    primitive: str = Field(description="a transient primitive whose law reads only the state and the clock "
+                                       "(controller type jump); its setpoint.file is written")
+    duration: float = Field(gt=0, description="length of the table (s), at least the primitive's domain")
+
+
 class GaitFile(Strict):
     """What `mpgspec gait` generates."""
 
     project: str = Field(description="the project file, relative to this file")
     primitive: str = Field(description="the trot primitive (all of its nodes)")
     dt: float = Field(default=0.001, gt=0, description="the oracle step the orbit is computed with (s)")
+    transients: list[TransientEntry] = Field(default_factory=list, description="transient primitives whose "
+                                             "x*(t) is the flow of their loop from the stance of controller.pose")
 
 
 @dataclass
@@ -66,6 +76,75 @@ class GaitTable:
         return "\n".join(lines) + "\n"
 
 
+@dataclass
+class FlowTable:
+    """x*(t) of a transient primitive: its loop's flow from the controller's stance (Definition 1
+    holds by construction on the oracle's discrete flow at the same dt)."""
+
+    node: str
+    path: Path
+    t: np.ndarray
+    X: np.ndarray
+    stats: dict
+    inputs: str
+
+    def text(self, state_names: list[str]) -> str:
+        head = {"generator": "mpgspec gait (the closed loop's flow from the stance, RK4 with contact events)",
+                "node": self.node, "dt": f"{self.t[1] - self.t[0]:g}", "duration": f"{self.t[-1]:g}",
+                **{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in self.stats.items()},
+                "inputs": self.inputs}
+        lines = [f"# {k}: {v}" for k, v in head.items()]
+        lines.append(",".join(["t", *state_names]))
+        for k, t in enumerate(self.t):
+            lines.append(",".join([f"{t:.6f}", *(f"{v:.12g}" for v in self.X[:, k])]))
+        return "\n".join(lines) + "\n"
+
+
+def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print) -> FlowTable:
+    """Roll out a transient primitive's closed loop from the stance of its controller.pose for
+    entry.duration, with the oracle's step (RK4, the step-end rule, the jump with contact events)."""
+    import dataclasses
+    import hashlib
+    import json
+
+    import casadi as ca
+
+    from ..compile.primitive import compile_primitive, spec_file
+    from ..compile.rigidbody.trot import nominal_state
+    from ..oracle.integrator import LEFT, rk4_jump
+    from ..spec.primitive import Setpoint
+
+    inst = next((i for i in spec.primitives if i.name == entry.primitive), None)
+    if inst is None or inst.spec.controller.type != "jump" or inst.spec.setpoint.file is None:
+        raise SpecError("no transient primitive of that name with a jump law and a setpoint table", location=None,
+                        key="transients.primitive", expected="a primitive with controller type jump and setpoint.file",
+                        found=entry.primitive, code="MPG104")
+    path = spec_file(inst, inst.spec.setpoint.file, inst.locate(("setpoint", "file")),
+                     f"primitive '{inst.name}': setpoint.file")[1]
+    ctrl = inst.spec.controller
+    x0 = nominal_state(sys, dict(ctrl.pose))
+    named = {n: float(v) for n, v in zip(sys.state_names, x0) if v != 0.0 and not n.startswith(("contact_", "since_"))}
+    start = dataclasses.replace(inst, spec=inst.spec.model_copy(update={"setpoint": Setpoint(named=named)}))
+    progress(f"compiling {inst.name} (its law does not read x*)")
+    prim = compile_primitive(start, sys)
+    n = int(round(entry.duration / dt))
+    f = lambda xx, tt: prim.f_cl(xx, tt, tt, x0)  # noqa: E731  (switched in at t = 0 from x0)
+    k = lambda xx, tt: prim.control(xx, tt, tt, x0)[1]  # noqa: E731
+    X = np.zeros((sys.nx, n + 1))
+    X[:, 0] = x0
+    x = ca.DM(x0)
+    for i in range(n):
+        x = rk4_jump(f, k, prim.jump, x, i * dt, dt, LEFT, s=i * dt)
+        X[:, i + 1] = np.array(x, float).ravel()
+    t = np.arange(n + 1) * dt
+    clock = sys.state_names.index("since_takeoff") if "since_takeoff" in sys.state_names else None
+    stats = {"takeoff": float(t[-1] - X[clock, -1]) if clock is not None and X[clock, -1] < t[-1] else "none"}
+    text = json.dumps({"controller": ctrl.model_dump(mode="json"), "dt": dt, "n": n, "x0": [round(float(v), 12) for v in x0],
+                       "friction": float(sys.friction), "u_hi": [float(v) for v in sys.u_hi]}, sort_keys=True)
+    progress(f"{inst.name}: {n} steps, takeoff at {stats['takeoff']} s")
+    return FlowTable(inst.name, path, t, X, stats, hashlib.sha256(text.encode()).hexdigest()[:16])
+
+
 def load_gait_file(path: Path) -> GaitFile:
     from ..spec.loader import _read
 
@@ -80,8 +159,9 @@ def load_gait_file(path: Path) -> GaitFile:
                         code="MPG104") from None
 
 
-def generate(path: str | Path, progress=print) -> list[GaitTable]:
-    """Find the orbit of every node of the gait file's primitive; return the tables (not yet written)."""
+def generate(path: str | Path, progress=print) -> list:
+    """Find the orbit of every node of the gait file's primitive and the flow of every transient
+    entry; return the tables (not yet written)."""
     from ..compile.primitive import spec_file
     from ..compile.rigidbody.trot import nominal_state, trot_inputs
     from ..compile.system import compile_system
@@ -114,6 +194,8 @@ def generate(path: str | Path, progress=print) -> list[GaitTable]:
                  f"command {orbit.command:.4f} m/s for a mean speed of {orbit.stats['mean_speed']:.4f} m/s, "
                  f"largest multiplier {orbit.spectral_radius:.4f} ({orbit.seconds:.1f} s)")
         out.append(table)
+    for entry in gf.transients:
+        out.append(flow_table(spec, sys, entry, gf.dt, progress))
     return out
 
 
@@ -134,7 +216,7 @@ def compare(tables: list[GaitTable], state_names: list[str]) -> list[str]:
             continue
         rows = [ln for ln in t.path.read_text().splitlines() if ln and not ln.startswith("#")][1:]
         old = np.array([[float(v) for v in r.split(",")] for r in rows]).T
-        new = np.vstack([t.orbit.t, t.orbit.X])
+        new = np.vstack([t.orbit.t, t.orbit.X]) if isinstance(t, GaitTable) else np.vstack([t.t, t.X])
         if old.shape != new.shape:
             problems.append(f"{t.node}: {old.shape[1]} rows on disk, {new.shape[1]} regenerated")
             continue

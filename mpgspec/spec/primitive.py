@@ -154,8 +154,29 @@ class TrotController(Strict):
     d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
 
 
+class JumpController(Strict):
+    """The paper's Jump for point-foot quadrupeds (compile/rigidbody/jump.py): a cubic CoM profile to
+    the takeoff velocity tracked through the stance feet until T_t, then the legs tucked."""
+
+    type: Literal["jump"]
+    takeoff_time: Number = Field(default=0.15, gt=0, description="T_t: end of the push (s on the clock)")
+    takeoff_velocity: Number = Field(default=1.0, gt=0, description="upward CoM speed at T_t (m/s)")
+    rise: Number = Field(default=0.06, gt=0, description="CoM rise over the push (m)")
+    pose: dict[Text, Number] = Field(default_factory=dict, description="joint angles of the stance the push "
+                                     "starts from (others 0): its CoM height is h_0")
+    tuck: dict[Text, Number] = Field(default_factory=dict, description="joint angles the legs fold to after T_t")
+    kz: Number = Field(default=400.0, ge=0, description="CoM height stiffness (1/s^2)")
+    dz: Number = Field(default=40.0, ge=0, description="CoM height damping (1/s)")
+    kv: Number = Field(default=10.0, ge=0, description="horizontal CoM velocity gain (1/s)")
+    k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
+    d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
+    d_yaw: Number = Field(default=10.0, ge=0, description="yaw-rate damping (1/s)")
+    kp_joint: Number = Field(default=60.0, ge=0, description="joint stiffness of the tuck (N m/rad)")
+    kd_joint: Number = Field(default=2.0, ge=0, description="joint damping of the tuck (N m s/rad)")
+
+
 Controller = Annotated[
-    Union[ExpressionController, PDController, LQRController, IDQPController, TrotController],
+    Union[ExpressionController, PDController, LQRController, IDQPController, TrotController, JumpController],
     Field(discriminator="type"),
 ]
 

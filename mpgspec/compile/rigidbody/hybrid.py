@@ -5,8 +5,9 @@ in continuous time. The dynamics enforce the contact rows of feet with c_i = 1 o
 rows are masked out of J and given a unit diagonal in the Schur complement, so their force is
 zero. After every integration step the discrete part of the hybrid system runs:
 
-- touchdown: a foot with c_i = 0 whose height reaches 0 while moving down gets c_i = 1, and the
-  plastic impact map v+ = v- - D^-1 Jn^T (Jn D^-1 Jn^T)^-1 Jn v- of the new contact set applies;
+- touchdown: a foot with c_i = 0 whose height reaches 0 while moving down gets c_i = 1, its leg
+  puts it on the ground (touchdown_projection), and the plastic impact map
+  v+ = v- - D^-1 Jn^T (Jn D^-1 Jn^T)^-1 Jn v- of the new contact set applies;
 - lift-off: a foot with c_i = 1 whose normal force under the step's input is below 0 gets c_i = 0.
 
 Events are detected at step boundaries (no event localisation): their time is known to one step.
@@ -100,7 +101,12 @@ def contact_events(sys, x_new: ca.SX, u: ca.SX, s=ca.inf) -> ca.SX:
         lift = ca.logic_and(c[i] > 0.5, lam[3 * i + 2] < 0)
         c_new.append(ca.if_else(touch, 1, ca.if_else(lift, 0, c[i])))
     c_new = ca.vertcat(*c_new)
-    touched = sum(ca.logic_and(c_new[i] > 0.5, c[i] < 0.5) for i in range(nf))
+    joins = [ca.logic_and(c_new[i] > 0.5, c[i] < 0.5) for i in range(nf)]
+    touched = sum(joins)
+    # the step that detects a touchdown ends with the foot up to one step's travel below the ground:
+    # put it on the ground by its leg, as a scheduled touchdown does, so that the constraint's
+    # Baumgarte term does not move it after the impact
+    q = touchdown_projection(sys, q, joins)
     v_new = ca.if_else(touched > 0, masked_impact(sys, q, v, c_new), v)
     now = {ContactEvent.FIRST_TOUCHDOWN: touched > 0,  # a foot touched down
            ContactEvent.TAKEOFF: ca.logic_and(ca.sum1(c) > 0.5, ca.sum1(c_new) < 0.5)}  # the last one lifted off

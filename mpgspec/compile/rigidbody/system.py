@@ -102,6 +102,8 @@ class RigidBodyCompiledSystem(CompiledSystem):
         The least-norm solution of H(q, 0) = B u + J^T lam, weighting tangential contact forces
         100x and normal forces 0.01x against torques, so the ground carries the weight through
         near-vertical forces: an equality-constrained inverse-dynamics QP solved in closed form.
+        With contact events only the feet of `contacts` whose flag is set carry weight, and with
+        none on the ground the torque is 0 (in free fall no torque holds a pose).
         """
         m, nq = self.model, self.model.nq
         xq = self.x[:nq]
@@ -109,6 +111,10 @@ class RigidBodyCompiledSystem(CompiledSystem):
         B = ca.DM(m.actuation_matrix)
         if contacts:
             J = ca.substitute(self.dyn.contact_jacobian_expr(contacts), self.dyn.q, xq)
+            if self.events:
+                flags = [self.contact_flag(f) for f in contacts]
+                J = ca.mtimes(ca.diag(ca.vertcat(*[fl for fl in flags for _ in range(3)])), J)
+                g = g * ca.if_else(sum(flags) > 0.5, 1, 0)
             A = ca.horzcat(B, J.T)
             w = [1.0] * m.nu + [100.0, 100.0, 0.01] * len(contacts)
         else:
@@ -223,10 +229,10 @@ class RigidBodyCompiledSystem(CompiledSystem):
         return ca.Function("uncertain_plant", [self.x, self.u, k, F], [xdot, k * lam], ["x", "u", "k", "F"],
                            ["xdot", "lam"])
 
-    def _when_in_contact(self, frame: str, h: ca.SX, mode: dict | None = None) -> ca.SX:
+    def _when_in_contact(self, frame: str, h: ca.SX, mode: dict | None = None, flags: bool = True) -> ca.SX:
         """A contact condition binds only while the foot is held: by the scheduled mode, or with
-        contact events while the foot's flag is set."""
-        c = mode[frame] if mode is not None else self.contact_flag(frame)
+        contact events (`flags`) while the foot's flag is set."""
+        c = mode[frame] if mode is not None else (self.contact_flag(frame) if flags else None)
         return h if c is None else ca.if_else(c > 0.5, h, 1e3)
 
     def scheduled_loop(self, mode: dict, contacts: tuple[str, ...] | None = None) -> OpenLoop:
@@ -268,10 +274,12 @@ class RigidBodyCompiledSystem(CompiledSystem):
                 out += [(f"q_min[{j}]", q - lo[i]), (f"q_max[{j}]", hi[i] - q),
                         (f"qdot_max[{j}]", vmax[i] - ca.fabs(v))]
         elif name == "ground_contact":  # C_ground: feet on the ground and not moving
+            # with contact events, every foot of the set must be down whatever its flag says (a foot
+            # that has lifted off, or not yet touched down, is outside C_ground)
             for f in contacts:
-                out += [(f"on_ground[{f}]", self._when_in_contact(f, tol - ca.fabs(env[f"{f}_z"]), mode)),
+                out += [(f"on_ground[{f}]", self._when_in_contact(f, tol - ca.fabs(env[f"{f}_z"]), mode, False)),
                         (f"foot_still[{f}]", self._when_in_contact(
-                            f, tol - ca.norm_2(ca.vertcat(*[env[f"{f}_v{a}"] for a in "xyz"])), mode))]
+                            f, tol - ca.norm_2(ca.vertcat(*[env[f"{f}_v{a}"] for a in "xyz"])), mode, False))]
         elif name == "no_slip":  # lambda in the friction cone, lambda_z >= 0
             forces = loop_env if loop_env is not None else self.open_loop(list(contacts)).env
             for f in contacts:

@@ -76,6 +76,60 @@ class TrotGains:
         return [(ds, feet), (h, PAIR_A), (h + ds, feet), (2 * h, PAIR_B)]
 
 
+@dataclass
+class Trunk:
+    """Symbols of the floating base that the centroidal laws share (functions of sys.x)."""
+
+    mass: float
+    grav: float
+    R: ca.SX  # base rotation
+    Ryaw: ca.SX  # the heading's rotation about z
+    com: ca.SX
+    cdot: ca.SX
+    omega: ca.SX  # base angular velocity, world axes
+    pos: dict  # foot -> world position
+    vel: dict  # foot -> world velocity
+    H: ca.SX  # nonlinear effects h(q, v)
+    sub: object  # expression of (dyn.q, dyn.v) -> of the state
+
+
+def trunk(sys) -> Trunk:
+    m, dyn, env = sys.model, sys.dyn, sys.extra_env
+    q, v = sys.x[:m.nq], sys.x[m.nq:m.nq + m.nv]
+    sub = lambda e: ca.substitute(e, ca.vertcat(dyn.q, dyn.v), ca.vertcat(q, v))  # noqa: E731
+    R = quat_to_rotation(q[3:7])
+    yaw = ca.atan2(R[1, 0], R[0, 0])
+    cy, sy = ca.cos(yaw), ca.sin(yaw)
+    Ryaw = ca.vertcat(ca.horzcat(cy, -sy, 0), ca.horzcat(sy, cy, 0), ca.horzcat(0, 0, 1))
+    com = ca.vertcat(*[env[f"com_{a}"] for a in "xyz"])
+    feet = m.contact_frames
+    return Trunk(mass=float(m.total_mass), grav=float(-m.gravity[2]), R=R, Ryaw=Ryaw, com=com,
+                 cdot=ca.jtimes(com, q, qdot(m, q, v)), omega=ca.mtimes(R, v[3:6]),
+                 pos={f: ca.vertcat(*[env[f"{f}_{a}"] for a in "xyz"]) for f in feet},
+                 vel={f: ca.vertcat(*[env[f"{f}_v{a}"] for a in "xyz"]) for f in feet},
+                 H=sub(dyn.nle_expr), sub=sub)
+
+
+def level_trunk_moment(tk: Trunk, inertia: np.ndarray, k_tilt: float, d_tilt: float, d_yaw: float) -> ca.SX:
+    """Moment about the CoM that levels the trunk (roll, pitch PD in the heading frame) and damps yaw."""
+    E = ca.mtimes(tk.Ryaw, tk.R.T)
+    e_R = 0.5 * ca.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1])
+    I_G = ca.mtimes([tk.Ryaw, ca.DM(inertia), tk.Ryaw.T])  # the nominal inertia turned with the heading
+    alpha = ca.vertcat(k_tilt * e_R[0] - d_tilt * tk.omega[0], k_tilt * e_R[1] - d_tilt * tk.omega[1],
+                       -d_yaw * tk.omega[2])
+    return ca.mtimes(I_G, alpha)
+
+
+def split_wrench(tk: Trunk, flags: dict, feet, wrench: ca.SX, moment_weight: float, reg: float) -> ca.SX:
+    """Ground forces on the feet with flag 1 whose wrench about the CoM is nearest `wrench`:
+    argmin ||A f - w||_S^2 + reg ||f||^2 in closed form (the force on a foot with flag 0 is 0)."""
+    cols = [flags[f] * ca.vertcat(ca.DM.eye(3), skew(tk.pos[f] - tk.com)) for f in feet]
+    A = ca.horzcat(*cols)
+    S = ca.DM(np.diag([1, 1, 1] + [moment_weight] * 3))
+    K = ca.mtimes([A.T, S, A]) + reg * ca.DM.eye(3 * len(feet))
+    return dense_ldl_solve(K, ca.mtimes([A.T, S, wrench]))
+
+
 def _smoothstep(sig):
     s = ca.fmin(ca.fmax(sig, 0), 1)
     return 3 * s**2 - 2 * s**3, ca.if_else(ca.logic_and(sig > 0, sig < 1), 6 * s * (1 - s), 0)
@@ -88,40 +142,19 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
     `inertia` is the centroidal inertia at the nominal pose (3 x 3), `offsets` the nominal
     horizontal foot position relative to the CoM in the heading frame, per foot.
     """
-    m, dyn, env = sys.model, sys.dyn, sys.extra_env
-    nq, nv = m.nq, m.nv
-    x = sys.x
-    q, v = x[:nq], x[nq:nq + nv]
+    m = sys.model
     feet = m.contact_frames
     flags = mode
-    mass = float(m.total_mass)
-    grav = float(-m.gravity[2])
-    sub = lambda e: ca.substitute(e, ca.vertcat(dyn.q, dyn.v), ca.vertcat(q, v))  # noqa: E731
-    H = sub(dyn.nle_expr)
-    R = quat_to_rotation(q[3:7])
-    yaw = ca.atan2(R[1, 0], R[0, 0])
-    cy, sy = ca.cos(yaw), ca.sin(yaw)
-    Ryaw = ca.vertcat(ca.horzcat(cy, -sy, 0), ca.horzcat(sy, cy, 0), ca.horzcat(0, 0, 1))
-    com = ca.vertcat(*[env[f"com_{a}"] for a in "xyz"])
-    cdot = ca.jtimes(com, q, qdot(m, q, v))
-    omega = ca.mtimes(R, v[3:6])
+    tk = trunk(sys)
+    com, cdot, Ryaw = tk.com, tk.cdot, tk.Ryaw
+    pos, vel, H, sub = tk.pos, tk.vel, tk.H, tk.sub
     v_cmd = ca.mtimes(Ryaw[:2, :2], ca.vertcat(g.speed, 0.0))  # g.speed may be a symbol (gait calibration)
     # trunk wrench about the CoM
-    force = mass * ca.vertcat(g.kv * (v_cmd - cdot[:2]),
-                              grav + g.kz * (g.height - com[2]) - g.dz * cdot[2])
-    E = ca.mtimes(Ryaw, R.T)
-    e_R = 0.5 * ca.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1])
-    I_G = ca.mtimes([Ryaw, ca.DM(inertia), Ryaw.T])  # the nominal inertia turned with the heading
-    alpha = ca.vertcat(g.k_tilt * e_R[0] - g.d_tilt * omega[0], g.k_tilt * e_R[1] - g.d_tilt * omega[1],
-                       -g.d_yaw * omega[2])
-    wrench = ca.vertcat(force, ca.mtimes(I_G, alpha))
-    pos = {f: ca.vertcat(*[env[f"{f}_{a}"] for a in "xyz"]) for f in feet}
-    vel = {f: ca.vertcat(*[env[f"{f}_v{a}"] for a in "xyz"]) for f in feet}
-    cols = [flags[f] * ca.vertcat(ca.DM.eye(3), skew(pos[f] - com)) for f in feet]
-    A = ca.horzcat(*cols)
-    S = ca.DM(np.diag([1, 1, 1] + [g.moment_weight] * 3))
-    K = ca.mtimes([A.T, S, A]) + g.regularization * ca.DM.eye(3 * len(feet))
-    f_all = dense_ldl_solve(K, ca.mtimes([A.T, S, wrench]))
+    force = tk.mass * ca.vertcat(g.kv * (v_cmd - cdot[:2]),
+                                 tk.grav + g.kz * (g.height - com[2]) - g.dz * cdot[2])
+    wrench = ca.vertcat(force, level_trunk_moment(tk, inertia, g.k_tilt, g.d_tilt, g.d_yaw))
+    f_all = split_wrench(tk, flags, feet, wrench, g.moment_weight, g.regularization)
+    dyn = sys.dyn
     mu = float(sys.friction)
     half, period = g.half, g.period
     tc = t - period * ca.floor(t / period)
