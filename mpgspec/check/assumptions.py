@@ -81,9 +81,44 @@ def _hybrid_orbit(p: CompiledPrimitive) -> dict:
     return p.cache["hybrid_orbit"]
 
 
+def _event_transient(p: CompiledPrimitive) -> bool:
+    return p.cls is PrimitiveClass.TRANSIENT and bool(getattr(p.system, "events", False)) and p.jump is not None
+
+
+def _transient_defect(p: CompiledPrimitive) -> tuple[float, float]:
+    """(largest ||x(t) - x*(t)||_W, its t) along the domain for the discrete flow with contact
+    events from x*(t_0), switched in at t_0: the flow a transient's x*(t) must be (Definition 1)."""
+    import casadi as ca
+
+    from ..oracle.integrator import LEFT, rk4_jump
+
+    W = np.asarray(p.info.get("roa_W", np.eye(p.system.nx)), float)
+    t0, tf = p.domain
+    x0 = p.x_star(t0)
+    x, dt = ca.DM(x0), HYBRID_DT
+    worst, at = 0.0, t0
+    for i in range(int(round((tf - t0) / dt))):
+        t = t0 + i * dt
+        x = rk4_jump(lambda xx, tt: p.f_cl(xx, tt, tt - t0, x0), lambda xx, tt: p.control(xx, tt, tt - t0, x0)[1],
+                     p.jump, x, t, dt, LEFT, s=t - t0)
+        d = np.array(x, float).ravel() - p.x_star(t + dt)
+        r = float(np.sqrt(max(d @ W @ d, 0.0))) if np.isfinite(d).all() else np.inf
+        if not r <= worst:
+            worst, at = r, t + dt
+    return worst, at
+
+
 def setpoint_dynamics(p: CompiledPrimitive, tol: float, n: int = 40) -> AssumptionCheck:
     """max_t |d/dt x*(t) - f_cl(x*(t), t)| by central differences of the setpoint; for gaits the
-    orbit defect of the discrete flow (in E's norm), since x*(t) jumps at every touchdown."""
+    orbit defect of the discrete flow (in E's norm), since x*(t) jumps at every touchdown, and for
+    transients with contact events the defect of the discrete flow along the domain."""
+    if _event_transient(p):
+        d, at = _transient_defect(p)
+        ok = np.isfinite(d) and d <= tol
+        return AssumptionCheck(p.name, "setpoint_dynamics", "pass" if ok else "fail", "computed",
+                               f"largest defect {d:.3g} at t = {at:.3g} (the discrete flow with contact events "
+                               f"from x*(t_0) over the domain, dt {HYBRID_DT:g}, ||x - x*||_W; tolerance {tol:g})",
+                               {"defect": d if np.isfinite(d) else None, "t": at, "tolerance": tol, "dt": HYBRID_DT})
     if _hybrid(p):
         d = _hybrid_orbit(p)["defect"]
         ok = np.isfinite(d) and d <= tol

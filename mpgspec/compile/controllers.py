@@ -84,6 +84,8 @@ def pd_law(c: PDController, ctx: ControlContext) -> ca.SX:
     ydot = ca.mtimes(Jy, drift)
     y_of = ca.Function("y", [x], [y, ydot])
     yd, yd_dot = y_of(ctx.x_star)
+    if c.target is not None:
+        yd, yd_dot = ca.DM(c.target), ca.DM.zeros(ny)
     if c.profile is not None:
         y0, y0_dot = y_of(ctx.x_sw)
         yd, yd_dot = cubic_profile(ctx.s, c.profile.duration, y0, y0_dot, yd, yd_dot)

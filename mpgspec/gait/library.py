@@ -31,9 +31,13 @@ TOLERANCE = 1e-6  # tables agree when every state differs by less than this (the
 class TransientEntry(Strict):
     """A transient primitive whose setpoint table is its closed loop's own flow."""
 
-    primitive: str = Field(description="a transient primitive whose law reads only the state and the clock "
-                                       "(controller type jump); its setpoint.file is written")
-    duration: float = Field(gt=0, description="length of the table (s), at least the primitive's domain")
+    primitive: str = Field(description="a transient primitive whose law does not read x* (controller type jump, "
+                                       "or pd with a fixed target); its setpoint.file is written")
+    duration: float = Field(gt=0, description="length of the flow (s), at least the primitive's domain")
+    start: str | None = Field(default=None, description="start from this transient's x* at the end of its "
+                                                        "domain (default: the stance of controller.pose)")
+    rest: bool = Field(default=False, description="write the flow's end state as a constant x*: the state the "
+                                                  "loop comes to rest in (e.g. Land's crouch after the landing)")
 
 
 class GaitFile(Strict):
@@ -89,8 +93,8 @@ class FlowTable:
     inputs: str
 
     def text(self, state_names: list[str]) -> str:
-        head = {"generator": "mpgspec gait (the closed loop's flow from the stance, RK4 with contact events)",
-                "node": self.node, "dt": f"{self.t[1] - self.t[0]:g}", "duration": f"{self.t[-1]:g}",
+        head = {"generator": "mpgspec gait (the closed loop's own flow, RK4 with contact events)",
+                "node": self.node, "duration": f"{self.t[-1]:g}",
                 **{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in self.stats.items()},
                 "inputs": self.inputs}
         lines = [f"# {k}: {v}" for k, v in head.items()]
@@ -100,9 +104,31 @@ class FlowTable:
         return "\n".join(lines) + "\n"
 
 
-def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print) -> FlowTable:
-    """Roll out a transient primitive's closed loop from the stance of its controller.pose for
-    entry.duration, with the oracle's step (RK4, the step-end rule, the jump with contact events)."""
+def _start_state(spec, sys, entry: TransientEntry, done: dict) -> np.ndarray:
+    """x0 of a flow: the stance of the controller's pose, or another transient's x* at the end of its
+    domain (from the table generated before it, else from the compiled primitive)."""
+    from ..compile.primitive import compile_primitive
+    from ..compile.rigidbody.trot import nominal_state
+
+    if entry.start is None:
+        inst = next(i for i in spec.primitives if i.name == entry.primitive)
+        return nominal_state(sys, dict(inst.spec.controller.pose))
+    src = next((i for i in spec.primitives if i.name == entry.start), None)
+    if src is None or src.spec.domain is None:
+        raise SpecError("no transient primitive of that name", location=None, key="transients.start",
+                        expected="the name of a transient primitive", found=entry.start, code="MPG104")
+    if entry.start in done:
+        table = done[entry.start]
+        k = int(np.argmin(np.abs(table.t - float(src.spec.domain[1]))))
+        return table.X[:, k].copy()
+    prim = compile_primitive(src, sys)
+    return prim.x_star(prim.domain[1])
+
+
+def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print, done: dict | None = None) -> FlowTable:
+    """Roll out a transient primitive's closed loop from its start for entry.duration, with the
+    oracle's step (RK4, the step-end rule, the jump with contact events); with `rest`, x* is the
+    end state held."""
     import dataclasses
     import hashlib
     import json
@@ -110,19 +136,20 @@ def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print) -> F
     import casadi as ca
 
     from ..compile.primitive import compile_primitive, spec_file
-    from ..compile.rigidbody.trot import nominal_state
     from ..oracle.integrator import LEFT, rk4_jump
     from ..spec.primitive import Setpoint
 
     inst = next((i for i in spec.primitives if i.name == entry.primitive), None)
-    if inst is None or inst.spec.controller.type != "jump" or inst.spec.setpoint.file is None:
-        raise SpecError("no transient primitive of that name with a jump law and a setpoint table", location=None,
-                        key="transients.primitive", expected="a primitive with controller type jump and setpoint.file",
+    ctrl = inst.spec.controller if inst is not None else None
+    free = ctrl is not None and (ctrl.type == "jump" or (ctrl.type == "pd" and ctrl.target is not None))
+    if inst is None or not free or inst.spec.setpoint.file is None:
+        raise SpecError("no transient primitive of that name whose law does not read x*, with a setpoint table",
+                        location=None, key="transients.primitive",
+                        expected="a primitive with controller type jump (or pd with a target) and setpoint.file",
                         found=entry.primitive, code="MPG104")
     path = spec_file(inst, inst.spec.setpoint.file, inst.locate(("setpoint", "file")),
                      f"primitive '{inst.name}': setpoint.file")[1]
-    ctrl = inst.spec.controller
-    x0 = nominal_state(sys, dict(ctrl.pose))
+    x0 = _start_state(spec, sys, entry, done or {})
     named = {n: float(v) for n, v in zip(sys.state_names, x0) if v != 0.0 and not n.startswith(("contact_", "since_"))}
     start = dataclasses.replace(inst, spec=inst.spec.model_copy(update={"setpoint": Setpoint(named=named)}))
     progress(f"compiling {inst.name} (its law does not read x*)")
@@ -137,11 +164,18 @@ def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print) -> F
         x = rk4_jump(f, k, prim.jump, x, i * dt, dt, LEFT, s=i * dt)
         X[:, i + 1] = np.array(x, float).ravel()
     t = np.arange(n + 1) * dt
-    clock = sys.state_names.index("since_takeoff") if "since_takeoff" in sys.state_names else None
-    stats = {"takeoff": float(t[-1] - X[clock, -1]) if clock is not None and X[clock, -1] < t[-1] else "none"}
-    text = json.dumps({"controller": ctrl.model_dump(mode="json"), "dt": dt, "n": n, "x0": [round(float(v), 12) for v in x0],
+    stats = {}
+    for event in ("takeoff", "first_touchdown"):
+        name = f"since_{event}"
+        if name in sys.state_names and X[sys.state_names.index(name), -1] < t[-1]:
+            stats[event] = float(t[-1] - X[sys.state_names.index(name), -1])
+    if entry.rest:  # x* is the state the flow comes to rest in
+        m = sys.model
+        stats["rest_speed"] = float(np.abs(X[m.nq:m.nq + m.nv, -1]).max())
+        t, X = np.array([0.0, t[-1]]), np.repeat(X[:, -1:], 2, axis=1)
+    text = json.dumps({"controller": ctrl.model_dump(mode="json"), "dt": dt, "n": n, "rest": entry.rest, "x0": [round(float(v), 12) for v in x0],
                        "friction": float(sys.friction), "u_hi": [float(v) for v in sys.u_hi]}, sort_keys=True)
-    progress(f"{inst.name}: {n} steps, takeoff at {stats['takeoff']} s")
+    progress(f"{inst.name}: {n} steps; " + ", ".join(f"{k} {v:.4g}" for k, v in stats.items()))
     return FlowTable(inst.name, path, t, X, stats, hashlib.sha256(text.encode()).hexdigest()[:16])
 
 
@@ -194,8 +228,10 @@ def generate(path: str | Path, progress=print) -> list:
                  f"command {orbit.command:.4f} m/s for a mean speed of {orbit.stats['mean_speed']:.4f} m/s, "
                  f"largest multiplier {orbit.spectral_radius:.4f} ({orbit.seconds:.1f} s)")
         out.append(table)
+    done: dict[str, FlowTable] = {}
     for entry in gf.transients:
-        out.append(flow_table(spec, sys, entry, gf.dt, progress))
+        done[entry.primitive] = flow_table(spec, sys, entry, gf.dt, progress, done)
+        out.append(done[entry.primitive])
     return out
 
 

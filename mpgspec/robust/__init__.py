@@ -2,6 +2,7 @@
 initial-state error (an adversarial falsification, never a proof).
 
 check.py validates a project's `uncertainty` block, rollout.py runs the perturbed closed loops
-(rigid.py those of rigid bodies: mass scale, friction, a push on the base), graph.py builds the
-robust graph, plan.py plans on it from a report.
+(rigid.py those of rigid bodies: mass scale, friction, a push on the base), starts.py samples
+start states on the boundary of the source's region of attraction, graph.py builds the robust
+graph, plan.py plans on it from a report.
 """

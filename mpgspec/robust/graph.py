@@ -7,8 +7,10 @@ them, seeded), its centre, `samples` seeded random points, each with the disturb
 and -bound; then `search` rounds of an adversarial bang-bang disturbance from the worst scenario
 (the sign of the gradient, through CasADi, of the binding h sample before entry and of the RoA
 margin at entry).
-A cell is robust-safe when every scenario is safe; the robust transition keeps only those cells
-and is classified like the nominal one. This is falsification: a robust edge withstood every
+With `start_in_roa`, every scenario also starts from seeded samples of the boundary of the source's
+region of attraction E_A (starts.py), and the search continues from the worst start.
+A cell is robust-safe when every scenario from every start is safe; the robust transition keeps
+only those cells and is classified like the nominal one. This is falsification: a robust edge withstood every
 scenario tried, it is not proven to withstand the whole set.
 """
 from __future__ import annotations
@@ -25,11 +27,15 @@ from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
 from .rigid import RigidRobustRollout
 from .rollout import RobustRollout, judge, plant
+from .starts import Start, boundary_starts
 from .sequence import sequence_under_uncertainty
 
 LABEL = "empirical"
-RECORD = 3
+RECORD = 4
 """Layout of the memoised robust record (part of its key)."""
+ROLLOUTS = 4096
+"""At most this many rollouts are run (and their samples held) at once."""
+SAMPLED = "empirical (sampled)"
 NOTE = ("falsification, not proof: a robust edge withstood every scenario tried (parameter-box corners, seeded "
         "samples and an adversarial disturbance search); no certificate backs it")
 
@@ -90,6 +96,14 @@ def _scenarios(unc, sys, rng: np.random.Generator, nominal: dict) -> tuple[np.nd
     return np.array(th).reshape(-1, len(names)), np.array(err), np.array(sg), kd
 
 
+def _start_record(prim, t_A: float, start: Start, state_names: list[str]) -> dict:
+    """Which start of a cell its worst case came from: a sample of E_A's boundary (its index, weighted
+    distance, E_A's radius and the offset from x_A*(t_A) by state) or x_A*(t_A) itself (sample None)."""
+    dx = start.x - prim.x_star(t_A)
+    return {"sample": start.sample, "weighted_distance": float(start.distance), "radius": float(prim.radius),
+            "offset": {n: float(v) for n, v in zip(state_names, dx) if v != 0.0}}
+
+
 def _rows(tr: Transition, m: int) -> list[int]:
     avail = np.flatnonzero(tr.available)
     if len(avail) <= m:
@@ -142,6 +156,7 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
         def rollout(B, horizon):
             return RobustRollout(B, P, dist_idx, K, settings, horizon)
     K = dist.segments if dist is not None else 1
+    roa_starts = unc.start_in_roa
     rng = np.random.default_rng(unc.seed)
     TH, ERR, SG, KIND = _scenarios(unc, sys, rng, nominal_values)
     S = len(TH)
@@ -162,27 +177,41 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
             for i in _rows(tr, unc.cells):
                 tb = tr.best_t_B[i]
                 j = int(np.argmin(np.abs(tr.t_B - tb)))
-                cells.append((a, tr, i, j, prims[a].x_star(float(tr.t_A[i])), float(tb)))
+                t_A = float(tr.t_A[i])
+                starts = [Start(prims[a].x_star(t_A))]
+                if roa_starts is not None:
+                    starts += boundary_starts(prims[a], t_A, roa_starts.samples, roa_starts.seed)
+                cells.append((a, tr, i, j, starts, float(tb)))
         hz = B.horizons(settings.horizon, [c[5] for c in cells])
         tb0 = time.perf_counter()
         rr = rollout(B, float(hz.max()))
         build_s += time.perf_counter() - tb0
         nsteps = np.minimum(np.ceil(hz / settings.dt - 1e-9).astype(int), rr.N)
         C = len(cells)
-        X0 = np.concatenate([c[4][None, :] + ERR for c in cells])
-        T0 = np.repeat([c[5] for c in cells], S)
-        THb = np.tile(TH, (C, 1))
-        D = np.tile((SG[:, None, None] * bound[None, :, None]) * np.ones((1, len(bound), K)), (C, 1, 1))
-        Y, last = rr.run(X0, T0, THb, D, np.repeat(nsteps, S), tol)
-        n_roll += len(X0)
-        res = [judge(Y[r, :-1], Y[r, -1], int(min(nsteps[r // S], last[r])), tol) for r in range(len(X0))]
-        worst = []  # per cell: its worst scenario so far
-        for c in range(C):
-            rs = range(c * S, (c + 1) * S)
-            r = min(rs, key=lambda r: (res[r][0], res[r][1]))
-            worst.append({"margin": res[r][1], "safe": res[r][0], "entry": res[r][2], "x0": X0[r], "t0": T0[r],
-                          "theta": THb[r], "D": D[r], "kind": KIND[r % S], "err": ERR[r % S],
-                          "all_safe": all(res[q][0] for q in rs), "Y": Y[r]})
+        D1 = (SG[:, None, None] * bound[None, :, None]) * np.ones((1, len(bound), K))
+        worst = [None] * C  # per cell: its worst scenario so far, over every start
+        pairs = [(c, s) for c in range(C) for s in cells[c][4]]
+        per = max(1, ROLLOUTS // S)
+        for q0 in range(0, len(pairs), per):
+            chunk = pairs[q0:q0 + per]
+            cs = np.repeat([c for c, _ in chunk], S)
+            X0 = np.concatenate([s.x[None, :] + ERR for _, s in chunk])
+            T0 = np.array([cells[c][5] for c in cs])
+            THb, D = np.tile(TH, (len(chunk), 1)), np.tile(D1, (len(chunk), 1, 1))
+            Y, last = rr.run(X0, T0, THb, D, nsteps[cs], tol)
+            n_roll += len(X0)
+            for q, (c, s) in enumerate(chunk):
+                rs = range(q * S, (q + 1) * S)
+                res = {r: judge(Y[r, :-1], Y[r, -1], int(min(nsteps[c], last[r])), tol) for r in rs}
+                r = min(rs, key=lambda r: (res[r][0], res[r][1]))
+                ok = all(res[p][0] for p in rs)
+                w = worst[c]
+                if w is None or (res[r][0], res[r][1]) < (w["safe"], w["margin"]):
+                    worst[c] = {"margin": res[r][1], "safe": res[r][0], "entry": res[r][2], "x0": X0[r],
+                                "t0": T0[r], "theta": THb[r], "D": D[r], "kind": KIND[r % S], "err": ERR[r % S],
+                                "start": s, "all_safe": ok and (w is None or w["all_safe"]), "Y": Y[r].copy()}
+                else:
+                    w["all_safe"] = w["all_safe"] and ok
         for _ in range(unc.search if dist is not None else 0):
             live = [c for c in range(C) if worst[c]["all_safe"]]
             if not live or rr.grad is None:
@@ -212,16 +241,16 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                     w.update(margin=m, safe=ok, entry=k_e, D=Dn, Y=Yc[q], kind="adversarial bang-bang disturbance")
                     w["all_safe"] = w["all_safe"] and ok
         per_edge: dict[str, list] = {}
-        for c, (a, tr, i, j, x0, tb) in enumerate(cells):
+        for c, (a, tr, i, j, starts, tb) in enumerate(cells):
             w = worst[c]
-            per_edge.setdefault(a, []).append({
-                "t_A": float(tr.t_A[i]), "t_B": tb, "robust_safe": bool(w["all_safe"]), "worst_margin": w["margin"],
-                "worst_case": {"kind": w["kind"], "parameters": dict(zip(names, map(float, w["theta"]))),
-                               "initial_error": {s: float(w["err"][sys.state_names.index(s)])
-                                                 for s in unc.initial_state},
-                               "disturbance": {u: [float(v) for v in w["D"][k]] for k, u in enumerate(
-                                   dist_names)}},
-                "_ij": (i, j)})
+            wc = {"kind": w["kind"], "parameters": dict(zip(names, map(float, w["theta"]))),
+                  "initial_error": {s: float(w["err"][sys.state_names.index(s)]) for s in unc.initial_state},
+                  "disturbance": {u: [float(v) for v in w["D"][k]] for k, u in enumerate(dist_names)}}
+            if roa_starts is not None:
+                wc["start"] = _start_record(prims[a], float(tr.t_A[i]), w["start"], sys.state_names)
+            per_edge.setdefault(a, []).append({"t_A": float(tr.t_A[i]), "t_B": tb, "robust_safe": bool(w["all_safe"]),
+                                               "worst_margin": w["margin"], "worst_case": wc, "_ij": (i, j),
+                                               "starts_kept": len(starts) - 1})
         for a, tr in items:
             checked = per_edge.get(a, [])
             margins = [c["worst_margin"] for c in checked]
@@ -232,6 +261,11 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                                                                    **worst["worst_case"]},
                           "cells": {"row": [int(c["_ij"][0]) for c in checked],  # t_A rows, at the nominal best t_B
                                     "robust_safe": [int(c["robust_safe"]) for c in checked], "worst_margin": margins}})
+            if roa_starts is not None:
+                kept = [c["starts_kept"] for c in checked]
+                edges[-1]["cells"]["starts_kept"] = kept
+                edges[-1]["start_in_roa"] = {"radius": float(prims[a].radius), "drawn": roa_starts.samples * len(kept),
+                                             "kept": int(sum(kept))}
     rg = _robust_graph(g, edges, unc.nodes)
     scen = {"per_cell": S, "corners": KIND.count("corner"), "samples": unc.samples, "search_rounds": unc.search,
             "disturbance_segments": K, "parameters": {n: list(unc.parameters[n].range) for n in names},
@@ -240,7 +274,12 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
             if force is None else {"force": {"frame": force.frame, "bound": bound.tolist(),
                                              "duration": force.duration}},
             "nodes": sorted(among),
-            "seed": unc.seed, "cells_per_edge": unc.cells}
+            "seed": unc.seed, "cells_per_edge": unc.cells, "start_in_roa": None}
+    if roa_starts is not None:
+        scen["start_in_roa"] = {"level": SAMPLED, "samples": roa_starts.samples, "seed": roa_starts.seed,
+                                "drawn": sum(e["start_in_roa"]["drawn"] for e in edges),
+                                "kept": sum(e["start_in_roa"]["kept"] for e in edges),
+                                "projected": bool(sys.is_rigid_body)}
     t1 = time.perf_counter()
     seq = None
     if spec.project.sequence is not None and unc.runs > 0:

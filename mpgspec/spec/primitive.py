@@ -81,6 +81,9 @@ class PDController(Strict):
     gravity_compensation: bool = Field(
         default=False, description="rigid bodies: add the torques that hold the current pose on the contact feet")
     profile: MotionProfile | None = None
+    target: list[Number] | None = Field(
+        default=None, description="fixed desired outputs y_d (rates 0) instead of y(x*(t)): a regulator whose law "
+                                  "does not read the setpoint, so that x* can be the loop's own flow or rest state")
 
     @field_validator("input_map")
     @classmethod
@@ -94,6 +97,10 @@ class PDController(Strict):
         n = len(self.outputs)
         if len(self.kp) != n or len(self.kd) != n:
             raise ValueError(f"kp and kd need one gain per output ({n})")
+        if self.target is not None and len(self.target) != n:
+            raise ValueError(f"target needs one value per output ({n})")
+        if self.target is not None and self.profile is not None:
+            raise ValueError("a fixed target has no motion profile to follow")
         return self
 
 

@@ -71,6 +71,15 @@ class Disturbance(Strict):
         return self
 
 
+class StartInRoA(Strict):
+    """Start states sampled on the boundary of the source's region of attraction E_A, besides x_A*(t_A)."""
+
+    samples: int = Field(ge=1, le=1000, description="seeded samples of the weighted sphere ||x - x_A*(t_A)||_W = r_A "
+                                                    "per cell, each run with every scenario")
+    seed: int = Field(default=0, ge=0, description="seed of the samples (sample k of a source has the same direction for "
+                                                   "every target and t_A row)")
+
+
 class Uncertainty(Strict):
     """What the robust graph must withstand and how hard it searches (a falsification, not a proof)."""
 
@@ -87,6 +96,9 @@ class Uncertainty(Strict):
     runs: int = Field(default=8, ge=0, le=1000,
                       description="seeded runs of the goal sequence under sampled uncertainty, per mode")
     seed: int = 0
+    start_in_roa: StartInRoA | None = Field(
+        default=None, description="also start each cell from seeded samples of the boundary of the source's region "
+                                  "of attraction E_A (projected onto its contact manifold for rigid bodies)")
     nodes: list[Text] | None = Field(default=None, min_length=1,
                                      description="primitives whose edges among each other are re-checked "
                                                  "(default: all); the robust graph has only these")

@@ -28,3 +28,35 @@ def test_a_failed_evaluation_raises_instead_of_returning_stale_outputs():
     with pytest.raises(RuntimeError, match="failed"):
         ch.run(np.array([[5.0], [6.0]]))
     assert np.isnan(rest[2]).all()  # the bound output buffer no longer holds the previous call
+
+
+def test_a_crash_is_the_evidence_of_the_call_that_crashes_not_of_its_batch():
+    """A batch whose compiled call fails is run again one call at a time: only the call that fails
+    gets error evidence, the others the verdicts they get alone."""
+    from pathlib import Path
+
+    from mpgspec.api import compile_project, settings_for
+    from mpgspec.oracle import SafetyOracle
+    from mpgspec.spec.loader import load_project
+
+    spec = load_project(Path(__file__).parents[2] / "specs" / "pendulum" / "project.yaml")
+    prims = compile_project(spec)
+    settings = settings_for(spec, {"jit": False})
+    target = prims["Balance"]
+    x_star = target.x_star(0.0)
+    x0s = np.array([x_star + [0.5, 0.1], x_star + [0.6, 0.0], x_star + [0.712345, 0.0]])
+    oracle = SafetyOracle(target, settings)
+    alone = [oracle(x, 0.0) for x in x0s[:2]]
+    assert all(a.t_stop > 0 for a in alone)  # judged in the compiled chunks, not at the first sample
+    run = oracle.runner.chunk.run
+
+    def crash_on_marker(Z):
+        if np.any(np.isclose(Z[0], x_star[0] + 0.712345)):
+            raise RuntimeError("the compiled rollout failed (status 1)")
+        return run(Z)
+
+    oracle.runner.chunk.run = crash_on_marker
+    ev = oracle.evaluate(x0s, np.zeros(3))
+    assert [e.status for e in ev[:2]] == [a.status for a in alone]
+    assert [e.t_stop for e in ev[:2]] == pytest.approx([a.t_stop for a in alone])
+    assert ev[2].status == "inconclusive" and ev[2].reason.value == "error" and "failed" in ev[2].message

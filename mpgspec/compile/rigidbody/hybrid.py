@@ -64,16 +64,27 @@ def masked_impact(sys, q: ca.SX, v: ca.SX, c: ca.SX) -> ca.SX:
     return v + tree_solve_l(L, parents, ca.mtimes(DY, P))
 
 
+def leg_joints(m, frame: str) -> list[int]:
+    """Configuration indices of the 1-dof joints on the chain from the base to `frame`."""
+    out, j = [], m.frame(frame).joint
+    while j >= 0 and m.joints[j].kind != "free":
+        out.append(m.joints[j].idx_q)
+        j = m.joints[j].parent
+    return sorted(out)
+
+
 def touchdown_projection(sys, q: ca.SX, joined: list) -> ca.SX:
     """q with each joining foot put on the ground by its own leg: one Gauss-Newton step on its
     height over the leg's three joints (minimal norm). A scheduled touchdown finds the foot up to
     a tracking error off the ground (millimetres); left there, the constraint's Baumgarte term
-    would move the foot after the impact. Legs follow the feet in joint order (quadrupeds)."""
+    would move the foot after the impact. A foot's leg is the chain of actuated joints from the
+    base to the foot."""
     m = sys.model
-    nq0 = 7 if m.n_base else 0
     q_new = q
     for i, f in enumerate(m.contact_frames):
-        leg = list(range(nq0 + 3 * i, nq0 + 3 * i + 3))
+        leg = leg_joints(m, f)
+        if not leg:
+            continue
         z0 = sys.extra_env[f"{f}_z"]
         z, Jz = (ca.substitute(e, sys.x[:m.nq], q) for e in (z0, ca.jacobian(z0, sys.x[:m.nq])[:, leg]))
         dq = -z * Jz.T / (ca.mtimes(Jz, Jz.T) + 1e-12)

@@ -44,12 +44,12 @@ class Replay:
 def held_feet(p: CompiledPrimitive, clock: float) -> tuple[str, ...] | None:
     """Feet the primitive's dynamics hold at this clock (a contact schedule, else its contact set);
     None when contact events decide."""
-    if p.system.events:
-        return None
     sched = p.info.get("contact_schedule")
     if sched:
         c = clock % p.period if p.period else clock
         return tuple(next((feet for until, feet in sched if c < until - 1e-9), sched[-1][1]))
+    if p.system.events:
+        return None
     return tuple(p.info.get("contacts", p.system.model.contact_frames))
 
 
