@@ -138,7 +138,8 @@ def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs
         "assumptions": rnd(finite_json([a.to_dict() for a in assumptions])),
         "sequence": None if spec.project.sequence is None else {
             "start": spec.project.sequence.start, "duration": spec.project.sequence.duration,
-            "commands": [{"t": c.t, "goal": c.goal} for c in spec.project.sequence.commands],
+            "commands": [{"t": c.t, "goal": c.goal, **({"reference": list(c.reference)} if c.reference else {})}
+                         for c in spec.project.sequence.commands],
             "state_names": list(csys.state_names),
             "runs": {m: compact_run(finite_json(r.to_dict())) for m, r in runs.items()},
         },

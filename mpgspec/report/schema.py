@@ -239,6 +239,8 @@ class AssumptionCheck(_Strict):
 class Command(_Strict):
     t: float
     goal: str
+    reference: list[str] | None = Field(default=None, description="what a reference run (e.g. the paper's "
+                                        "Table II) goes through for this goal")
 
 
 class Switch(_Strict):

@@ -50,5 +50,6 @@ def command_rows(seq: dict) -> list[dict]:
                                        for s in inside],
                              "from": before, "reached": reached, "violation": viol,
                              "stopped": _stopped(run, t0, t1, end)}
-        rows.append({"t": float(c["t"]), "goal": c["goal"], "until": t1, "runs": per_run})
+        rows.append({"t": float(c["t"]), "goal": c["goal"], "until": t1, "runs": per_run,
+                     "reference": c.get("reference")})
     return rows

@@ -110,6 +110,8 @@ Assertion = Annotated[
 class GoalCommand(Strict):
     t: Number = Field(ge=0)
     goal: Text
+    reference: list[Text] | None = Field(default=None, description="the primitives a reference run goes through "
+                                         "for this goal (e.g. a row of the paper's Table II), shown beside the runs")
 
 
 class Sequence(Strict):
