@@ -45,7 +45,8 @@ def test_committed_gait_tables_regenerate_within_tolerance():
     gf = load_gait_file(A1 / "gaits.yaml")
     names = compile_system(load_project(A1 / gf.project)).state_names
     assert compare(tables, names) == []
-    for t in tables:
+    assert {t.node for t in tables if not hasattr(t, "orbit")} == {"Jump", "Land"}  # flows of the transients
+    for t in (t for t in tables if hasattr(t, "orbit")):
         o = t.orbit
         assert o.status == "converged" and o.residual < 1e-10
         assert o.spectral_radius < 0.2

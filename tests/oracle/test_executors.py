@@ -91,8 +91,8 @@ def hybrid_project(folder: Path) -> Path:
     d = folder / "a1_hybrid"
     shutil.copytree(ROOT / "specs" / "a1", d)
     p = (d / "project.yaml").read_text()
-    p = p.replace("  friction: 0.6\n", "  friction: 0.6\n  contact_events: true\n")
     p = p.replace("  - primitives/stand.yaml\n", "  - primitives/drop.yaml\n").replace("  - primitives/walk.yaml\n", "")
+    p = p.replace("  - primitives/jump.yaml\n", "").replace("  - primitives/land.yaml\n", "")
     p = p[: p.index("sequence:")].replace("horizon: 2.5", "horizon: 0.6")
     (d / "project.yaml").write_text(p)
     lie = (d / "primitives" / "lie.yaml").read_text()

@@ -18,8 +18,8 @@ def drop_spec(tmp_path_factory):
     d = tmp_path_factory.mktemp("drop") / "a1"
     shutil.copytree(SPEC, d)
     p = (d / "project.yaml").read_text()
-    p = p.replace("  friction: 0.6\n", "  friction: 0.6\n  contact_events: true\n")
     p = p.replace("  - primitives/stand.yaml\n", "").replace("  - primitives/walk.yaml\n", "")
+    p = p.replace("  - primitives/jump.yaml\n", "").replace("  - primitives/land.yaml\n", "")
     p = p[: p.index("sequence:")]  # the goal sequence and assertions name the primitives left out
     (d / "project.yaml").write_text(p)
     lie = (d / "primitives" / "lie.yaml").read_text()
@@ -74,8 +74,8 @@ def test_contact_schedule_sets_the_flags_by_the_clock(tmp_path):
     d = tmp_path / "a1"
     shutil.copytree(SPEC, d)
     p = (d / "project.yaml").read_text()
-    p = p.replace("  friction: 0.6\n", "  friction: 0.6\n  contact_events: true\n")
     p = p.replace("  - primitives/stand.yaml\n", "").replace("  - primitives/walk.yaml\n", "")
+    p = p.replace("  - primitives/jump.yaml\n", "").replace("  - primitives/land.yaml\n", "")
     (d / "project.yaml").write_text(p[: p.index("sequence:")])
     lie = (d / "primitives" / "lie.yaml").read_text()
     lie = lie.replace("roa:\n", "contact_schedule:\n  - {until: 0.2, feet: [FL_foot, FR_foot, RL_foot, RR_foot]}\n"
