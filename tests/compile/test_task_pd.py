@@ -59,3 +59,24 @@ def test_task_space_pd_on_the_a1(tmp_path):
     u_late = np.array(p.control(x, 0.0, 5.0, x)[0]).ravel()
     expect = (Jn.T @ (-50 * (c - c_star).ravel() - 5 * cd.ravel())).ravel() + grav
     assert np.allclose(u_late, expect, atol=1e-8)
+
+
+def test_a_fixed_target_does_not_read_the_setpoint(tmp_path):
+    """`target` replaces y(x*(t)) (and the rates 0), so the law is the same whatever x* is."""
+    laws = []
+    for setpoint in ("[0.5, 0]", "[-2.0, 3.0]"):
+        text = PROJECT.replace("setpoint: {expr: [0.5, 0]}", f"setpoint: {{expr: {setpoint}}}")
+        text = text.replace("input_map: jacobian_transpose}", "input_map: jacobian_transpose, target: [1.0]}")
+        (tmp_path / "project.yaml").write_text(text)
+        p = compile_project(load_project(tmp_path / "project.yaml"))["Hold"]
+        x = np.array([0.2, -0.3])
+        laws.append(float(p.control(x, 0, 0, x)[0]))
+    assert laws[0] == laws[1] == np.float64(2 * (-3 * (0.4 - 1) - 1 * (-0.6)))
+
+
+def test_a_target_of_the_wrong_length_is_a_located_spec_error(tmp_path):
+    from mpgspec.cli import main
+
+    text = PROJECT.replace("input_map: jacobian_transpose}", "input_map: jacobian_transpose, target: [1.0, 2.0]}")
+    (tmp_path / "project.yaml").write_text(text)
+    assert main(["verify", str(tmp_path / "project.yaml"), "--no-write", "-q"]) == 2

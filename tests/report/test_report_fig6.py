@@ -290,3 +290,12 @@ def test_runs_record_a_pose_at_the_start_each_switch_the_first_violation_and_the
     graph = [(e, p) for t, p, e, _ in seen["graph"]]
     assert graph == [("start", "Home"), ("switch", "Ramp"), ("switch", "Right"), ("end", "Right")]
     assert [t for t, *_ in seen["graph"]][1:3] == [s["t"] for s in runs["graph"].switches[1:]]
+
+
+def test_a_reference_row_is_carried_beside_the_runs():
+    from mpgspec.report.traversal import command_rows
+
+    seq = {"duration": 4.0, "runs": {}, "commands": [
+        {"t": 0.0, "goal": "Lie"}, {"t": 2.0, "goal": "Walk(fast)", "reference": ["Lie", "Stand", "Walk(fast)"]}]}
+    rows = command_rows(seq)
+    assert rows[0]["reference"] is None and rows[1]["reference"] == ["Lie", "Stand", "Walk(fast)"]
