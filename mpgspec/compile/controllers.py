@@ -128,7 +128,7 @@ def _task_jacobian(sys: CompiledSystem, ydot: ca.SX, xdot: ca.SX) -> ca.SX:
     for other systems d ydot / dx times d xdot / du."""
     if sys.is_rigid_body:
         m = sys.model
-        v_act = sys.x[m.nq + m.n_base:]
+        v_act = sys.x[m.nq + m.n_base:m.nq + m.nv]
         return ca.jacobian(ydot, v_act)
     return ca.mtimes(ca.jacobian(ydot, sys.x), ca.jacobian(xdot, sys.u))
 

@@ -45,9 +45,10 @@ def test_task_space_pd_on_the_a1(tmp_path):
     p = compile_project(load_project(tmp_path / "a1" / "project.yaml"))["Lie"]
     sys = p.system
     rng = np.random.default_rng(1)
-    x = p.x_star(0.0) + np.r_[np.zeros(sys.model.nq), 0.1 * rng.normal(size=sys.model.nv)]
+    x = p.x_star(0.0) + np.r_[np.zeros(sys.model.nq), 0.1 * rng.normal(size=sys.model.nv),
+                              np.zeros(sys.nx - sys.model.nq - sys.model.nv)]
     com = ca.vertcat(*[sys.extra_env[f"com_{a}"] for a in "xyz"])
-    J = ca.jacobian(ca.jtimes(com, sys.x[:sys.model.nq], sys.xdot[:sys.model.nq]), sys.x[sys.model.nq + 6:])
+    J = ca.jacobian(ca.jtimes(com, sys.x[:sys.model.nq], sys.xdot[:sys.model.nq]), sys.x[sys.model.nq + 6:sys.model.nq + sys.model.nv])
     fJ = ca.Function("f", [sys.x], [com, J, ca.mtimes(ca.jacobian(com, sys.x[:sys.model.nq]), sys.xdot[:sys.model.nq])])
     c, Jn, cd = (np.array(v) for v in fJ(x))
     c_star = np.array(fJ(p.x_star(0.0))[0])

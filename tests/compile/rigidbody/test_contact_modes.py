@@ -48,7 +48,7 @@ def test_masked_dynamics_match_pinocchio(a1, states, held):
     fn = ca.Function("fn", [a1.x, a1.u], [loop.xdot[m.nq:m.nq + m.nv], lam_all])
     pm, pd = m.pin_model, m.pin_model.createData()
     for q, v, u in states:
-        a, lam = (np.array(z).ravel() for z in fn(np.r_[q, v], u))
+        a, lam = (np.array(z).ravel() for z in fn(np.r_[q, v, np.zeros(a1.nx - q.size - v.size)], u))
         tau = m.actuation_matrix @ u
         if held:
             cms, cds = pin_contacts(m, held, q, a1.baumgarte)
