@@ -41,7 +41,7 @@ def _random_state(sys, rng):
     m = sys.model
     q = m.random_configuration(rng)
     v = rng.normal(size=m.nv)
-    return q, v, np.concatenate([q, v])
+    return q, v, np.concatenate([q, v, sys.default_state()[m.nq + m.nv:]])  # flags and event clocks
 
 
 def _scaled(model: pin.Model, k: float) -> pin.Model:
@@ -64,7 +64,7 @@ def test_mass_scale_is_the_nominal_dynamics_under_tau_over_k(system):
     assert np.allclose(a_scaled, pin.aba(model, model.createData(), q, v, tau / k), atol=1e-9)
     aerial = system.uncertain_plant((), "trunk")
     xdot = np.array(aerial(x, u, k, np.zeros(3))[0]).ravel()
-    assert np.allclose(xdot[m.nq:], a_scaled, atol=1e-8)
+    assert np.allclose(xdot[m.nq:m.nq + m.nv], a_scaled, atol=1e-8)
     held = system.uncertain_plant(tuple(m.contact_frames), "trunk")  # ground forces scale with k
     _, lam_k = held(x, u, k, np.zeros(3))
     _, lam_1 = held(x, u / k, 1.0, np.zeros(3))
@@ -78,7 +78,7 @@ def test_push_changes_the_base_acceleration_by_its_generalized_force(system):
     q, v, x = _random_state(system, rng)
     u, F = rng.normal(size=m.nu), np.array([20.0, -12.0, 5.0])
     aerial = system.uncertain_plant((), "trunk")
-    da = (np.array(aerial(x, u, 1.0, F)[0]) - np.array(aerial(x, u, 1.0, np.zeros(3))[0])).ravel()[m.nq:]
+    da = (np.array(aerial(x, u, 1.0, F)[0]) - np.array(aerial(x, u, 1.0, np.zeros(3))[0])).ravel()[m.nq:m.nq + m.nv]
     R = pin.Quaternion(q[6], q[3], q[4], q[5]).toRotationMatrix()
     fext = [pin.Force.Zero() for _ in range(model.njoints)]
     p = m.frame("trunk").translation
@@ -88,7 +88,7 @@ def test_push_changes_the_base_acceleration_by_its_generalized_force(system):
     assert np.allclose(da, ref, atol=1e-9)
     pin.centerOfMass(model, data, q, np.zeros(m.nv), da)  # the centre of mass accelerates by F / m
     assert np.allclose(data.acom[0] * m.total_mass, F, atol=1e-8)
-    a_k = (np.array(aerial(x, u, 1.1, F)[0]) - np.array(aerial(x, u, 1.1, np.zeros(3))[0])).ravel()[m.nq:]
+    a_k = (np.array(aerial(x, u, 1.1, F)[0]) - np.array(aerial(x, u, 1.1, np.zeros(3))[0])).ravel()[m.nq:m.nq + m.nv]
     assert np.allclose(a_k, da / 1.1, atol=1e-9)  # a heavier robot is pushed less
 
 
