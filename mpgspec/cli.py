@@ -551,7 +551,7 @@ def cmd_schema(args) -> int:
 def cmd_gait(args) -> int:
     """Generate (or with --check, compare) the gait tables of a gait file."""
     from .compile.system import compile_system
-    from .gait.library import compare, generate, load_gait_file, write
+    from .gait.library import GaitTable, compare, generate, load_gait_file, write
     from .spec.loader import load_project
 
     path = Path(args.file)
@@ -559,8 +559,8 @@ def cmd_gait(args) -> int:
     tables = generate(path, progress=say)
     gf = load_gait_file(path)
     names = compile_system(load_project(path.parent / gf.project)).state_names
-    bad = [t.node for t in tables if hasattr(t, "orbit") and (t.orbit.status != "converged"
-                                                              or not t.orbit.spectral_radius < 1)]
+    bad = [t.node for t in tables if isinstance(t, GaitTable) and (t.orbit.status != "converged"
+                                                                   or not t.orbit.spectral_radius < 1)]
     if args.check:
         problems = compare(tables, names)
         for p_ in problems:

@@ -157,11 +157,11 @@ def _simulate(run: SequenceRun, prims: dict[str, CompiledPrimitive], graph: Moti
         return
     snaps.append((0.0, cur, "start", np.array(x, float)))
 
-    seen = [False]  # a violation recorded since the last switch
+    seen = False  # a violation recorded since the last switch
 
     def switch(to: str, t_B: float | None, why: str, x_now: np.ndarray, t_now: float):
-        nonlocal cur, z, converged
-        seen[0] = False
+        nonlocal cur, z, converged, seen
+        seen = False
         t_B = _start_clock(prims[to]) if t_B is None else t_B
         run.switches.append({"t": t_now, "from": cur, "to": to, "clock": float(t_B), "reason": why})
         snaps.append((t_now, to, "switch", np.array(x_now, float)))
@@ -199,8 +199,8 @@ def _simulate(run: SequenceRun, prims: dict[str, CompiledPrimitive], graph: Moti
                 run.safe = False
                 if not run.violations:
                     snaps.append((t_now, cur, "first_violation", np.array(xi, float)))
-                if len(run.violations) < 50 or not seen[0]:  # the first of every switch is kept
-                    seen[0] = True
+                if len(run.violations) < 50 or not seen:  # the first of every switch is kept
+                    seen = True
                     j = int(np.argmin(np.where(np.isfinite(hv), hv, -np.inf)))
                     v = float(hv[j]) if np.isfinite(hv[j]) else None
                     run.violations.append({"t": t_now, "primitive": cur, "h": p.h_names[j], "value": v})

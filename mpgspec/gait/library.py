@@ -133,10 +133,8 @@ def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print, done
     import hashlib
     import json
 
-    import casadi as ca
-
     from ..compile.primitive import compile_primitive, spec_file
-    from ..oracle.integrator import LEFT, rk4_jump
+    from ..oracle.integrator import switched_flow
     from ..spec.primitive import Setpoint
 
     inst = next((i for i in spec.primitives if i.name == entry.primitive), None)
@@ -155,14 +153,7 @@ def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print, done
     progress(f"compiling {inst.name} (its law does not read x*)")
     prim = compile_primitive(start, sys)
     n = int(round(entry.duration / dt))
-    f = lambda xx, tt: prim.f_cl(xx, tt, tt, x0)  # noqa: E731  (switched in at t = 0 from x0)
-    k = lambda xx, tt: prim.control(xx, tt, tt, x0)[1]  # noqa: E731
-    X = np.zeros((sys.nx, n + 1))
-    X[:, 0] = x0
-    x = ca.DM(x0)
-    for i in range(n):
-        x = rk4_jump(f, k, prim.jump, x, i * dt, dt, LEFT, s=i * dt)
-        X[:, i + 1] = np.array(x, float).ravel()
+    X = switched_flow(prim, x0, 0.0, dt, n)
     t = np.arange(n + 1) * dt
     stats = {}
     for event in ("takeoff", "first_touchdown"):

@@ -210,6 +210,21 @@ def rk4_jump(f, k, jump, x, t, h: float, left: float = 0.0, s: float = np.inf):
     return jump(x_end, k(x, t), t + h, s + h)
 
 
+def switched_flow(prim: CompiledPrimitive, x0: np.ndarray, t0: float, dt: float, n: int) -> np.ndarray:
+    """States (nx, n + 1) of a primitive's discrete flow switched in at clock t0 from x0: n oracle
+    steps of dt (RK4, the step-end rule, the jump with contact events at each step's end), each
+    evaluated through the compiled loop without the error bookkeeping."""
+    x = ca.DM(np.asarray(x0, float))
+    X = np.zeros((x.shape[0], n + 1))
+    X[:, 0] = np.asarray(x0, float)
+    for i in range(n):
+        t = t0 + i * dt
+        x = rk4_jump(lambda xx, tt: prim.f_cl(xx, tt, tt - t0, x0), lambda xx, tt: prim.control(xx, tt, tt - t0, x0)[1],
+                     prim.jump, x, t, dt, LEFT, s=t - t0)
+        X[:, i + 1] = np.array(x, float).ravel()
+    return X
+
+
 FD_STEP = 1e-6
 """Time step of the one-sided differences that give the rates of h along the flow in large loops."""
 

@@ -23,14 +23,6 @@ from ..controllers import cubic_profile
 from .trot import level_trunk_moment, nominal_geometry, nominal_state, split_wrench, trunk
 
 
-def _pose_vector(sys, pose: dict) -> ca.DM:
-    m = sys.model
-    x = sys.default_state()
-    for j, a in pose.items():
-        x[sys.state_names.index(j)] = float(a)
-    return ca.DM(x[7:m.nq])
-
-
 def jump_torque(sys, c, mode: dict, t: ca.SX) -> ca.SX:
     """u(x, t) of the jump; mode[f] is 1 while foot f is in contact (its flag with contact events)."""
     m = sys.model
@@ -47,7 +39,7 @@ def jump_torque(sys, c, mode: dict, t: ca.SX) -> ca.SX:
     wrench = ca.vertcat(force, level_trunk_moment(tk, inertia, float(c.k_tilt), float(c.d_tilt), float(c.d_yaw)))
     f_all = split_wrench(tk, mode, feet, wrench, 10.0, 1e-4)
     q, v = sys.x[7:m.nq], sys.x[m.nq + 6:m.nq + m.nv]
-    stance_q, tuck_q = _pose_vector(sys, dict(c.pose)), _pose_vector(sys, dict(c.tuck))
+    stance_q, tuck_q = ca.DM(x0[7:m.nq]), ca.DM(nominal_state(sys, dict(c.tuck))[7:m.nq])  # joint angles
     kp, kd = float(c.kp_joint), float(c.kd_joint)
     hold = kp * (stance_q - q) - kd * v
     tuck = kp * (tuck_q - q) - kd * v
