@@ -420,9 +420,6 @@ def _simulate_uncertain(args, spec, report) -> int:
     unc = spec.project.uncertainty
     if unc is None:
         raise UsageError(f"{spec.path}: the project declares no `uncertainty` to sample")
-    if getattr(spec.system, "kind", "analytic") != "analytic":
-        raise UsageError(f"{spec.path}: runs of the goal sequence under uncertainty are supported for analytic "
-                         "systems only; the robust edges of this project are in its report")
     runs = unc.runs if args.runs is None else args.runs
     seed = unc.seed if args.seed is None else args.seed
     if not 1 <= runs <= 100000:

@@ -71,13 +71,6 @@ def check_uncertainty(spec: ProjectSpec) -> None:
                     _err(errors, "unknown input", loc("disturbance", "inputs", i), f"disturbance.inputs.{i}", "MPG107",
                          "one of " + ", ".join(sys.inputs) if sys.inputs else "no inputs", repr(str(u)[:60]),
                          _hint(u, sys.inputs))
-    if rigid and dist is not None and unc.search > 0:
-        _err(errors, "the adversarial search needs gradients through the control law; rigid bodies run the "
-             "constant pushes only", loc("search") if "search" in unc.model_fields_set else loc(), "search",
-             "MPG104", "search: 0", str(unc.search))
-    if rigid and spec.project.sequence is not None and unc.runs > 0:
-        _err(errors, "runs of the goal sequence under uncertainty are supported for analytic systems only",
-             loc("runs") if "runs" in unc.model_fields_set else loc(), "runs", "MPG104", "runs: 0", str(unc.runs))
     for name in unc.initial_state if not rigid else ():  # rigid bodies: checked once compiled
         if name not in sys.states:
             _err(errors, "unknown state", loc("initial_state", name), f"initial_state.{name}", "MPG107",
@@ -107,8 +100,7 @@ def check_uncertainty(spec: ProjectSpec) -> None:
 
 
 def check_uncertainty_compiled(spec: ProjectSpec, prims: dict) -> None:
-    """What only the compiled rigid body knows: the push's frame, state names, and that each robust
-    node has one contact set and no safety windows (the no-slip rows are re-evaluated on the plant)."""
+    """What only the compiled rigid body knows: the push's frame and the state names."""
     unc = spec.project.uncertainty
     if unc is None or not prims:
         return
@@ -127,16 +119,5 @@ def check_uncertainty_compiled(spec: ProjectSpec, prims: dict) -> None:
         if name not in sys.state_names:
             _err(errors, "unknown state", loc("initial_state", name), f"initial_state.{name}", "MPG107",
                  "a state of the system", repr(str(name)[:60]), _hint(name, sys.state_names))
-    names = unc.nodes if unc.nodes is not None else list(prims)
-    for i, n in enumerate(names):
-        p = prims[n]
-        # with contact events a node that holds one contact set is run holding it (a lift-off would
-        # already break its normal-force row)
-        if p.info.get("contact_schedule") or any(w is not None for w in p.windows):
-            where = ("nodes", i) if unc.nodes is not None else ()
-            _err(errors, f"primitive '{n}' switches contacts or safety functions; the robust check takes "
-                 "primitives with one contact set and no `when` windows", loc(*where),
-                 f"nodes.{i}" if unc.nodes is not None else "nodes", "MPG104",
-                 "nodes: [...] without it", n)
     if errors:
         raise SpecErrors(errors)

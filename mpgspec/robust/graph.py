@@ -6,7 +6,8 @@ scenarios: the corners of the box of uncertain parameters and start errors (at m
 them, seeded), its centre, `samples` seeded random points, each with the disturbance at 0, +bound
 and -bound; then `search` rounds of an adversarial bang-bang disturbance from the worst scenario
 (the sign of the gradient, through CasADi, of the binding h sample before entry and of the RoA
-margin at entry).
+margin at entry; where the law gives no gradient, a rigid body or a sampled ID-QP, a coordinate
+search that reverses one piece of one axis per candidate and keeps the worst).
 With `start_in_roa`, every scenario also starts from seeded samples of the boundary of the source's
 region of attraction E_A (starts.py), and the search continues from the worst start.
 A cell is robust-safe when every scenario from every start is safe; the robust transition keeps
@@ -31,7 +32,7 @@ from .starts import Start, boundary_starts
 from .sequence import sequence_under_uncertainty
 
 LABEL = "empirical"
-RECORD = 4
+RECORD = 5
 """Layout of the memoised robust record (part of its key)."""
 ROLLOUTS = 4096
 """At most this many rollouts are run (and their samples held) at once."""
@@ -102,6 +103,45 @@ def _start_record(prim, t_A: float, start: Start, state_names: list[str]) -> dic
     dx = start.x - prim.x_star(t_A)
     return {"sample": start.sample, "weighted_distance": float(start.distance), "radius": float(prim.radius),
             "offset": {n: float(v) for n, v in zip(state_names, dx) if v != 0.0}}
+
+
+def _binding(prim, Y: np.ndarray, margin: float, entry: int | None, tol: float, dt: float) -> dict:
+    """What decided a worst case: the safety function with the least value before entry (or over the
+    rollout, when it broke one), with that value and its time after the switch; or, when the flow
+    stayed safe without entering E_B, the best RoA margin it reached."""
+    H = Y[:-1, : (entry + 1 if entry is not None else Y.shape[1])]
+    H = H[:, ~np.isnan(H).all(axis=0)] if H.size else H  # samples after a decided rollout are NaN
+    if H.size:
+        Hf = np.where(np.isfinite(H), H, -np.inf)
+        j, k = np.unravel_index(int(np.argmin(Hf)), Hf.shape)
+        if entry is not None or Hf[j, k] < -tol:
+            return {"h": prim.h_names[j], "value": float(Hf[j, k]), "t": float(k * dt)}
+    return {"h": None, "roa_margin": float(margin)}
+
+
+def _gradient_candidates(rr, worst: list, live: list[int], bound: np.ndarray) -> list:
+    """Per live cell two bang-bang disturbances: against the gradient of the binding h sample before
+    entry and of the RoA margin at entry (the sign of each piece's derivative, through CasADi)."""
+    targets = []
+    for c in live:
+        w = worst[c]
+        Hs = w["Y"][:-1, : w["entry"] + 1]
+        jh, kh = np.unravel_index(int(np.argmin(Hs)), Hs.shape) if Hs.size else (0, 0)
+        targets += [(c, int(jh), int(kh)), (c, rr.nh, int(w["entry"]))]
+    gr = rr.gradients(np.array([worst[c]["x0"] for c, _, _ in targets]),
+                      np.array([worst[c]["t0"] for c, _, _ in targets]),
+                      np.array([worst[c]["theta"] for c, _, _ in targets]),
+                      np.array([worst[c]["D"] for c, _, _ in targets]),
+                      [r for _, r, _ in targets], [k for _, _, k in targets])
+    return [(c, np.where(gd != 0, -np.sign(gd) * bound[:, None], worst[c]["D"])) for (c, _, _), gd in zip(targets, gr)]
+
+
+def _flipped(D: np.ndarray, bound: np.ndarray, a: int, k: int) -> np.ndarray:
+    """D with piece k of axis a reversed (set to +bound where it was 0): one move of the coordinate
+    search for a bang-bang disturbance when no gradient is available."""
+    Dn = np.array(D, float)
+    Dn[a, k] = -Dn[a, k] if Dn[a, k] != 0 else bound[a]
+    return Dn
 
 
 def _rows(tr: Transition, m: int) -> list[int]:
@@ -214,38 +254,38 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                     w["all_safe"] = w["all_safe"] and ok
         for _ in range(unc.search if dist is not None else 0):
             live = [c for c in range(C) if worst[c]["all_safe"]]
-            if not live or rr.grad is None:
+            if not live:
                 break
-            targets = []  # per live cell: the binding h sample before entry, and the RoA margin at entry
-            for c in live:
-                w = worst[c]
-                Hs = w["Y"][:-1, : w["entry"] + 1]
-                jh, kh = np.unravel_index(int(np.argmin(Hs)), Hs.shape) if Hs.size else (0, 0)
-                targets += [(c, int(jh), int(kh)), (c, rr.nh, int(w["entry"]))]
-            gr = rr.gradients(np.array([worst[c]["x0"] for c, _, _ in targets]),
-                              np.array([worst[c]["t0"] for c, _, _ in targets]),
-                              np.array([worst[c]["theta"] for c, _, _ in targets]),
-                              np.array([worst[c]["D"] for c, _, _ in targets]),
-                              [r for _, r, _ in targets], [k for _, _, k in targets])
-            cand = [(c, np.where(gd != 0, -np.sign(gd) * bound[:, None], worst[c]["D"]))
-                    for (c, _, _), gd in zip(targets, gr)]
+            if rr.grad is None:  # no gradient through the law (a sampled ID-QP, a rigid body): flip one piece
+                cand = [(c, _flipped(worst[c]["D"], bound, a, k)) for c in live
+                        for a in range(len(bound)) if bound[a] != 0 for k in range(K)]
+            else:
+                cand = _gradient_candidates(rr, worst, live, bound)
+            if not cand:
+                break
             Xc = np.array([worst[c]["x0"] for c, _ in cand])
             Yc, lc = rr.run(Xc, np.array([worst[c]["t0"] for c, _ in cand]),
                         np.array([worst[c]["theta"] for c, _ in cand]).reshape(len(cand), -1),
                         np.array([Dn for _, Dn in cand]), np.array([nsteps[c] for c, _ in cand]), tol)
             n_roll += len(cand)
+            moved = False
             for q, (c, Dn) in enumerate(cand):
                 ok, m, k_e = judge(Yc[q, :-1], Yc[q, -1], int(min(nsteps[c], lc[q])), tol)
                 w = worst[c]
                 if (ok, m) < (w["safe"], w["margin"]):
-                    w.update(margin=m, safe=ok, entry=k_e, D=Dn, Y=Yc[q], kind="adversarial bang-bang disturbance")
+                    w.update(margin=m, safe=ok, entry=k_e, D=Dn, Y=Yc[q], kind="adversarial bang-bang disturbance"
+                             + ("" if rr.grad is not None else " (coordinate search)"))
                     w["all_safe"] = w["all_safe"] and ok
+                    moved = True
+            if not moved and rr.grad is None:  # the coordinate search sits at a local worst
+                break
         per_edge: dict[str, list] = {}
         for c, (a, tr, i, j, starts, tb) in enumerate(cells):
             w = worst[c]
             wc = {"kind": w["kind"], "parameters": dict(zip(names, map(float, w["theta"]))),
                   "initial_error": {s: float(w["err"][sys.state_names.index(s)]) for s in unc.initial_state},
-                  "disturbance": {u: [float(v) for v in w["D"][k]] for k, u in enumerate(dist_names)}}
+                  "disturbance": {u: [float(v) for v in w["D"][k]] for k, u in enumerate(dist_names)},
+                  "binding": _binding(B, w["Y"], w["margin"], w["entry"], tol, settings.dt)}
             if roa_starts is not None:
                 wc["start"] = _start_record(prims[a], float(tr.t_A[i]), w["start"], sys.state_names)
             per_edge.setdefault(a, []).append({"t_A": float(tr.t_A[i]), "t_B": tb, "robust_safe": bool(w["all_safe"]),

@@ -1,24 +1,57 @@
 """Robust rollouts of a rigid-body primitive: mass scale, friction and a push on the base.
 
 The plant is the system's uncertain_plant (every link's mass and inertia times k, a world-frame
-force F at a base frame); the controller is the primitive's own, on the nominal model, solved at
-its control rate and held in between when it is sampled (the ID-QP), as the oracle runs it. The
-no-slip safety functions are evaluated with the plant's ground forces and the friction coefficient
-mu of the scenario; every other safety function as compiled.
+force F at a base frame) holding the feet the primitive's dynamics hold: a fixed set, the set its
+contact schedule holds at the clock, or the flags of the state with contact events (lift-offs are
+then decided on the perturbed plant too). The controller is the primitive's own, on the nominal
+model, solved at its control rate and held in between when it is sampled (the ID-QP), as the
+oracle runs it. Each step is the oracle's (RK4 with the last stage just before the step's end, so
+a law or contact mode switching there is not yet on, then the jump); a step's sample is the lesser of h at its two ends, with every safety function
+masked outside its window as the oracle masks it. The no-slip safety functions take the plant's
+ground forces and the scenario's friction coefficient mu; every other safety function is the
+compiled one.
 """
 from __future__ import annotations
 
 import casadi as ca
 
-from ..compile.primitive import CompiledPrimitive, saturate
+from ..compile.primitive import INACTIVE, CompiledPrimitive, saturate
 from ..compile.rigidbody.system import no_slip
-from ..oracle.integrator import _jump_fn
+from ..oracle.integrator import LEFT, _active, _jump_fn, _wrap
 from .rollout import RobustRollout
 
 
+def plant_feet(prim: CompiledPrimitive) -> list[str]:
+    """The feet whose ground forces the robust plant returns, in its order."""
+    sys = prim.system
+    if prim.info.get("contact_schedule") or sys.events:
+        return list(sys.model.contact_frames)
+    return list(prim.info.get("contacts", sys.model.contact_frames))
+
+
+def robust_plant(prim: CompiledPrimitive, frame: str) -> ca.Function:
+    """(x, u, k, F, t) -> (xdot, lam, c) of the primitive's dynamics perturbed (uncertain_plant)."""
+    sched = prim.info.get("contact_schedule")
+    return prim.system.uncertain_plant(tuple(prim.info.get("contacts", ())), frame,
+                                       [(u, tuple(f)) for u, f in sched] if sched else None, prim.period)
+
+
+def robust_jump(prim: CompiledPrimitive, frame: str) -> ca.Function:
+    """(x, u, t, s, k, F) -> x after a step's discrete update; with contact events and no schedule,
+    lift-offs are decided on the perturbed plant (touchdowns and impacts do not depend on k or F)."""
+    sys = prim.system
+    x, u, t, s = sys.x, ca.SX.sym("u", sys.nu), ca.SX.sym("t"), ca.SX.sym("s")
+    k, F = ca.SX.sym("k"), ca.SX.sym("F", 3)
+    if sys.events and not prim.info.get("contact_schedule"):
+        xn = sys.project(x, u, s, k, sys.push_wrench(frame, x[:sys.model.nq], F))
+    else:
+        xn = _jump_fn(prim)(x, u, t, s)
+    return ca.Function("robust_jump", [x, u, t, s, k, F], [xn])
+
+
 def no_slip_rows(prim: CompiledPrimitive) -> dict[int, tuple[int, int]]:
-    """h row -> (foot index in the primitive's contact set, 0 normal force | 1 friction cone)."""
-    feet = list(prim.info.get("contacts", []))
+    """h row -> (foot index in plant_feet, 0 normal force | 1 friction cone)."""
+    feet = plant_feet(prim)
     rows = {}
     for j, name in enumerate(prim.h_names):
         for kind, prefix in enumerate(("normal_force[", "friction_cone[")):
@@ -33,80 +66,97 @@ class RigidRobustRollout(RobustRollout):
 
     def __init__(self, prim: CompiledPrimitive, names: list[str], frame: str, push: bool, segments: int,
                  settings, horizon: float, duration: float | None = None):
-        sys = prim.system
-        self.names, self.push = list(names), push
-        self.plant_fn = sys.uncertain_plant(tuple(prim.info.get("contacts", sys.model.contact_frames)), frame)
+        self.names, self.push, self.frame = list(names), push, frame
+        self.plant_fn = robust_plant(prim, frame)
         super().__init__(prim, self.plant_fn, [], segments, settings, horizon, duration)
 
     def _loop(self, prim, plant_fn, dist_inputs, dt):
-        sys = prim.system
-        nx, nu = sys.nx, sys.nu
-        nth, nd = len(self.names), 3 if self.push else 0
-        law = prim.sampled
-        nw = law.nw if law is not None else 0
-        nhold = 1 + nu + nw if law is not None else 0
-        z, d = ca.MX.sym("z", 2 * nx + 2 + nth + nhold), ca.MX.sym("d", nd)
-        x, t, s, xsw = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2]
-        th, hold = z[2 * nx + 2:2 * nx + 2 + nth], z[2 * nx + 2 + nth:]
-        k = th[self.names.index("mass_scale")] if "mass_scale" in self.names else 1.0
-        mu = th[self.names.index("friction")] if "friction" in self.names else sys.friction
-        F = d if nd else ca.DM.zeros(3)
-        rows = no_slip_rows(prim)
-        jump = _jump_fn(prim)
+        return rigid_step(prim, plant_fn, self.names, self.frame, self.push, dt)
 
-        def sat(u):
-            return saturate(u, sys.u_lo, sys.u_hi)
 
-        def control(xx, tt, ss, held):  # (u_raw, u) at a state; a sampled law holds its input
-            if law is not None:
-                return held, sat(held)
-            return prim.control(xx, tt, ss, xsw)
+def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str], frame: str, push: bool, dt: float):
+    """(step (z, d) -> (z next, [h; RoA margin]), first (x0, t0, theta, d) -> ([h; margin], hold), nth,
+    nd, hold size) of one oracle step on the perturbed plant, z = [x; t; s; x_sw; theta; hold]."""
+    sys = prim.system
+    nx, nu = sys.nx, sys.nu
+    nth, nd = len(names), 3 if push else 0
+    law = prim.sampled
+    nw = law.nw if law is not None else 0
+    nhold = 1 + nu + nw if law is not None else 0
+    z, d = ca.MX.sym("z", 2 * nx + 2 + nth + nhold), ca.MX.sym("d", nd)
+    x, t, s, xsw = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2]
+    th, hold = z[2 * nx + 2:2 * nx + 2 + nth], z[2 * nx + 2 + nth:]
+    k = th[names.index("mass_scale")] if "mass_scale" in names else 1.0
+    mu = th[names.index("friction")] if "friction" in names else sys.friction
+    F = d if nd else ca.DM.zeros(3)
+    rows = no_slip_rows(prim)
+    gated = bool(prim.info.get("contact_schedule")) or sys.events  # contact conditions bind while held
+    jump = robust_jump(prim, frame)
+    held = hold[1:1 + nu] if law is not None else None
 
-        def h_at(xx, tt, ss, held, FF):
-            ur, u = control(xx, tt, ss, held)
-            h = prim.loop_u(xx, tt, ss, xsw, ur)[1] if law is not None else prim.h(xx, tt, ss, xsw)
-            lam = plant_fn(xx, u, k, FF)[1]
-            parts = [ca.vertsplit(h)[j] if j not in rows else
-                     no_slip(*ca.vertsplit(lam[3 * rows[j][0]:3 * rows[j][0] + 3]), mu)[rows[j][1]]
-                     for j in range(h.shape[0])]
-            return ca.vertcat(ca.vertcat(*parts) if parts else ca.MX(0, 1), prim.roa_margin(xx, tt))
-
-        held = hold[1:1 + nu] if law is not None else None
-
-        def f(xx, tt, ss):
-            return plant_fn(xx, control(xx, tt, ss, held)[1], k, F)[0]
-
-        k1 = f(x, t, s)
-        k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2)
-        k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2)
-        k4 = f(x + dt * k3, t + dt, s + dt)
-        x_end = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        xn = jump(x_end, control(x, t, s, held)[1], t + dt, s + dt)
-        if law is not None:  # solved at the start of every m-th step, from the previous solve's warm start
-            m, c, w = law.steps(dt), hold[0], hold[1 + nu:]
-            c_next = ca.if_else(c + 1 > m - 0.5, 0, c + 1)
-            if m == 1:
-                u_next, w_next = law.solve(xn, t + dt, s + dt, xsw, w)
-            else:
-                a = [*law.solve.mx_in(), ca.MX.sym("u", nu)]
-                sample = ca.Function.if_else("sample", ca.Function("solve", a, law.solve.call(a[:5])),
-                                             ca.Function("keep", a, [a[5], a[4]]))
-                u_next, w_next = sample(c_next < 0.5, xn, t + dt, s + dt, xsw, w, held)
-            hold_next = ca.vertcat(c_next, u_next, w_next)
-        else:
-            u_next, hold_next = None, ca.MX(0, 1)
-        out = h_at(xn, t + dt, s + dt, u_next, F)
-        step = ca.Function("robust_rigid_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th, hold_next), out])
-        x0, t0, th0, d0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("th0", nth), ca.MX.sym("d0", nd)
-        zf = ca.vertcat(x0, t0, 0, x0, th0)
+    def control(xx, tt, ss, u_held):  # (u_raw, u) at a state; a sampled law holds its input
         if law is not None:
-            u0, w0 = law.solve(x0, t0, 0, x0, ca.DM.zeros(nw))
-            hold0 = ca.vertcat(0, u0, w0)
-        else:
-            u0, hold0 = None, ca.MX(0, 1)
-        # the first sample: the same expressions on z0 = [x0; t0; 0; x0; theta0; hold0]
-        out0 = ca.Function("o", [z, d], [h_at(x, t, s, held, F)])(
-            ca.vertcat(zf, hold0), d0 if nd else ca.MX(0, 1))
-        first = ca.Function("robust_rigid_first", [x0, t0, th0, d0], [out0, hold0])
-        return step, first, nth, nd, nhold
+            return u_held, saturate(u_held, sys.u_lo, sys.u_hi)
+        return prim.control(xx, tt, ss, xsw)
 
+    def raw_h(xx, tt, ss, ur):  # every safety function, unwindowed, under the nominal model
+        return (prim.loop_u(xx, tt, ss, xsw, ur) if law is not None else prim.loop_raw(xx, tt, ss, xsw))[1]
+
+    def h_of(xx, tt, ss, ur, lam, c):
+        h = raw_h(xx, tt, ss, ur)
+        parts = []
+        for j in range(h.shape[0]):
+            v = h[j]
+            if j in rows:
+                i, kind = rows[j]
+                v = no_slip(lam[3 * i], lam[3 * i + 1], lam[3 * i + 2], mu)[kind]
+                v = ca.if_else(c[i] > 0.5, v, 1e3) if gated else v
+            parts.append(v)
+        return ca.vertcat(*parts) if parts else ca.MX(0, 1)
+
+    def f(xx, tt, ss):
+        return plant_fn(xx, control(xx, tt, ss, held)[1], k, F, tt)[0]
+
+    ur0, u0 = control(x, t, s, held)
+    k1, lam0, c0 = plant_fn(x, u0, k, F, t)
+    te = dt - min(LEFT, dt / 2)  # the step's end seen from inside it, as switched_flow sees it
+    k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2)
+    k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2)
+    k4 = f(x + dt * k3, t + te, s + te)
+    x_end = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    ur1, u1 = control(x_end, t + te, s + te, held)
+    _, lam1, c1 = plant_fn(x_end, u1, k, F, t + te)
+    xn = jump(x_end, u0, t + dt, s + dt, k, F)
+    act = _active(prim, _wrap(prim, t + dt / 2), x, s, xn, dt)
+    hs = ca.fmin(h_of(x, t, s, ur0, lam0, c0), h_of(x_end, t + te, s + te, ur1, lam1, c1))
+    if len(prim.h_names):
+        hs = ca.if_else(act, hs, INACTIVE)
+    if law is not None:  # solved at the start of every m-th step, from the previous solve's warm start
+        m, cnt, w = law.steps(dt), hold[0], hold[1 + nu:]
+        c_next = ca.if_else(cnt + 1 > m - 0.5, 0, cnt + 1)
+        if m == 1:
+            u_next, w_next = law.solve(xn, t + dt, s + dt, xsw, w)
+        else:
+            a = [*law.solve.mx_in(), ca.MX.sym("u", nu)]
+            sample = ca.Function.if_else("sample", ca.Function("solve", a, law.solve.call(a[:5])),
+                                         ca.Function("keep", a, [a[5], a[4]]))
+            u_next, w_next = sample(c_next < 0.5, xn, t + dt, s + dt, xsw, w, held)
+        hold_next = ca.vertcat(c_next, u_next, w_next)
+    else:
+        hold_next = ca.MX(0, 1)
+    out = ca.vertcat(hs, prim.roa_margin(xn, t + dt))
+    step = ca.Function("robust_rigid_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th, hold_next), out])
+    x0, t0, th0, d0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("th0", nth), ca.MX.sym("d0", nd)
+    if law is not None:
+        u_0, w0 = law.solve(x0, t0, 0, x0, ca.DM.zeros(nw))
+        hold0 = ca.vertcat(0, u_0, w0)
+    else:
+        hold0 = ca.MX(0, 1)
+    # the first sample: h at the step's start, windowed at that instant, on z0 = [x0; t0; 0; x0; theta0; hold0]
+    h_start = h_of(x, t, s, ur0, lam0, c0)
+    if len(prim.h_names):
+        h_start = ca.if_else(_active(prim, _wrap(prim, t), x, s, x, 0.0), h_start, INACTIVE)
+    out0 = ca.Function("o", [z, d], [h_start])(ca.vertcat(x0, t0, 0, x0, th0, hold0), d0 if nd else ca.MX(0, 1))
+    first = ca.Function("robust_rigid_first", [x0, t0, th0, d0], [ca.vertcat(out0, prim.roa_margin(x0, t0)),
+                                                                 hold0])
+    return step, first, nth, nd, nhold

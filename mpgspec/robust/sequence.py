@@ -1,11 +1,14 @@
 """The project's goal sequence under sampled uncertainty: how often it stays safe in each mode.
 
 Each of `runs` seeded runs draws the plant's parameters and the start error uniformly from their
-boxes and a disturbance that is piecewise constant over `hold` seconds, uniform in its bounds. The
-same draws are run naive (switch at each command), through the nominal graph and through the robust
-graph (the switching rules of mpgspec.execute.sequence: leave a primitive only after its flow
-entered E, at a verified t_A, switching in at the verified t_B). All runs of a mode advance
-together, one mapped RK4 step per active primitive.
+boxes and a disturbance that is piecewise constant over `hold` seconds, uniform in its bounds (an
+input disturbance, or for rigid bodies the push on the base). The same draws are run naive (switch
+at each command), through the nominal graph and through the robust graph (the switching rules of
+mpgspec.execute.sequence: leave a primitive only after its flow entered E, at a verified t_A,
+switching in at the verified t_B). All runs of a mode advance together, one mapped step per
+active primitive; a run ends at its first unsafe sample (or a failed control law, its evidence).
+Rigid bodies step as the robust rollouts do (mpgspec.robust.rigid: contact schedules and events,
+a sampled law held between solves).
 """
 from __future__ import annotations
 
@@ -41,6 +44,31 @@ def _step(prim: CompiledPrimitive, plant_fn: ca.Function, Bd: np.ndarray, dt: fl
                         prim.roa_margin(xn, t + dt)])
 
 
+class _Stepper:
+    """One primitive's mapped step over the runs: init (x0, clock, theta, d) -> z and step (z, theta,
+    d) -> (z next, h, RoA margin), on columns (runs); z = [x; clock; s; x_sw; ...]."""
+
+    def __init__(self, step: ca.Function, first: ca.Function | None, runs: int, rigid: bool, jit_flags):
+        jit = (lambda fn: compile_cached(fn, jit_flags)) if jit_flags is not None else (lambda fn: fn)
+        self.rigid, self.nz = rigid, step.size1_in(0)
+        self.step = _Bound(jit(step).map(runs))
+        self.first = _Bound(jit(first).map(runs)) if first is not None else None
+
+    def init(self, X0, T0, TH, D) -> np.ndarray:
+        z = np.vstack([X0, T0[None, :], np.zeros((1, X0.shape[1])), X0])
+        if not self.rigid:
+            return z
+        out, hold = self.first(X0, T0[None, :], TH, D)
+        return np.vstack([z, TH, hold])
+
+    def __call__(self, Z, TH, D):
+        if self.rigid:  # theta rides in z; the step's outputs are (z, [h; margin])
+            z, out = self.step(Z[:self.nz], D)
+            return z, out[:-1], out[-1]
+        z, h, m = self.step(Z[:self.nz], TH, D)
+        return z, h, m.ravel()
+
+
 def _start_clock(p: CompiledPrimitive) -> float:
     return p.domain[0] if p.cls is PrimitiveClass.TRANSIENT else 0.0
 
@@ -67,15 +95,11 @@ class _Bound:
 class DisturbedSequences:
     """Seeded draws of the uncertainty and the sequence run under them, in any mode."""
 
-    def __init__(self, prims, plant_fn, dist_idx, bound, unc, settings, seq, runs: int, seed: int):
-        self.prims, self.settings, self.seq, self.n = prims, settings, seq, runs
+    def __init__(self, prims, steppers: dict[str, _Stepper], names: list[str], nd: int, bound, unc, settings, seq,
+                 runs: int, seed: int):
+        self.prims, self.fns, self.settings, self.seq, self.n = prims, steppers, settings, seq, runs
         sys = next(iter(prims.values())).system
-        nu, nd = sys.nu, len(dist_idx)
-        Bd = np.zeros((nu, nd))
-        for k, i in enumerate(dist_idx):
-            Bd[i, k] = 1.0
         rng = np.random.default_rng(seed)
-        names = list(unc.parameters)
         lo = np.array([unc.parameters[p].range[0] for p in names])
         hi = np.array([unc.parameters[p].range[1] for p in names])
         self.theta = (lo + rng.random((runs, len(names))) * (hi - lo)).T  # nth x n
@@ -85,11 +109,30 @@ class DisturbedSequences:
         self.steps = int(round(seq.duration / settings.dt))
         pieces = int(np.ceil(seq.duration / HOLD)) + 1
         self.dist = rng.uniform(-1, 1, (pieces, nd, runs)) * np.asarray(bound, float).reshape(1, nd, 1)
-        self.fns = {}
-        for name, p in prims.items():
-            fn = _step(p, plant_fn, Bd, settings.dt)
-            fn = compile_cached(fn, settings.jit_flags) if settings.jit else fn
-            self.fns[name] = _Bound(fn.map(runs))
+        self.nz = max(f.nz for f in steppers.values())
+
+    def _apply(self, fn, cols: np.ndarray, args: list[np.ndarray]):
+        """fn on the columns `cols` of args (padded to the mapped width with the last), and the columns
+        whose call failed (a control law that found no solution): each is re-run alone."""
+        sel = np.resize(cols, self.n)
+        try:
+            return [np.atleast_2d(o)[:, :len(cols)] for o in fn(*[a[:, sel] for a in args])], []
+        except RuntimeError:
+            outs, failed = None, []
+            for q, c in enumerate(cols):
+                try:
+                    res = fn(*[np.repeat(a[:, [c]], self.n, axis=1) for a in args])
+                except RuntimeError:
+                    failed.append(q)
+                    continue
+                res = [np.atleast_2d(o) for o in res]
+                if outs is None:
+                    outs = [np.full((o.shape[0], len(cols)), np.nan) for o in res]
+                for o, r in zip(outs, res):
+                    o[:, q] = r[:, 0]
+            if outs is None:
+                return None, failed
+            return outs, failed
 
     def run(self, graph, table, mode: str) -> dict:
         """Safe fraction, per-run outcome and the switches made per edge of one mode ('naive' or
@@ -100,9 +143,29 @@ class DisturbedSequences:
         cur = [seq.start] * n
         c0 = _start_clock(prims[seq.start])
         x0 = prims[seq.start].x_star(c0)[:, None] + self.err
-        Z = np.vstack([x0, np.full((1, n), c0), np.zeros((1, n)), x0])
+        Z = np.zeros((self.nz, n))
         safe, conv = np.ones(n, bool), np.zeros(n, bool)
         first = [None] * n
+
+        def fail(r, t, name, why=None):  # why: the violated h ({h, value}) or the error
+            if safe[r]:
+                first[r] = {"t": t, "primitive": name, **(why if isinstance(why, dict) else {"error": why} if why else {})}
+            safe[r] = False
+
+        def enter(rs: list[int], name: str, clocks: np.ndarray, X: np.ndarray, t: float):
+            d = self.dist[min(int(t / HOLD), len(self.dist) - 1)]
+            cols = np.array(rs)
+            fn = self.fns[name]
+            full = np.zeros((nx, n)), np.zeros(n)
+            full[0][:, cols], full[1][cols] = X, clocks
+            outs, failed = self._apply(lambda a, b, c, e: [fn.init(a, b[0], c, e)], cols,
+                                       [full[0], full[1][None, :], self.theta, d])
+            for q in failed:
+                fail(int(cols[q]), t, name, "the control law found no input at the switch")
+            if outs is not None:
+                Z[:fn.nz, cols] = outs[0]
+
+        enter(list(range(n)), seq.start, np.full(n, c0), x0, 0.0)
         goal, cmd = [seq.start] * n, 0
         cur_a = np.array(cur, dtype=object)
         taken: dict[tuple[str, str], int] = {}  # switches per edge over all runs
@@ -110,18 +173,25 @@ class DisturbedSequences:
         for k in range(self.steps):
             t = (k + 1) * dt
             d = self.dist[min(int(k * dt / HOLD), len(self.dist) - 1)]
-            Znew, M, bad = np.empty_like(Z), np.empty(n), np.zeros(n, bool)
-            for name in set(cur):
-                cols = cur_a == name
-                zf, h, m = self.fns[name](Z, self.theta, d)
-                Znew[:, cols], M[cols] = zf[:, cols], m.ravel()[cols]
-                hc = h[:, cols]
-                bad[cols] = ~np.isfinite(zf[:nx, cols]).all(axis=0) | (hc < -tol).any(axis=0) | \
-                    ~np.isfinite(hc).all(axis=0)
-            Z = Znew
-            for r in np.flatnonzero(bad & safe):
-                first[r] = {"t": t, "primitive": cur[r]}
-            safe &= ~bad
+            M = np.full(n, -np.inf)
+            for name in set(cur_a[safe]):
+                cols = np.flatnonzero((cur_a == name) & safe)
+                fn = self.fns[name]
+                outs, failed = self._apply(fn, cols, [Z[:fn.nz], self.theta, d])
+                for q in failed:
+                    fail(int(cols[q]), t, name, "the control law found no input")
+                if outs is None:
+                    continue
+                zf, hc, m = outs
+                ok = np.ones(len(cols), bool)
+                ok[failed] = False
+                Z[:fn.nz, cols[ok]], M[cols[ok]] = zf[:, ok], m.ravel()[ok]
+                bad = ~np.isfinite(zf[:nx]).all(axis=0) | (hc < -tol).any(axis=0) | ~np.isfinite(hc).all(axis=0)
+                for q in np.flatnonzero(bad & ok):
+                    hq = np.where(np.isfinite(hc[:, q]), hc[:, q], -np.inf)
+                    j = int(np.argmin(hq)) if len(hq) else None
+                    fail(int(cols[q]), t, name, None if j is None or hq[j] >= -tol else
+                         {"h": self.prims[name].h_names[j], "value": float(hq[j])})
             conv |= M > 0
             new_goal = None
             while cmd < len(seq.commands) and seq.commands[cmd].t <= t - dt + 1e-12:
@@ -130,7 +200,8 @@ class DisturbedSequences:
             if new_goal is not None:
                 goal = [new_goal] * n
             clocks = Z[nx]
-            for r in range(n):
+            moves: dict[str, list[tuple[int, float]]] = {}
+            for r in np.flatnonzero(safe):
                 p = prims[cur[r]]
                 if not (new_goal is not None and mode == "naive" or trans[cur[r]] and clocks[r] >= p.domain[1] - 1e-9
                         or mode != "naive" and conv[r] and goal[r] != cur[r] and not trans[cur[r]]):
@@ -143,8 +214,7 @@ class DisturbedSequences:
                     tr = graph.edge(cur[r], p.next) if graph is not None else None
                     tb = tr.switch_clock(p.domain[1]) if tr is not None else None
                     if mode != "naive" and tb is None:
-                        if safe[r]:
-                            first[r] = {"t": t, "primitive": cur[r], "unverified_hand_over": p.next}
+                        first[r] = {"t": t, "primitive": cur[r], "unverified_hand_over": p.next}
                         safe[r] = False
                     to = (p.next, tb if tb is not None and mode != "naive" else _start_clock(prims[p.next]))
                 elif mode != "naive" and goal[r] != cur[r] and conv[r] and not trans[cur[r]]:
@@ -160,23 +230,52 @@ class DisturbedSequences:
                     taken[(cur[r], to[0])] = taken.get((cur[r], to[0]), 0) + 1
                     cur[r], conv[r] = to[0], False
                     cur_a[r] = to[0]
-                    Z[nx:, r] = np.concatenate([[to[1], 0.0], Z[:nx, r]])
+                    moves.setdefault(to[0], []).append((int(r), float(to[1])))
+            for name, items in moves.items():
+                rs = [r for r, _ in items if safe[r]]
+                if rs:
+                    enter(rs, name, np.array([c for r, c in items if safe[r]]), Z[:nx, rs], t)
+        last = seq.commands[-1].goal if seq.commands else seq.start
         return {"safe_fraction": float(safe.mean()), "safe_runs": int(safe.sum()), "runs": n,
+                "reached_goal": int(sum(1 for r in range(n) if safe[r] and cur[r] == last)),
                 "first_violation": [f for f in first if f is not None][:5], "final": cur,
                 "switches": [{"from": a, "to": b, "count": c} for (a, b), c in sorted(taken.items())]}
+
+
+def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], list[str], int, np.ndarray]:
+    """Each primitive's mapped step over `runs` on the perturbed plant, the uncertain parameters'
+    names, the disturbance's size and bound."""
+    from .rigid import rigid_step, robust_plant
+    from .rollout import plant
+
+    unc, sys = spec.project.uncertainty, next(iter(prims.values())).system
+    names, dist = list(unc.parameters), unc.disturbance
+    flags = settings.jit_flags if settings.jit else None
+    out = {}
+    if sys.is_rigid_body:
+        force = dist.force if dist is not None else None
+        frame = force.frame if force is not None else sys.base_frames()[0]
+        for name, p in prims.items():
+            step, first, *_ = rigid_step(p, robust_plant(p, frame), names, frame, force is not None, settings.dt)
+            out[name] = _Stepper(step, first, runs, True, flags)
+        return out, names, 3 if force is not None else 0, np.asarray(force.bound if force else [], float)
+    dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
+    bound = np.broadcast_to(np.asarray(dist.bound, float), (len(dist_idx),)) if dist is not None else np.zeros(0)
+    Bd = np.zeros((sys.nu, len(dist_idx)))
+    for k, i in enumerate(dist_idx):
+        Bd[i, k] = 1.0
+    P = plant(spec, names)
+    for name, p in prims.items():
+        out[name] = _Stepper(_step(p, P, Bd, settings.dt), None, runs, False, flags)
+    return out, names, len(dist_idx), bound
 
 
 def sequence_under_uncertainty(spec, prims, settings, graphs: dict, runs: int, seed: int) -> dict:
     """The project's goal sequence in `runs` seeded draws of its uncertainty, run naive and through
     each graph of `graphs` (mode -> (graph, lookup table)) on the same draws; per mode the safe
-    fraction, the safe runs and the first violations."""
-    from .rollout import plant
-
-    unc, sys = spec.project.uncertainty, next(iter(prims.values())).system
-    dist = unc.disturbance
-    dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
-    bound = np.broadcast_to(np.asarray(dist.bound, float), (len(dist_idx),)) if dist is not None else np.zeros(0)
-    ds = DisturbedSequences(prims, plant(spec, list(unc.parameters)), dist_idx, bound, unc, settings,
+    fraction, the safe runs, the safe runs that end in the last goal and the first violations."""
+    fns, names, nd, bound = steppers(spec, prims, settings, runs)
+    ds = DisturbedSequences(prims, fns, names, nd, bound, spec.project.uncertainty, settings,
                             spec.project.sequence, runs, seed)
     modes = {"naive": ds.run(None, {}, "naive")}
     modes.update({m: ds.run(g, table, "graph") for m, (g, table) in graphs.items()})

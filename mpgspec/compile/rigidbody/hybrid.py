@@ -25,8 +25,12 @@ def _mask(c: ca.SX) -> ca.SX:
     return ca.vertcat(*[ca.vertcat(c[i], c[i], c[i]) for i in range(c.shape[0])])
 
 
-def masked_contact_dynamics(sys, q: ca.SX, v: ca.SX, u: ca.SX, c: ca.SX) -> tuple[ca.SX, ca.SX]:
-    """(a, lam) with the contact rows of feet whose flag is 0 switched off (their lam is 0)."""
+def masked_contact_dynamics(sys, q: ca.SX, v: ca.SX, u: ca.SX, c: ca.SX, k=None, w=None) -> tuple[ca.SX, ca.SX]:
+    """(a, lam) with the contact rows of feet whose flag is 0 switched off (their lam is 0).
+
+    k scales every link's mass and inertia and w is an external generalized force (robust checks):
+    k M a + k H = B u + w + J^T lam is the nominal system under (B u + w) / k, with lam k times its
+    solution's."""
     dyn, m = sys.dyn, sys.model
     sub = lambda e: ca.substitute(e, ca.vertcat(dyn.q, dyn.v), ca.vertcat(q, v))  # noqa: E731
     parents = dof_parents(m)
@@ -40,13 +44,16 @@ def masked_contact_dynamics(sys, q: ca.SX, v: ca.SX, u: ca.SX, c: ca.SX) -> tupl
     gamma = -2 * b.alpha * ca.mtimes(J, v) - b.beta**2 * heights
     Jm = ca.diag(mask) @ J
     L, D = tree_ldl(M, parents)
-    z = tree_solve_lt(L, parents, ca.mtimes(ca.DM(m.actuation_matrix), u) - H)
+    tau = ca.mtimes(ca.DM(m.actuation_matrix), u)
+    if w is not None:
+        tau = tau + w
+    z = tree_solve_lt(L, parents, (tau if k is None else tau / k) - H)
     Y = tree_solve_lt(L, parents, Jm.T)
     DY = scale_rows(D, Y)
     K = ca.mtimes(Y.T, DY) + ca.diag(1 - mask)
     lam = dense_ldl_solve(K, mask * (gamma - drift) - ca.mtimes(DY.T, z))
     a = tree_solve_l(L, parents, scale_rows(D, z + ca.mtimes(Y, lam)))
-    return a, lam
+    return a, (lam if k is None else k * lam)
 
 
 def masked_impact(sys, q: ca.SX, v: ca.SX, c: ca.SX) -> ca.SX:
@@ -93,9 +100,11 @@ def touchdown_projection(sys, q: ca.SX, joined: list) -> ca.SX:
     return q_new
 
 
-def contact_events(sys, x_new: ca.SX, u: ca.SX, s=ca.inf) -> ca.SX:
+def contact_events(sys, x_new: ca.SX, u: ca.SX, s=ca.inf, k=None, w=None) -> ca.SX:
     """The discrete update after a step ending s after switch-in: touchdowns (with impact) and
-    lift-offs, and the first touchdown and takeoff since switch-in on the event clocks."""
+    lift-offs, and the first touchdown and takeoff since switch-in on the event clocks. k and w as
+    in masked_contact_dynamics decide lift-offs on a perturbed plant (the impact map does not
+    depend on k)."""
     from ...spec.models import ContactEvent
     from ..events import record
 
@@ -104,7 +113,7 @@ def contact_events(sys, x_new: ca.SX, u: ca.SX, s=ca.inf) -> ca.SX:
     q, v, c = x_new[:nq], x_new[nq:nq + nv], x_new[nq + nv:nq + nv + nf]
     keys = [f"{f}_{k}" for f in m.contact_frames for k in ("z", "vz")]
     env = dict(zip(keys, ca.vertsplit(ca.substitute(ca.vertcat(*[sys.extra_env[k] for k in keys]), sys.x, x_new))))
-    _, lam = masked_contact_dynamics(sys, q, v, u, c)
+    _, lam = masked_contact_dynamics(sys, q, v, u, c, k, w)
     c_new = []
     for i, f in enumerate(m.contact_frames):
         z, vz = env[f"{f}_z"], env[f"{f}_vz"]

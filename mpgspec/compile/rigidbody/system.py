@@ -124,15 +124,16 @@ class RigidBodyCompiledSystem(CompiledSystem):
         y = dense_ldl_solve(ca.mtimes(AW, A.T) + 1e-9 * ca.DM.eye(A.shape[0]), g)
         return ca.mtimes(AW.T, y)[: m.nu]
 
-    def project(self, x: ca.SX, u: ca.SX | None = None, s=ca.inf) -> ca.SX:
+    def project(self, x: ca.SX, u: ca.SX | None = None, s=ca.inf, k=None, w=None) -> ca.SX:
         """After each step (ending s after switch-in): renormalise the base quaternion; with contact
-        events, run them and record the first touchdown and takeoff on the event clocks."""
+        events, run them and record the first touchdown and takeoff on the event clocks (on the
+        plant perturbed by k and w of masked_contact_dynamics, when given)."""
         nq = self.model.nq
         x = ca.vertcat(normalize_quaternion(self.model, x[:nq]), x[nq:])
         if self.events and u is not None:
             from .hybrid import contact_events
 
-            x = contact_events(self, x, u, s)
+            x = contact_events(self, x, u, s, k, w)
         return x
 
     def contact_mode(self, x: np.ndarray, default: tuple[str, ...] | list[str] | None = None) -> tuple[str, ...]:
@@ -207,27 +208,51 @@ class RigidBodyCompiledSystem(CompiledSystem):
         """Frames rigidly attached to the floating base (where a push on the trunk may act)."""
         return [f.name for f in self.model.frames if self.model.n_base and f.joint == 0]
 
-    def uncertain_plant(self, contacts: tuple[str, ...], frame: str) -> ca.Function:
-        """(x, u, k, F) -> (xdot, lam): the dynamics holding `contacts` with every link's mass and
-        inertia scaled by k and a world-frame force F at `frame` (attached to the base).
+    def push_wrench(self, frame: str, q, F):
+        """J_f^T F: the generalized force of a world-frame force F at `frame` (attached to the base).
+        With the base twist in the base frame it is [R^T F; p x R^T F; 0] for the frame at p."""
+        m = self.model
+        f_base = ca.mtimes(quat_to_rotation(q[3:7]).T, F)
+        return ca.vertcat(f_base, ca.cross(ca.DM(m.frame(frame).translation), f_base), ca.DM.zeros(m.nv - 6))
+
+    def uncertain_plant(self, contacts: tuple[str, ...], frame: str, schedule=None,
+                        period: float | None = None) -> ca.Function:
+        """(x, u, k, F, t) -> (xdot, lam, c): the dynamics with every link's mass and inertia scaled
+        by k and a world-frame force F at `frame` (attached to the base), at clock t.
 
         k M a + k H = B u + J_f^T F + J^T lam is M a + H = (B u + J_f^T F) / k + J^T (lam / k): the
         nominal dynamics under the generalized force divided by k, with the ground forces k times the
-        nominal solution's. With the base twist in the base frame, J_f^T F = [R^T F; p x R^T F; 0]
-        for the frame at p in the base frame.
+        nominal solution's. The feet held are those a primitive's dynamics hold: `contacts` (lam and
+        c over them, c = 1), or with a contact schedule (clock t) or contact events (flags in x)
+        every contact frame, c saying which is held (lam 0 for the others).
         """
+        from .hybrid import masked_contact_dynamics
+
         m = self.model
-        k, F = ca.SX.sym("k"), ca.SX.sym("F", 3)
-        fr = m.frame(frame)
+        k, F, t = ca.SX.sym("k"), ca.SX.sym("F", 3), ca.SX.sym("t")
         xq, xv = self.x[:m.nq], self.x[m.nq:m.nq + m.nv]
-        cd = ContactDynamics(self.dyn, contacts, self.baumgarte)
-        f_base = ca.mtimes(quat_to_rotation(self.dyn.q[3:7]).T, F)
-        w = ca.vertcat(f_base, ca.cross(ca.DM(fr.translation), f_base), ca.DM.zeros(m.nv - 6))
-        a, lam = cd.solve((cd.tau_expr + w) / k)
-        a, lam = ca.substitute([a, lam], [self.dyn.q, self.dyn.v, cd.u], [xq, xv, self.u])
-        xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(self.nx - m.nq - m.nv))
-        return ca.Function("uncertain_plant", [self.x, self.u, k, F], [xdot, k * lam], ["x", "u", "k", "F"],
-                           ["xdot", "lam"])
+        if schedule is None and not self.events:
+            cd = ContactDynamics(self.dyn, contacts, self.baumgarte)
+            a, lam = cd.solve((cd.tau_expr + self.push_wrench(frame, self.dyn.q, F)) / k)
+            a, lam = ca.substitute([a, lam], [self.dyn.q, self.dyn.v, cd.u], [xq, xv, self.u])
+            xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(self.nx - m.nq - m.nv))
+            c = ca.DM.ones(len(contacts))
+        else:
+            feet = m.contact_frames
+            if schedule is not None:
+                from ..primitive import scheduled_mode
+
+                mode = scheduled_mode(schedule, feet, t, period)
+                c = ca.vertcat(*[mode[f] for f in feet])
+            else:
+                c = self.x[m.nq + m.nv:m.nq + m.nv + len(feet)]
+            a, lam = masked_contact_dynamics(self, xq, xv, self.u, c, k, self.push_wrench(frame, xq, F))
+            xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(self.nx - m.nq - m.nv - len(self.event_clocks)),
+                              *[clock_rate(self.x[i]) for i in self.event_clocks])
+            return ca.Function("uncertain_plant", [self.x, self.u, k, F, t], [xdot, lam, c],
+                               ["x", "u", "k", "F", "t"], ["xdot", "lam", "c"])
+        return ca.Function("uncertain_plant", [self.x, self.u, k, F, t], [xdot, k * lam, c],
+                           ["x", "u", "k", "F", "t"], ["xdot", "lam", "c"])
 
     def _when_in_contact(self, frame: str, h: ca.SX, mode: dict | None = None, flags: bool = True) -> ca.SX:
         """A contact condition binds only while the foot is held: by the scheduled mode, or with

@@ -1,0 +1,134 @@
+"""Robust rollouts of the A1's contact-switching primitives: a trot under a contact schedule, and
+Land with contact events and windows anchored on them. At the nominal scenario a robust step is the
+oracle's step (the same flow, state for state); a push and a mass error act as Newton says; the
+no-slip functions take the scenario's friction only for the feet held."""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mpgspec.api import compile_project, settings_for
+from mpgspec.execute.sequence import simulate_sequence
+from mpgspec.oracle.integrator import switched_flow
+from mpgspec.robust.rigid import no_slip_rows, plant_feet, rigid_step, robust_plant
+from mpgspec.robust.sequence import sequence_under_uncertainty
+from mpgspec.spec.loader import load_project
+from mpgspec.spec.project import Sequence
+
+A1 = Path(__file__).resolve().parents[2] / "specs" / "a1" / "project.yaml"
+NAMES = ["mass_scale", "friction"]
+G = 9.81
+
+
+@pytest.fixture(scope="module")
+def a1():
+    spec = load_project(A1)
+    return spec, compile_project(spec), dataclasses.replace(settings_for(spec), jit=False)
+
+
+def _steps(prim, x0, t0, theta, F, n, dt):
+    """States (nx, n + 1) and outputs (n, nh + 1) of n robust steps from x0 at clock t0."""
+    step, *_ = rigid_step(prim, robust_plant(prim, "trunk"), NAMES, "trunk", True, dt)
+    nx = prim.system.nx
+    z = np.concatenate([x0, [t0, 0.0], x0, theta])
+    X, out = [x0], []
+    for _ in range(n):
+        zn, o = step(z, F)
+        z = np.array(zn).ravel()
+        X.append(z[:nx])
+        out.append(np.array(o).ravel())
+    return np.array(X).T, np.array(out)
+
+
+@pytest.mark.parametrize("name, source, t_A, t0, n", [
+    ("Walk(in_place)", "Walk(in_place)", 0.0, 0.0, 400),  # a full stride: swing, touchdown, the other pair
+    ("Land", "Jump", 0.25, 0.0, 300),                    # flight, touchdown by event, the delay window
+])
+def test_the_nominal_scenario_is_the_oracles_flow(a1, name, source, t_A, t0, n):
+    _, prims, settings = a1
+    prim, dt = prims[name], settings.dt
+    x0 = prims[source].x_star(t_A)
+    X, out = _steps(prim, x0, t0, [1.0, 0.6], np.zeros(3), n, dt)
+    ref = switched_flow(prim, x0, t0, dt, n)
+    assert np.abs(X - ref).max() < 1e-9
+    margins = np.array([float(prim.roa_margin(ref[:, k], t0 + k * dt)) for k in range(1, n + 1)])
+    assert np.allclose(out[:, -1], margins, atol=1e-9)
+    sys = prim.system
+    flags = ref[sys.model.nq + sys.model.nv:sys.model.nq + sys.model.nv + 4]
+    assert np.ptp(flags, axis=1).max() == 1.0  # the contact set changed along the way
+
+
+def test_a_push_in_flight_accelerates_the_centre_of_mass_by_F_over_km(a1):
+    _, prims, settings = a1
+    land, dt = prims["Land"], settings.dt
+    sys = land.system
+    F, k = np.array([6.0, -4.0, 0.0]), 1.1
+    X, _ = _steps(land, prims["Jump"].x_star(0.25), 0.0, [k, 0.6], F, 60, dt)
+    flags = X[sys.model.nq + sys.model.nv:sys.model.nq + sys.model.nv + 4]
+    air = np.flatnonzero(flags.sum(axis=0) == 0)
+    air = air[(air > 0) & (air < air.max())][:40]
+    assert len(air) == 40  # still in flight
+    com = ca.Function("com", [sys.x], [ca.vertcat(*[sys.extra_env[f"com_{a}"] for a in "xyz"])])
+    C = np.array(com.map(X.shape[1])(X))
+    acc = (C[:, air + 1] - 2 * C[:, air] + C[:, air - 1]) / dt**2
+    expected = F / (k * sys.model.total_mass) + np.array([0.0, 0.0, -G])
+    assert np.abs(acc - expected[:, None]).max() < 0.02
+
+
+def test_friction_binds_the_held_feet_only(a1):
+    _, prims, _ = a1
+    walk = prims["Walk(in_place)"]
+    _, first, *_ = rigid_step(walk, robust_plant(walk, "trunk"), NAMES, "trunk", True, 0.001)
+    feet, rows = plant_feet(walk), no_slip_rows(walk)
+    assert len(rows) == 2 * len(feet)
+    for t in (0.0, 0.1):  # double support, then mid-swing (two feet up)
+        x = walk.x_star(t)
+        y = {mu: np.array(first(x, t, [1.0, mu], np.zeros(3))[0]).ravel() for mu in (0.4, 0.8)}
+        held = walk.system.contact_mode(x)
+        for j, (i, kind) in rows.items():
+            if feet[i] in held:
+                assert y[0.8][j] > y[0.4][j] if kind else y[0.8][j] == y[0.4][j]
+            else:
+                assert y[0.4][j] == y[0.8][j] == 1e3  # a foot in the air has no force to bound
+        assert (t == 0.0) == (len(held) == 4)
+
+
+def _jump_sequence(spec, mass_scale: float, friction: float = 0.6):
+    """Stand, then Jump at 0.05 s (Land takes over at its end), 1.5 s; the mass scale and friction
+    fixed at the given values, no push."""
+    P = spec.project.uncertainty.parameters
+    unc = spec.project.uncertainty.model_copy(update={
+        "parameters": {"mass_scale": P["mass_scale"].model_copy(update={"range": (mass_scale, mass_scale)}),
+                       "friction": P["friction"].model_copy(update={"range": (friction, friction)})},
+        "disturbance": None})
+    seq = Sequence(start="Stand", duration=1.5, commands=[{"t": 0.05, "goal": "Jump"}])
+    return dataclasses.replace(spec, project=spec.project.model_copy(update={"uncertainty": unc, "sequence": seq}))
+
+
+def test_the_sequence_under_the_nominal_draw_is_the_nominal_run(a1):
+    spec, prims, settings = a1
+    s = _jump_sequence(spec, 1.0)
+    stats = sequence_under_uncertainty(s, prims, settings, {}, 2, 0)
+    naive = stats["modes"]["naive"]
+    run = simulate_sequence(prims, None, {}, s.project.sequence, settings, "naive")
+    assert run.safe and [w["to"] for w in run.switches] == ["Stand", "Jump", "Land"]
+    assert naive["safe_runs"] == 2 and naive["final"] == ["Land", "Land"]
+    assert naive["switches"] == [{"from": "Jump", "to": "Land", "count": 2}, {"from": "Stand", "to": "Jump", "count": 2}]
+
+
+def test_a_lighter_robot_overshoots_the_tuck(a1):
+    """With every link 10 % lighter the same joint PD swings the calves past their limit after
+    takeoff; Stand -> Jump is still a robust edge, since Jump's E holds Stand's x* at the switch:
+    the robust edge covers the flow up to E_B, the sequence runs cover the rest."""
+    spec, prims, settings = a1
+    runs = {k: sequence_under_uncertainty(_jump_sequence(spec, k), prims, settings, {}, 2, 0)["modes"]["naive"]
+            for k in (0.9, 1.1)}
+    assert runs[1.1]["safe_runs"] == 2
+    first = runs[0.9]["first_violation"]
+    assert runs[0.9]["safe_runs"] == 0 and {f["h"] for f in first} == {"q_max[RR_calf_joint]"}
+    T_t = prims["Jump"].info["jump"]["takeoff_time"]
+    assert all(f["primitive"] == "Jump" and 0.05 + T_t < f["t"] <= 0.05 + 0.25 for f in first)
