@@ -27,12 +27,12 @@ from ..check.assertions import AssertionResult, evaluate_assertions
 from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
 from .rigid import RigidRobustRollout
-from .rollout import RobustRollout, judge, plant
+from .rollout import RobustRollout, judge, judge_flow, plant
 from .starts import Start, boundary_starts
 from .sequence import sequence_under_uncertainty
 
 LABEL = "empirical"
-RECORD = 5
+RECORD = 6
 """Layout of the memoised robust record (part of its key)."""
 ROLLOUTS = 4096
 """At most this many rollouts are run (and their samples held) at once."""
@@ -51,13 +51,15 @@ class RobustResult:
     scenarios: dict
     timing: dict = field(default_factory=dict)
     sequence: dict | None = None  # safe fraction of the goal sequence per mode under sampled uncertainty
+    nodes: list[dict] = field(default_factory=list)  # each target's own flow under the scenarios
 
     def to_dict(self) -> dict:
         survive = [e for e in self.edges if e["survives"]]
         return {"level": LABEL, "note": NOTE, "scenarios": self.scenarios,
                 "summary": {"nominal_edges": len(self.edges), "robust_edges": len(survive),
                             "nominal_only": [f"{e['from']} -> {e['to']}" for e in self.edges if not e["survives"]]},
-                "edges": self.edges, "assertions": [a.to_dict() for a in self.assertions], "sequence": self.sequence,
+                "edges": self.edges, "nodes": self.nodes, "assertions": [a.to_dict() for a in self.assertions],
+                "sequence": self.sequence,
                 "timing": self.timing}
 
 
@@ -119,6 +121,30 @@ def _binding(prim, Y: np.ndarray, margin: float, entry: int | None, tol: float, 
     return {"h": None, "roa_margin": float(margin)}
 
 
+def _node_check(B, rr, tbs: list[float], TH, ERR, D1, KIND, settings, tol, names, dist_names) -> dict:
+    """Definition 1's premise under uncertainty: B's own flow from x_B*(t_B), at every clock its
+    robust cells switch in at, stays in C_B for every scenario over the horizon (or the rest of a
+    transient's domain), whether or not it settles in E_B. A robust cell checks the flow only up to
+    E_B; Theorem 1 also needs B to keep it safe from there."""
+    S = len(TH)
+    hz = B.horizons(settings.horizon, tbs)
+    ns = np.repeat(np.minimum(np.ceil(hz / settings.dt - 1e-9).astype(int), rr.N), S)
+    X0 = np.concatenate([B.x_star(tb)[None, :] + ERR for tb in tbs])
+    T0 = np.repeat(np.asarray(tbs, float), S)
+    D = np.tile(D1, (len(tbs), 1, 1))
+    Y, last = rr.run(X0, T0, np.tile(TH, (len(tbs), 1)), D, ns, tol, until_entry=False)
+    res = [judge_flow(Y[r, :-1], int(min(ns[r], last[r])), tol) for r in range(len(X0))]
+    r = min(range(len(X0)), key=lambda q: (res[q][0], res[q][1]))
+    ok, low, k = res[r]
+    H = np.where(np.isfinite(Y[r, :-1, k]), Y[r, :-1, k], -np.inf)
+    binding = {"h": B.h_names[int(np.argmin(H))], "value": float(low), "t": float(k * settings.dt)} if H.size else None
+    return {"node": B.name, "t_B": [float(t) for t in tbs], "scenarios": len(X0), "rollouts": len(X0),
+            "robust_safe": bool(all(x[0] for x in res)), "worst_margin": float(low),
+            "worst_case": {"t_B": float(T0[r]), "kind": KIND[r % S], "parameters": dict(zip(names, map(float, TH[r % S]))),
+                           "disturbance": {u: [float(v) for v in D[r][i]] for i, u in enumerate(dist_names)},
+                           "binding": binding}}
+
+
 def _gradient_candidates(rr, worst: list, live: list[int], bound: np.ndarray) -> list:
     """Per live cell two bang-bang disturbances: against the gradient of the binding h sample before
     entry and of the RoA margin at entry (the sign of each piece's derivative, through CasADi)."""
@@ -171,7 +197,8 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
         edges = known["edges"]
         rg = _robust_graph(g, edges, unc.nodes)
         return RobustResult(rg, edges, _assertions(unc, rg), known["scenarios"],
-                            {"robust_s": time.perf_counter() - t0, "robust_cache_hit": 1.0}, known["sequence"])
+                            {"robust_s": time.perf_counter() - t0, "robust_cache_hit": 1.0}, known["sequence"],
+                            known["nodes"])
     sys = next(iter(prims.values())).system
     names = list(unc.parameters)
     dist = unc.disturbance
@@ -204,7 +231,7 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
     among = set(unc.nodes) if unc.nodes is not None else set(prims)
     nominal = {(a, b): tr for (a, b), tr in g.transitions.items()
                if tr.cls is not TransitionClass.NONE and a in among and b in among}
-    edges, n_roll, build_s = [], 0, 0.0
+    edges, nodes, n_roll, build_s = [], [], 0, 0.0
     by_target: dict[str, list] = {}
     for (a, b), tr in nominal.items():
         by_target.setdefault(b, []).append((a, tr))
@@ -279,6 +306,10 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                     moved = True
             if not moved and rr.grad is None:  # the coordinate search sits at a local worst
                 break
+        node = _node_check(B, rr, sorted({round(c[5], 9) for c in cells}), TH, ERR, D1, KIND, settings, tol,
+                           names, dist_names)
+        n_roll += node.pop("rollouts")
+        nodes.append(node)
         per_edge: dict[str, list] = {}
         for c, (a, tr, i, j, starts, tb) in enumerate(cells):
             w = worst[c]
@@ -288,7 +319,7 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                   "binding": _binding(B, w["Y"], w["margin"], w["entry"], tol, settings.dt)}
             if roa_starts is not None:
                 wc["start"] = _start_record(prims[a], float(tr.t_A[i]), w["start"], sys.state_names)
-            per_edge.setdefault(a, []).append({"t_A": float(tr.t_A[i]), "t_B": tb, "robust_safe": bool(w["all_safe"]),
+            per_edge.setdefault(a, []).append({"t_A": float(tr.t_A[i]), "t_B": tb, "robust_safe": bool(w["all_safe"]) and node["robust_safe"],
                                                "worst_margin": w["margin"], "worst_case": wc, "_ij": (i, j),
                                                "starts_kept": len(starts) - 1})
         for a, tr in items:
@@ -296,6 +327,7 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
             margins = [c["worst_margin"] for c in checked]
             worst = min(checked, key=lambda c: c["worst_margin"]) if checked else None
             edges.append({"from": a, "to": b, "nominal_class": int(tr.cls), "rows_available": int(tr.available.sum()),
+                          "target_flow_safe": node["robust_safe"],
                           "cells_checked": len(checked), "worst_margin": min(margins) if margins else None,
                           "worst_case": None if worst is None else {"t_A": worst["t_A"], "t_B": worst["t_B"],
                                                                    **worst["worst_case"]},
@@ -332,8 +364,8 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
               "robust_sequence_s": time.perf_counter() - t1}
     edges.sort(key=lambda e: (e["from"], e["to"]))
     if memo is not None:
-        memo.put(key, {"edges": edges, "scenarios": scen, "sequence": seq, "rollouts": n_roll})
-    return RobustResult(rg, edges, _assertions(unc, rg), scen, timing, seq)
+        memo.put(key, {"edges": edges, "nodes": nodes, "scenarios": scen, "sequence": seq, "rollouts": n_roll})
+    return RobustResult(rg, edges, _assertions(unc, rg), scen, timing, seq, nodes)
 
 
 def _assertions(unc, rg: MotionPrimitiveGraph) -> list[AssertionResult]:

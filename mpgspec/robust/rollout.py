@@ -52,6 +52,18 @@ def judge(H: np.ndarray, M: np.ndarray, n: int, tol: float) -> tuple[bool, float
     return False, (low if low < -tol else float(M.max())), None
 
 
+def judge_flow(H: np.ndarray, n: int, tol: float) -> tuple[bool, float, int]:
+    """(safe, least h, its sample) of one rollout's h (nh x N+1) over its first n+1 samples, whatever
+    its RoA margin: the flow from the setpoint stays in C (Definition 1's premise, re-checked)."""
+    H = H[:, : n + 1]
+    if not H.size:
+        return True, math.inf, 0
+    Hf = np.where(np.isfinite(H), H, -np.inf)
+    lows = Hf.min(axis=0)
+    k = int(np.argmin(lows))
+    return bool(lows[k] >= -tol), float(lows[k]), k
+
+
 class RobustRollout:
     """Batched rollouts into one target primitive under (theta, d, start error) scenarios."""
 
@@ -154,12 +166,12 @@ class RobustRollout:
         return out
 
     def run(self, X0: np.ndarray, T0: np.ndarray, TH: np.ndarray, D: np.ndarray,
-            limit: np.ndarray | None = None, tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+            limit: np.ndarray | None = None, tol: float = 0.0, until_entry: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Samples (n, nh + 1, N + 1) of n rollouts and the index of each one's last computed sample;
         X0 (n, nx), T0 (n,), TH (n, nth), D (n, nd, K).
 
-        A rollout stops at the chunk where it is decided (entered E, h < -tol or a non-finite value)
-        or reaches its `limit` steps; its later samples are NaN.
+        A rollout stops at the chunk where it is decided (entered E, unless not `until_entry`; h < -tol
+        or a non-finite value) or reaches its `limit` steps; its later samples are NaN.
         """
         n, nh, N, L = len(X0), self.nh, self.N, self.CHUNK
         limit = np.full(n, N) if limit is None else np.minimum(np.asarray(limit, int), N)
@@ -173,7 +185,9 @@ class RobustRollout:
 
         def hits(y, upto):  # decided within the samples up to index `upto` of y
             k = np.arange(y.shape[2])[None, :] <= upto[:, None]
-            hit = (y[:, nh] > 0) | (y[:, :nh] < -tol).any(axis=1) | ~np.isfinite(y).all(axis=1)
+            hit = (y[:, :nh] < -tol).any(axis=1) | ~np.isfinite(y).all(axis=1)
+            if until_entry:
+                hit |= y[:, nh] > 0
             return (hit & k).any(axis=1)
 
         active = np.flatnonzero(~hits(Y[:, :, :1], np.zeros(n, int)) & (limit > 0))

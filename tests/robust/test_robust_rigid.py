@@ -23,7 +23,19 @@ PEND = Path(__file__).resolve().parents[2] / "specs" / "pendulum"
 
 
 def _lie_stand(spec):
-    return dataclasses.replace(spec, primitives=[p for p in spec.primitives if p.name in ("Lie", "Stand")])
+    """The A1 with Lie and Stand only: the robust graph's assertions among them, constant pushes, no
+    sequence runs."""
+    unc = spec.project.uncertainty
+    keep = [a for a in unc.assertions if _names(a) <= {"Lie", "Stand"}]
+    unc = unc.model_copy(update={"assertions": keep, "search": 0, "runs": 0})
+    return dataclasses.replace(spec, primitives=[p for p in spec.primitives if p.name in ("Lie", "Stand")],
+                               project=spec.project.model_copy(update={"uncertainty": unc}))
+
+
+def _names(assertion) -> set[str]:
+    from mpgspec.spec.project import node_refs
+
+    return {name for name, _ in node_refs(assertion) or ()}
 
 
 @pytest.fixture(scope="module")
