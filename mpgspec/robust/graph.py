@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..check.assertions import AssertionResult, evaluate_assertions
+from ..compile.events import NEVER
 from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
 from .rigid import RigidRobustRollout
@@ -32,9 +33,12 @@ from .starts import Start, boundary_starts
 from .sequence import sequence_under_uncertainty
 
 LABEL = "empirical"
-RECORD = 6
+RECORD = 7
 """Layout of the memoised robust record (part of its key)."""
 ROLLOUTS = 4096
+SETTLED = NEVER / 2
+"""Time since switch-in at the start of a target's own-flow check: long settled, yet below the clock
+of an event that has not happened (NEVER), which stays at rest."""
 """At most this many rollouts are run (and their samples held) at once."""
 SAMPLED = "empirical (sampled)"
 NOTE = ("falsification, not proof: a robust edge withstood every scenario tried (parameter-box corners, seeded "
@@ -132,7 +136,8 @@ def _node_check(B, rr, tbs: list[float], TH, ERR, D1, KIND, settings, tol, names
     X0 = np.concatenate([B.x_star(tb)[None, :] + ERR for tb in tbs])
     T0 = np.repeat(np.asarray(tbs, float), S)
     D = np.tile(D1, (len(tbs), 1, 1))
-    Y, last = rr.run(X0, T0, np.tile(TH, (len(tbs), 1)), D, ns, tol, until_entry=False)
+    # s since switch-in: long ago (a flow settled in B), so events the setpoint's clocks record count
+    Y, last = rr.run(X0, T0, np.tile(TH, (len(tbs), 1)), D, ns, tol, until_entry=False, s0=SETTLED)
     res = [judge_flow(Y[r, :-1], int(min(ns[r], last[r])), tol) for r in range(len(X0))]
     r = min(range(len(X0)), key=lambda q: (res[q][0], res[q][1]))
     ok, low, k = res[r]

@@ -75,7 +75,7 @@ class RigidRobustRollout(RobustRollout):
 
 
 def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str], frame: str, push: bool, dt: float):
-    """(step (z, d) -> (z next, [h; RoA margin]), first (x0, t0, theta, d) -> ([h; margin], hold), nth,
+    """(step (z, d) -> (z next, [h; RoA margin]), first (x0, t0, s0, theta, d) -> ([h; margin], hold), nth,
     nd, hold size) of one oracle step on the perturbed plant, z = [x; t; s; x_sw; theta; hold]."""
     sys = prim.system
     nx, nu = sys.nx, sys.nu
@@ -146,17 +146,18 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
         hold_next = ca.MX(0, 1)
     out = ca.vertcat(hs, prim.roa_margin(xn, t + dt))
     step = ca.Function("robust_rigid_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th, hold_next), out])
-    x0, t0, th0, d0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("th0", nth), ca.MX.sym("d0", nd)
+    x0, t0, s0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("s0")
+    th0, d0 = ca.MX.sym("th0", nth), ca.MX.sym("d0", nd)
     if law is not None:
-        u_0, w0 = law.solve(x0, t0, 0, x0, ca.DM.zeros(nw))
+        u_0, w0 = law.solve(x0, t0, s0, x0, ca.DM.zeros(nw))
         hold0 = ca.vertcat(0, u_0, w0)
     else:
         hold0 = ca.MX(0, 1)
-    # the first sample: h at the step's start, windowed at that instant, on z0 = [x0; t0; 0; x0; theta0; hold0]
+    # the first sample: h at the step's start, windowed at that instant, on z0 = [x0; t0; s0; x0; theta0; hold0]
     h_start = h_of(x, t, s, ur0, lam0, c0)
     if len(prim.h_names):
         h_start = ca.if_else(_active(prim, _wrap(prim, t), x, s, x, 0.0), h_start, INACTIVE)
-    out0 = ca.Function("o", [z, d], [h_start])(ca.vertcat(x0, t0, 0, x0, th0, hold0), d0 if nd else ca.MX(0, 1))
-    first = ca.Function("robust_rigid_first", [x0, t0, th0, d0], [ca.vertcat(out0, prim.roa_margin(x0, t0)),
+    out0 = ca.Function("o", [z, d], [h_start])(ca.vertcat(x0, t0, s0, x0, th0, hold0), d0 if nd else ca.MX(0, 1))
+    first = ca.Function("robust_rigid_first", [x0, t0, s0, th0, d0], [ca.vertcat(out0, prim.roa_margin(x0, t0)),
                                                                  hold0])
     return step, first, nth, nd, nhold

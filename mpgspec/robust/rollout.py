@@ -83,14 +83,14 @@ class RobustRollout:
         self.seg = np.where(n < na, np.minimum((n * self.K) // na, self.K - 1), self.K)
         step, first, self.nth, self.nd, self.nhold = self._loop(prim, plant_fn, dist_inputs, dt)
         nx = prim.system.nx
-        x0, t0 = ca.MX.sym("x0", nx), ca.MX.sym("t0")
+        x0, t0, s0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("s0")
         TH, D = ca.MX.sym("theta", self.nth), ca.MX.sym("D", self.nd, self.K)
         name = f"robust_{prim.digest()[:16]}_{self.N}_{self.K}_{na}"
-        f0 = first(x0, t0, TH, D[:, 0] if self.nd else ca.MX(0, 1))
+        f0 = first(x0, t0, s0, TH, D[:, 0] if self.nd else ca.MX(0, 1))
         self.nh = f0[0].shape[0] - 1
         self.nz = step.size1_in(0)
         jit = (lambda fn: compile_cached(fn, settings.jit_flags)) if settings.jit else (lambda fn: fn)
-        self.first = jit(ca.Function(name + "_first", [x0, t0, TH, D], [ca.vertcat(*f0)]))
+        self.first = jit(ca.Function(name + "_first", [x0, t0, s0, TH, D], [ca.vertcat(*f0)]))
         zc, Dc = ca.MX.sym("z", self.nz), ca.MX.sym("Dc", self.nd, self.CHUNK)
         zL, outs_c = step.mapaccum("robust_chunk", self.CHUNK)(zc, Dc)
         self.chunk = jit(ca.Function(name + "_chunk", [zc, Dc], [ca.vertcat(zL[:, -1], ca.vec(outs_c))]))
@@ -101,14 +101,14 @@ class RobustRollout:
             S[self.seg[on], n[on]] = 1.0
             z0 = ca.vertcat(x0, t0, ca.MX(0), x0, TH)
             _, outs = step.mapaccum("robust_acc", self.N)(z0, ca.mtimes(D, ca.DM(S)))
-            Y = ca.horzcat(f0[0], outs)  # (nh + 1) x (N + 1)
+            Y = ca.horzcat(first(x0, t0, 0, TH, D[:, 0])[0], outs)  # (nh + 1) x (N + 1), from switch-in
             w = ca.MX.sym("w", Y.numel())
             self.grad = jit(ca.Function(name + "_grad", [x0, t0, TH, D, w],
                                         [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))]))
         self._maps: dict[tuple, ca.Function] = {}
 
     def _loop(self, prim: CompiledPrimitive, plant_fn: ca.Function, dist_inputs: list[int], dt: float):
-        """(step (z, d) -> (z next, [h; RoA margin] at it), first (x0, t0, theta, d) -> ([h; margin],
+        """(step (z, d) -> (z next, [h; RoA margin] at it), first (x0, t0, s0, theta, d) -> ([h; margin],
         hold), nth, nd, hold size) for z = [x; t; s; x_sw; theta; hold]."""
         nx, nu = prim.system.nx, prim.system.nu
         nth, nd = plant_fn.size1_in(2), len(dist_inputs)
@@ -130,7 +130,7 @@ class RobustRollout:
         out = ca.vertcat(prim.h(xn, t + dt, s + dt, xsw), prim.roa_margin(xn, t + dt))
         z = ca.vertcat(x, t, s, xsw, th)
         step = ca.Function("robust_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th), out])
-        first = ca.Function("robust_first", [x, t, th, d], [ca.vertcat(prim.h(x, t, 0, x), prim.roa_margin(x, t)),
+        first = ca.Function("robust_first", [x, t, s, th, d], [ca.vertcat(prim.h(x, t, s, x), prim.roa_margin(x, t)),
                                                          ca.SX(0, 1)])
         return step, first, nth, nd, 0
 
@@ -166,21 +166,24 @@ class RobustRollout:
         return out
 
     def run(self, X0: np.ndarray, T0: np.ndarray, TH: np.ndarray, D: np.ndarray,
-            limit: np.ndarray | None = None, tol: float = 0.0, until_entry: bool = True) -> tuple[np.ndarray, np.ndarray]:
+            limit: np.ndarray | None = None, tol: float = 0.0, until_entry: bool = True,
+            s0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Samples (n, nh + 1, N + 1) of n rollouts and the index of each one's last computed sample;
         X0 (n, nx), T0 (n,), TH (n, nth), D (n, nd, K).
 
         A rollout stops at the chunk where it is decided (entered E, unless not `until_entry`; h < -tol
-        or a non-finite value) or reaches its `limit` steps; its later samples are NaN.
+        or a non-finite value) or reaches its `limit` steps; its later samples are NaN. s0: the time
+        since switch-in at the start (events recorded in the state's clocks count when it is large).
         """
         n, nh, N, L = len(X0), self.nh, self.N, self.CHUNK
         limit = np.full(n, N) if limit is None else np.minimum(np.asarray(limit, int), N)
         Y = np.full((n, nh + 1, N + 1), np.nan)
         D = np.asarray(D, float).reshape(n, self.nd, self.K)
-        f0 = self._call(self.first, n, [X0.T, T0[None, :], self._th(TH, n), self._d(D, n)])
+        S0 = np.full((1, n), float(s0))
+        f0 = self._call(self.first, n, [X0.T, T0[None, :], S0, self._th(TH, n), self._d(D, n)])
         Y[:, :, 0] = f0[: nh + 1].T
         last = np.zeros(n, int)
-        Z = np.vstack([X0.T, T0[None, :], np.zeros((1, n)), X0.T, self._th(TH, n), f0[nh + 1:]])
+        Z = np.vstack([X0.T, T0[None, :], S0, X0.T, self._th(TH, n), f0[nh + 1:]])
         D = np.concatenate([D, np.zeros((n, self.nd, 1))], axis=2)  # segment K: no disturbance
 
         def hits(y, upto):  # decided within the samples up to index `upto` of y

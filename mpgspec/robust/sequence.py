@@ -58,7 +58,7 @@ class _Stepper:
         z = np.vstack([X0, T0[None, :], np.zeros((1, X0.shape[1])), X0])
         if not self.rigid:
             return z
-        out, hold = self.first(X0, T0[None, :], TH, D)
+        out, hold = self.first(X0, T0[None, :], np.zeros((1, X0.shape[1])), TH, D)
         return np.vstack([z, TH, hold])
 
     def __call__(self, Z, TH, D):

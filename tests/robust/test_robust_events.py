@@ -87,7 +87,7 @@ def test_friction_binds_the_held_feet_only(a1):
     assert len(rows) == 2 * len(feet)
     for t in (0.0, 0.1):  # double support, then mid-swing (two feet up)
         x = walk.x_star(t)
-        y = {mu: np.array(first(x, t, [1.0, mu], np.zeros(3))[0]).ravel() for mu in (0.4, 0.8)}
+        y = {mu: np.array(first(x, t, 0.0, [1.0, mu], np.zeros(3))[0]).ravel() for mu in (0.4, 0.8)}
         held = walk.system.contact_mode(x)
         for j, (i, kind) in rows.items():
             if feet[i] in held:

@@ -124,7 +124,7 @@ def test_friction_reaches_the_cone_function_with_the_plants_ground_forces(built)
     rows = no_slip_rows(stand)
     assert sorted(k for _, k in rows.values()) == [0] * 4 + [1] * 4
     F = np.array([7.5, -7.5, 0.0])
-    y = {mu: np.array(rr.first(x0, 0.0, [1.1, mu], np.tile(F[:, None], (1, 4)))).ravel() for mu in (0.4, 0.8)}
+    y = {mu: np.array(rr.first(x0, 0.0, 0.0, [1.1, mu], np.tile(F[:, None], (1, 4)))).ravel() for mu in (0.4, 0.8)}
     sys = stand.system
     u = np.clip(y[0.4][rr.nh + 2:rr.nh + 2 + sys.nu], sys.u_lo, sys.u_hi)  # after [h; margin; c]: the held input
     lam = np.array(rr.plant_fn(x0, u, 1.1, F, 0.0)[1]).ravel()
