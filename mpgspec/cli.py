@@ -454,9 +454,12 @@ def _simulate_uncertain(args, spec, report) -> int:
     for m, r in modes.items():
         first = r["first_violation"][0] if r["first_violation"] else None
         why = "" if first is None else (f"; first unsafe at t = {first['t']:.3f} s in {first['primitive']}"
+                                        + (f" ({first['h']} = {first['value']:.4g})" if first.get("h") else "")
+                                        + (f" ({first['error']})" if first.get("error") else "")
                                         + (f" (unverified hand-over to {first['unverified_hand_over']})"
                                            if first.get("unverified_hand_over") else ""))
-        print(f"  {m.replace('_', ' '):13} {r['safe_runs']:>5} / {r['runs']} safe ({100 * r['safe_fraction']:.1f} %){why}")
+        print(f"  {m.replace('_', ' '):13} {r['safe_runs']:>5} / {r['runs']} safe ({100 * r['safe_fraction']:.1f} %), "
+              f"{r.get('reached_goal', 0)} safe in the last goal{why}")
     return args.exit_code
 
 

@@ -211,7 +211,7 @@ def test_simulate_uncertain_from_the_report_and_rebuilt_agree(capsys, tmp_path):
     rc, text, _ = _cli(capsys, "simulate", PEND, "--out", out, "--uncertain", "--runs", "3")
     assert rc == 0 and "3 seeded runs (seed 0)" in text
     assert [ln.split()[0] for ln in text.splitlines()[1:]] == ["naive", "graph", "robust"]
-    assert "0 / 3 safe (0.0 %); first unsafe at t = 2.010 s in Balance" in text
+    assert "0 / 3 safe (0.0 %), 0 safe in the last goal; first unsafe at t = 2.010 s in Balance (" in text
     rc, _, err = _cli(capsys, "simulate", PEND, "--out", out, "--runs", "3")
     assert rc == 2 and "--uncertain" in err
     rc, _, err = _cli(capsys, "simulate", PEND, "--out", out, "--uncertain", "--runs", "0")
