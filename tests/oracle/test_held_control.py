@@ -29,6 +29,7 @@ def lie_and_stand(dst: Path, rate: str | None = None) -> Path:
     proj["primitives"] = ["primitives/lie.yaml", "primitives/stand.yaml"]
     proj.pop("assertions", None)
     proj.pop("sequence", None)
+    proj.pop("uncertainty", None)  # its robust assertions name the walks, Jump and Land
     proj.pop("crosscheck", None)  # replays the sequence, which is gone
     (dst / "project.yaml").write_text(yaml.safe_dump(proj, sort_keys=False))
     if rate is not None:
