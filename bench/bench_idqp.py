@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import datetime as _dt
 import os
 import shutil
 import statistics
@@ -52,7 +51,7 @@ os.environ["MPGSPEC_CACHE"] = _JIT_DIR
 import casadi as ca  # noqa: E402
 import common  # noqa: E402  (bench/common.py)
 import yaml  # noqa: E402
-from common import med_ratio, rounds, write_section  # noqa: E402
+from common import markdown_table, med_ratio, rounds, stamp, write_section  # noqa: E402
 
 from mpgspec.api import compile_project, settings_for  # noqa: E402
 from mpgspec.oracle.integrator import build_chunk  # noqa: E402
@@ -173,14 +172,8 @@ def _run(args, R: int, tmp: Path) -> int:
         rows.append(("Stand step with the law at every loop evaluation (no hold) / Lie step, oracle calls",
                      f"{med_ratio(per[n], per['Lie']):.1f}x "
                      f"(compiled chunks: {med_ratio(per_c[n], per_c['Lie']):.1f}x)"))
-    w = max(len(a) for a, _ in rows)
-    table = "\n".join([f"| {'measure':{w}s} | value |", f"|{'-' * (w + 2)}|-------|"]
-                      + [f"| {a:{w}s} | {b} |" for a, b in rows])
-    when = _dt.datetime.now().strftime("%Y-%m-%d %H:%M")
-    load = " ".join(Path("/proc/loadavg").read_text().split()[:3]) if Path("/proc/loadavg").exists() else "?"
-    head = (f"{when}, {mach['revision']}; {mach['nproc']} CPU ({mach['cpu']}), Python {mach['python']}, CasADi "
-            f"{mach['casadi']}; load average {load}; `python bench/bench_idqp.py{' --quick' if args.quick else ''}` "
-            f"(medians of {R} interleaved rounds; {time.perf_counter() - T0:.0f} s wall). specs/a1 with Lie and "
+    table = markdown_table(rows)
+    head = (stamp(mach, "bench_idqp.py", args.quick, R, time.perf_counter() - T0) + " specs/a1 with Lie and "
             f"Stand only, oracle dt={st.dt:g}, error={st.error}, K={st.chunk}, cold JIT cache. Stand's ID-QP is "
             f"solved at {stand.info['id_qp']['control_rate']} (once per step: judged rollout and step-doubling "
             f"companion one solve each) and held over the step, warm-started; when no inequality is active its "

@@ -697,10 +697,7 @@ def main(argv=None) -> int:
          + " (" + " / ".join(f"{builds[k]['total']:.2f} s" for k in presets) + "; inconclusive "
          + " / ".join(str(builds[k]['inc']) for k in presets) + ")"),
     ]
-    w = max(len(a) for a, _ in rows)
-    table = [f"| {'measure':{w}s} | value |", f"|{'-' * (w + 2)}|-------|"]
-    table += [f"| {a:{w}s} | {b} |" for a, b in rows]
-    table = "\n".join(table)
+    table = common.markdown_table(rows)
     when = _dt.datetime.now().strftime("%Y-%m-%d %H:%M")
     try:
         load_end = " (%.2f %.2f %.2f at the end)" % os.getloadavg()

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import datetime as _dt
 import statistics
 import sys
 import time
@@ -36,7 +35,7 @@ sys.path.insert(0, str(ROOT))
 
 import casadi as ca  # noqa: E402
 import common  # noqa: E402  (bench/common.py)
-from common import med_ratio, rounds, write_section  # noqa: E402
+from common import markdown_table, med_ratio, rounds, stamp, write_section  # noqa: E402
 
 from mpgspec.api import compile_stage, settings_for  # noqa: E402
 from mpgspec.oracle.oracle import SafetyOracle  # noqa: E402
@@ -123,15 +122,9 @@ def main(argv=None) -> int:
     rows += [("sequence Stand, Jump, Land (1.5 s), naive: 1 run", f"{med(per1) * 1e3:,.1f} ms"),
              ("same, 8 runs together", f"{med(times['sequence 8']) * 1e3:,.1f} ms, {med(per8) * 1e3:,.1f} ms per run"),
              ("**per run, 8 together / 1 alone**", f"**{med_ratio(per8, per1):.2f}x**")]
-    w = max(len(a) for a, _ in rows)
-    table = "\n".join([f"| {'measure':{w}s} | value |", f"|{'-' * (w + 2)}|-------|"]
-                      + [f"| {a:{w}s} | {b} |" for a, b in rows])
-    when = _dt.datetime.now().strftime("%Y-%m-%d %H:%M")
-    load = " ".join(Path("/proc/loadavg").read_text().split()[:3]) if Path("/proc/loadavg").exists() else "?"
-    head = (f"{when}, {mach['revision']}; {mach['nproc']} CPU ({mach['cpu']}), Python {mach['python']}, CasADi "
-            f"{mach['casadi']}; load average {load}; `python bench/bench_robust.py{' --quick' if args.quick else ''}` "
-            f"(medians of {R} interleaved rounds; {time.perf_counter() - T0:.0f} s wall). specs/a1, dt={st.dt:g}, "
-            f"the project's compile cache (warm unless stated by the build times in the log).")
+    table = markdown_table(rows)
+    head = (stamp(mach, "bench_robust.py", args.quick, R, time.perf_counter() - T0) + f" specs/a1, dt={st.dt:g}, "
+            "the project's compile cache (warm unless stated by the build times in the log).")
     section = f"{HEADING}\n\n{head}\n\n{table}\n\nSee the docstring of bench/bench_robust.py for the meaning of each row.\n"
     log("\n" + section)
     if not args.no_write:

@@ -43,6 +43,25 @@ def machine(**versions: str) -> dict:
             "python": platform.python_version(), **versions, "platform": platform.platform()}
 
 
+def markdown_table(rows: list[tuple[str, str]]) -> str:
+    """The | measure | value | table of a benchmark's section."""
+    w = max(len(a) for a, _ in rows)
+    return "\n".join([f"| {'measure':{w}s} | value |", f"|{'-' * (w + 2)}|-------|"]
+                     + [f"| {a:{w}s} | {b} |" for a, b in rows])
+
+
+def stamp(mach: dict, script: str, quick: bool, repeats: int, seconds: float) -> str:
+    """When, what and where a section was measured: date, revision, CPUs, Python and CasADi, the
+    load average, the command and its rounds and wall time."""
+    import datetime
+
+    when = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
+    load = " ".join(Path("/proc/loadavg").read_text().split()[:3]) if Path("/proc/loadavg").exists() else "?"
+    return (f"{when}, {mach['revision']}; {mach['nproc']} CPU ({mach['cpu']}), Python {mach['python']}, CasADi "
+            f"{mach['casadi']}; load average {load}; `python bench/{script}{' --quick' if quick else ''}` "
+            f"(medians of {repeats} interleaved rounds; {seconds:.0f} s wall).")
+
+
 def revision(root: Path, paths: tuple[str, ...] = ("mpgspec", "verifiers", "specs")) -> str:
     """The commit measured, and which of `paths` have uncommitted changes (the benchmark measures
     the working tree)."""
