@@ -36,13 +36,13 @@ LABEL = "empirical"
 RECORD = 8
 """Layout of the memoised robust record (part of its key)."""
 ROLLOUTS = 4096
+"""At most this many rollouts are run (and their samples held) at once."""
 NODE_STARTS = 2
 """A target's own flow is checked from x_B*(t_B) at this many of its cells' switch-in clocks (the
 first and the last)."""
 SETTLED = NEVER / 2
 """Time since switch-in at the start of a target's own-flow check: long settled, yet below the clock
 of an event that has not happened (NEVER), which stays at rest."""
-"""At most this many rollouts are run (and their samples held) at once."""
 SAMPLED = "empirical (sampled)"
 NOTE = ("falsification, not proof: a robust edge withstood every scenario tried (parameter-box corners, seeded "
         "samples and an adversarial disturbance search); no certificate backs it")
@@ -143,10 +143,9 @@ def _node_check(B, rr, tbs: list[float], TH, ERR, D1, KIND, settings, tol, names
     Y, last = rr.run(X0, T0, np.tile(TH, (len(tbs), 1)), D, ns, tol, until_entry=False, s0=SETTLED)
     res = [judge_flow(Y[r, :-1], int(min(ns[r], last[r])), tol) for r in range(len(X0))]
     r = min(range(len(X0)), key=lambda q: (res[q][0], res[q][1]))
-    ok, low, k = res[r]
-    H = np.where(np.isfinite(Y[r, :-1, k]), Y[r, :-1, k], -np.inf)
-    binding = {"h": B.h_names[int(np.argmin(H))], "value": float(low), "t": float(k * settings.dt)} if H.size else None
-    return {"node": B.name, "t_B": [float(t) for t in tbs], "scenarios": len(X0), "rollouts": len(X0),
+    ok, low, k, j = res[r]
+    binding = {"h": B.h_names[j], "value": float(low), "t": float(k * settings.dt)} if j is not None else None
+    return {"node": B.name, "t_B": [float(t) for t in tbs], "scenarios": len(X0),
             "robust_safe": bool(all(x[0] for x in res)), "worst_margin": float(low),
             "worst_case": {"t_B": float(T0[r]), "kind": KIND[r % S], "parameters": dict(zip(names, map(float, TH[r % S]))),
                            "disturbance": {u: [float(v) for v in D[r][i]] for i, u in enumerate(dist_names)},
@@ -317,7 +316,7 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
         tbs = sorted({round(c[5], 9) for c in cells})
         tbs = [tbs[int(round(k))] for k in np.linspace(0, len(tbs) - 1, min(NODE_STARTS, len(tbs)))]
         node = _node_check(B, rr, sorted(set(tbs)), TH, ERR, D1, KIND, settings, tol, names, dist_names)
-        n_roll += node.pop("rollouts")
+        n_roll += node["scenarios"]
         nodes.append(node)
         per_edge: dict[str, list] = {}
         for c, (a, tr, i, j, starts, tb) in enumerate(cells):

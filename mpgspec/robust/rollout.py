@@ -52,16 +52,17 @@ def judge(H: np.ndarray, M: np.ndarray, n: int, tol: float) -> tuple[bool, float
     return False, (low if low < -tol else float(M.max())), None
 
 
-def judge_flow(H: np.ndarray, n: int, tol: float) -> tuple[bool, float, int]:
-    """(safe, least h, its sample) of one rollout's h (nh x N+1) over its first n+1 samples, whatever
-    its RoA margin: the flow from the setpoint stays in C (Definition 1's premise, re-checked)."""
+def judge_flow(H: np.ndarray, n: int, tol: float) -> tuple[bool, float, int, int | None]:
+    """(safe, least h, its sample, its row) of one rollout's h (nh x N+1) over its first n+1 samples,
+    whatever its RoA margin: the flow from the setpoint stays in C (Definition 1's premise,
+    re-checked). A non-finite value counts as -inf; without h the row is None."""
     H = H[:, : n + 1]
     if not H.size:
-        return True, math.inf, 0
+        return True, math.inf, 0, None
     Hf = np.where(np.isfinite(H), H, -np.inf)
     lows = Hf.min(axis=0)
     k = int(np.argmin(lows))
-    return bool(lows[k] >= -tol), float(lows[k]), k
+    return bool(lows[k] >= -tol), float(lows[k]), k, int(np.argmin(Hf[:, k]))
 
 
 class RobustRollout:

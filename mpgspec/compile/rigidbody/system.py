@@ -236,7 +236,7 @@ class RigidBodyCompiledSystem(CompiledSystem):
             a, lam = cd.solve((cd.tau_expr + self.push_wrench(frame, self.dyn.q, F)) / k)
             a, lam = ca.substitute([a, lam], [self.dyn.q, self.dyn.v, cd.u], [xq, xv, self.u])
             xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(self.nx - m.nq - m.nv))
-            c = ca.DM.ones(len(contacts))
+            c, lam = ca.DM.ones(len(contacts)), k * lam
         else:
             feet = m.contact_frames
             if schedule is not None:
@@ -249,9 +249,7 @@ class RigidBodyCompiledSystem(CompiledSystem):
             a, lam = masked_contact_dynamics(self, xq, xv, self.u, c, k, self.push_wrench(frame, xq, F))
             xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(self.nx - m.nq - m.nv - len(self.event_clocks)),
                               *[clock_rate(self.x[i]) for i in self.event_clocks])
-            return ca.Function("uncertain_plant", [self.x, self.u, k, F, t], [xdot, lam, c],
-                               ["x", "u", "k", "F", "t"], ["xdot", "lam", "c"])
-        return ca.Function("uncertain_plant", [self.x, self.u, k, F, t], [xdot, k * lam, c],
+        return ca.Function("uncertain_plant", [self.x, self.u, k, F, t], [xdot, lam, c],
                            ["x", "u", "k", "F", "t"], ["xdot", "lam", "c"])
 
     def _when_in_contact(self, frame: str, h: ca.SX, mode: dict | None = None, flags: bool = True) -> ca.SX:
