@@ -18,7 +18,7 @@ from bench.common import med_ratio, rounds  # noqa: E402
 from mpgspec.api import compile_project, settings_for  # noqa: E402
 from mpgspec.compile.rigidbody.system import feet_on_ground  # noqa: E402
 from mpgspec.compile.system import compile_system  # noqa: E402
-from mpgspec.gait.orbit import StrideMap, find_orbit  # noqa: E402
+from mpgspec.robots.quadruped.gait.orbit import StrideMap, find_orbit  # noqa: E402
 from mpgspec.oracle.integrator import build_chunk, initial_state  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402
 

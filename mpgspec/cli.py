@@ -551,7 +551,7 @@ def cmd_schema(args) -> int:
 def cmd_gait(args) -> int:
     """Generate (or with --check, compare) the gait tables of a gait file."""
     from .compile.system import compile_system
-    from .gait.library import GaitTable, compare, generate, load_gait_file, write
+    from .robots.quadruped.gait.library import GaitTable, compare, generate, load_gait_file, write
     from .spec.loader import load_project
 
     path = Path(args.file)

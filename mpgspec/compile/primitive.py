@@ -18,12 +18,14 @@ import numpy as np
 from ..errors import SpecError, SpecErrors
 from ..spec.loader import PrimitiveInstance
 from ..spec.models import PrimitiveClass
-from .controllers import LAWS, ControlContext
 from .events import EventWindow, event_window
-from .hold import SampledLaw
-from .expr_casadi import interp_cubic, interp_linear
 from .exprs import ExprCompiler
-from .system import CompiledSystem, shadowing_error, taken_names
+from .hold import SampledLaw
+from .laws.base import ControlContext
+from .laws.kind import Setup
+from .laws.registry import controller_kind
+from .setpoint import compile_setpoint
+from .system import CompiledSystem, OpenLoop, shadowing_error, taken_names
 
 INACTIVE = 1e9
 """Value of a safety function outside its active window: never binding."""
@@ -170,12 +172,62 @@ def _clock_time(ec: ExprCompiler, inst: PrimitiveInstance, value, path: tuple, c
     return v
 
 
+@dataclass
+class _Clock:
+    """The symbols every function of a primitive takes, and its clock data."""
+
+    t: ca.SX  # the primitive's clock
+    s: ca.SX  # time since switch-in
+    x_sw: ca.SX  # state at switch-in
+    tc: ca.SX  # the clock seen by setpoint and windows: wrapped into one period for periodic primitives
+    period: float | None
+    domain: tuple[float, float] | None
+
+
+@dataclass
+class _Mode:
+    """The open loop a primitive runs on and its contact mode (foot -> 1 while held, a function of
+    the clock under a contact schedule; None for systems without feet)."""
+
+    loop: OpenLoop
+    schedule: list | None
+    mode: dict | None
+
+
 def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledPrimitive:
     """Build f_cl, control, h, roa_margin and setpoint for one graph node."""
     p = inst.spec
     ec = ExprCompiler(inst.locate, f"primitive '{inst.name}'")
+    kind = controller_kind(p.controller, ec)
     loop = sys.open_loop(p.contacts)
     consts = _constants(inst, sys, ec, loop.env)
+    clock = _clock(inst, sys, ec, consts)
+    setup = kind.run_setup(inst, sys, ec, consts)
+    cm = _contact_mode(inst, sys, loop, setup, clock)
+    ident = _ident(inst.name)
+    setpoint, x_star, x_star_dot = compile_setpoint(inst, sys, ec, consts, cm.loop.contacts, clock.t, clock.tc,
+                                                    clock.period, ident)
+    if sys.is_rigid_body and sys.events and cm.schedule is not None:
+        setpoint = _scheduled_flags(setpoint, sys, cm.schedule, clock.period)
+    env: dict[str, object] = {**sys.env(), **consts, "t": clock.tc, "s": clock.s}  # t: the clock, within one period
+    for i, n in enumerate(sys.state_names):
+        env[f"{n}_star"] = x_star[i]
+        env[f"{n}_star_dot"] = x_star_dot[i]
+    ctx = ControlContext(sys, clock.t, clock.s, clock.x_sw, x_star, x_star_dot, setpoint, env, ec,
+                         fixed=p.class_ is PrimitiveClass.FIXED, xdot=cm.loop.xdot, contacts=cm.loop.contacts,
+                         mode=cm.mode)
+    ctx.info.update(setup.info)
+    if cm.schedule is not None:
+        ctx.info["contact_schedule"] = [[float(u), list(f)] for u, f in cm.schedule]
+    if sys.is_rigid_body:  # rigid bodies: the feet the primitive's dynamics hold
+        ctx.info["contacts"] = list(cm.loop.contacts)
+    u_raw = kind.build_law(p.controller, ctx)
+    return _assemble(inst, sys, ec, clock, cm, ctx, u_raw, setpoint, ident)
+
+
+def _clock(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, consts: dict) -> _Clock:
+    """The period of a periodic primitive, the domain [t0, tf] of a transient, and the symbols."""
+    p = inst.spec
     period = _clock_time(ec, inst, p.period, ("period",), consts, "period") if p.period is not None else None
     domain = None
     if p.domain is not None:
@@ -186,98 +238,65 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
                             key=f"primitive '{inst.name}': domain", expected="tf > t0", found=f"{list(domain)}",
                             code="MPG104")
     t = ca.SX.sym("t")
-    s = ca.SX.sym("s")
-    x_sw = ca.SX.sym("x_sw", sys.nx)
-    x = sys.x
-    # clock seen by setpoint and windows: wrapped into one period for periodic primitives
     tc = t - period * ca.floor(t / period) if period is not None else t
-    trot = _trot_setup(inst, sys, ec, consts) if p.controller.type == "trot" else None
-    schedule = _schedule(inst, sys, trot)
-    mode = None  # the contact mode: foot -> 1 while held, a function of the clock under a schedule
-    if schedule is not None:  # the clock sets the contact set (flags in the state follow it, see _jump)
-        mode = scheduled_mode(schedule, sys.model.contact_frames, t, period)
+    return _Clock(t, ca.SX.sym("s"), ca.SX.sym("x_sw", sys.nx), tc, period, domain)
+
+
+def _contact_mode(inst: PrimitiveInstance, sys: CompiledSystem, loop: OpenLoop, setup: Setup, clock: _Clock) -> _Mode:
+    """Under a contact schedule (the spec's, or the one the controller kind's setup sets) the clock
+    sets the contact set, and flags in the state follow it (see _jump); rigid bodies without one
+    hold the primitive's contacts."""
+    schedule = _schedule(inst, sys, setup.schedule)
+    mode = None
+    if schedule is not None:
+        mode = scheduled_mode(schedule, sys.model.contact_frames, clock.t, clock.period)
         loop = sys.scheduled_loop(mode)
     elif sys.is_rigid_body:
         mode = {f: ca.SX(1.0 if f in loop.contacts else 0.0) for f in sys.model.contact_frames}
-    env: dict[str, object] = {**sys.env(), **consts, "t": tc, "s": s}  # t: the clock, within one period
-    sp = p.setpoint
-    table = None  # (times, samples, interpolation) of a tabulated setpoint
-    if sp.named is not None:
-        unknown = [k for k in sp.named if k not in sys.state_names]
-        if unknown:
-            raise SpecError("setpoint names an unknown state", location=inst.locate(("setpoint", "named", unknown[0])),
-                            key=f"primitive '{inst.name}': setpoint.named", expected="state names of the system",
-                            found=repr(unknown[0]), code="MPG106")
-        base = sys.default_state(loop.contacts)
-        x_star_t = ca.vertcat(*[ec.sx(sp.named[n], ("setpoint", "named", n), {**consts, "t": t}) if n in sp.named
-                                else ca.SX(base[i]) for i, n in enumerate(sys.state_names)])
-        if sp.feet_on_ground:
-            from .rigidbody.system import feet_on_ground
+    return _Mode(loop, schedule, mode)
 
-            x_fixed = feet_on_ground(sys, np.array(ca.Function("x0", [t], [x_star_t])(0.0)).ravel())
-            i = sys.state_names.index("base_z")
-            x_star_t = ca.vertcat(x_star_t[:i], x_fixed[i], x_star_t[i + 1:])
-    elif sp.expr is not None:
-        if len(sp.expr) != sys.nx:
-            raise SpecError("setpoint needs one expression per state", location=inst.locate(("setpoint", "expr")),
-                            key=f"primitive '{inst.name}': setpoint.expr", expected=f"{sys.nx}", found=f"{len(sp.expr)}",
-                            code="MPG106")
-        x_star_t = ec.vector(sp.expr, ("setpoint", "expr"), {**consts, "t": t})
-    elif sp.file is not None:
-        ts, ys = _samples_from_csv(inst, sys, loop.contacts)
-        table = (ts, ys, sp.interpolation)
-        interp = interp_cubic if sp.interpolation == "cubic" else interp_linear
-        x_star_t = ca.vertcat(*[interp(t, ts, ys[:, i]) for i in range(sys.nx)])
-    else:
-        if any(len(r) != sys.nx for r in sp.samples):
-            raise SpecError("each sample needs one value per state", location=inst.locate(("setpoint", "samples")),
-                            key=f"primitive '{inst.name}': setpoint.samples", expected=f"{sys.nx} values",
-                            found=f"{sorted({len(r) for r in sp.samples})}", code="MPG106")
-        ts = np.asarray(sp.times, float)
-        ys = np.asarray(sp.samples, float)
-        table = (ts, ys, sp.interpolation)
-        interp = interp_cubic if sp.interpolation == "cubic" else interp_linear
-        x_star_t = ca.vertcat(*[interp(t, ts, ys[:, i]) for i in range(sys.nx)])
-    x_star_raw = ca.Function("x_star_raw", [t], [x_star_t])
-    x_star = x_star_raw(tc)
-    x_star_dot = ca.jacobian(x_star_raw(t), t)
-    x_star_dot = ca.substitute(x_star_dot, t, tc)
-    setpoint = ca.Function(f"setpoint_{_ident(inst.name)}", [t], [x_star])
-    if table is not None and len(table[0]) > TABLE_KNOTS:  # a lookup, not a tree of thousands of branches
-        setpoint = _table_setpoint(f"setpoint_{_ident(inst.name)}", *table, period)
-    if sys.is_rigid_body and sys.events and schedule is not None:
-        setpoint = _scheduled_flags(setpoint, sys, schedule, period)
-    for i, n in enumerate(sys.state_names):
-        env[f"{n}_star"] = x_star[i]
-        env[f"{n}_star_dot"] = x_star_dot[i]
-    ctx = ControlContext(sys, t, s, x_sw, x_star, x_star_dot, setpoint, env, ec,
-                         fixed=p.class_ is PrimitiveClass.FIXED, xdot=loop.xdot, contacts=loop.contacts, mode=mode)
-    if trot is not None:
-        ctx.info["trot"] = {k: v for k, v in trot.items() if k != "gains"}
-    if schedule is not None:
-        ctx.info["contact_schedule"] = [[float(u), list(f)] for u, f in schedule]
-    if sys.is_rigid_body:  # rigid bodies: the feet the primitive's dynamics hold
-        ctx.info["contacts"] = list(loop.contacts)
-    u_raw = LAWS[p.controller.type](p.controller, ctx)
+
+def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, clock: _Clock, cm: _Mode,
+              ctx: ControlContext, u_raw, setpoint: ca.Function, ident: str) -> CompiledPrimitive:
+    """Close the loop: saturate the law, compose dynamics and safety functions with it, size E."""
+    p = inst.spec
     sat_u = saturate(sys.u, sys.u_lo, sys.u_hi)
-    args = [x, t, s, x_sw]
-    ident = _ident(inst.name)
-    f_u = ca.Function("f_u", args + [sys.u], [ca.substitute(loop.xdot, sys.u, sat_u) if sys.nu else loop.xdot])
+    args = [sys.x, clock.t, clock.s, clock.x_sw]
+    f_u = ca.Function("f_u", args + [sys.u], [ca.substitute(cm.loop.xdot, sys.u, sat_u) if sys.nu else cm.loop.xdot])
     # safety functions may name inputs (the saturated control)
-    henv = {**env, **loop.env, **{n: sat_u[i] for i, n in enumerate(sys.input_names)}}
+    henv = {**ctx.env, **cm.loop.env, **{n: sat_u[i] for i, n in enumerate(sys.input_names)}}
+    hs, hs_raw, names, windows = _safety_functions(inst, sys, ec, henv, cm, clock, sat_u)
+    windowed = any(w is not None for w in windows)
+    h_u = ca.Function("h_u", args + [sys.u], [ca.vertcat(*hs) if hs else ca.SX(0, 1)])
+    h_all = ca.Function("h_raw", args + [sys.u], [ca.vertcat(*hs_raw)]) if windowed else h_u
+    jump = _jump(inst, sys, clock.t, cm.schedule, clock.period)
+    f_cl, control, h, loop_fn = _close_loop(ident, args, u_raw, f_u, h_u, sys)
+    loop_raw = _close_loop(ident + "_raw", args, u_raw, f_u, h_all, sys)[3] if windowed else loop_fn
+    loop_u = _open_loop(ident, args, f_u, h_all, sys) if ctx.sampled is not None else None
+    W = _roa_metric(inst, sys)
+    radius = float(p.roa.radius) if p.roa.radius is not None else 0.0  # 0 until a verifier sizes E
+    ctx.info["roa_W"] = W.tolist()
+    roa_margin = _roa_margin(sys, setpoint, W, radius, ident)
+    grid = p.grid
+    return CompiledPrimitive(
+        name=inst.name, cls=p.class_, system=sys, period=clock.period, domain=clock.domain, next=p.next,
+        horizon=p.horizon, grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names,
+        radius=radius, f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info,
+        jump=jump, loop=loop_fn, loop_raw=loop_raw, windows=windows,
+        boundaries=_boundaries(windows, cm.schedule, clock.period, clock.domain),
+        hybrid=sys.events or cm.schedule is not None, sampled=ctx.sampled, loop_u=loop_u,
+    )
+
+
+def _safety_functions(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, henv: dict, cm: _Mode,
+                      clock: _Clock, sat_u):
+    """(h active in its window, h always active, names, windows) over the safe set C: written
+    functions, and the blocks a rigid-body system provides (`use`)."""
     hs, hs_raw, names, windows = [], [], [], []
     for j, sf in enumerate(inst.safe_set):
         path = ("safe_set", j)
         if sf.use is not None:
-            try:
-                scheduled = schedule is not None  # contact conditions bind by the mode
-                items = sys.builtin_safe_set(sf.use, loop.contacts, mode=mode if scheduled else None,
-                                             env=loop.env if scheduled else None)
-            except KeyError:
-                raise SpecError("this safe-set block does not apply to the system", location=inst.locate(path + ("use",)),
-                                key=f"primitive '{inst.name}': safe_set.{j}.use", expected="a block of the project or, "
-                                "for rigid bodies, joint_limits, ground_contact, no_slip or aerial",
-                                found=repr(sf.use), code="MPG302") from None
+            items = _builtin_block(inst, sys, sf.use, path, cm)
         elif sf.h is not None:
             items = [(sf.name, ec.sx(sf.h, path + ("h",), henv))]
         else:
@@ -288,28 +307,36 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
             if isinstance(sf.when, tuple):
                 a, b = float(sf.when[0]), float(sf.when[1])
                 windows.append((a, b))
-                hv = ca.if_else(ca.logic_and(tc >= a, tc < b), hv, INACTIVE)
+                hv = ca.if_else(ca.logic_and(clock.tc >= a, clock.tc < b), hv, INACTIVE)
             elif sf.when is not None:  # anchored on a contact event: the loader checked the system has them
                 w = event_window(sf.when, sys.state_names)
                 windows.append(w)
-                hv = ca.if_else(w.active(x[w.clock], s), hv, INACTIVE)
+                hv = ca.if_else(w.active(sys.x[w.clock], clock.s), hv, INACTIVE)
             else:
                 windows.append(None)
             hs.append(hv)
             names.append(name or f"h{j}")
-    h_u = ca.Function("h_u", args + [sys.u], [ca.vertcat(*hs) if hs else ca.SX(0, 1)])
-    jump = _jump(inst, sys, t, schedule, period)
-    f_cl, control, h, loop_fn = _close_loop(ident, args, u_raw, f_u, h_u, sys)
-    if any(w is not None for w in windows):
-        h_raw = ca.Function("h_raw", args + [sys.u], [ca.vertcat(*hs_raw)])
-        loop_raw = _close_loop(ident + "_raw", args, u_raw, f_u, h_raw, sys)[3]
-    else:
-        loop_raw = loop_fn
-    loop_u = None
-    if ctx.sampled is not None:
-        h_all = h_raw if any(w is not None for w in windows) else h_u
-        loop_u = _open_loop(ident, args, f_u, h_all, sys)
-    roa = p.roa
+    return hs, hs_raw, names, windows
+
+
+def _builtin_block(inst: PrimitiveInstance, sys: CompiledSystem, use: str, path: tuple, cm: _Mode) -> list:
+    """The safety functions of a block the system provides; under a schedule contact conditions
+    bind by the mode."""
+    scheduled = cm.schedule is not None
+    try:
+        return sys.builtin_safe_set(use, cm.loop.contacts, mode=cm.mode if scheduled else None,
+                                    env=cm.loop.env if scheduled else None)
+    except KeyError:
+        raise SpecError("this safe-set block does not apply to the system", location=inst.locate(path + ("use",)),
+                        key=f"primitive '{inst.name}': {'.'.join(map(str, path))}.use", expected="a block of the "
+                        "project or, for rigid bodies, joint_limits, ground_contact, no_slip or aerial",
+                        found=repr(use), code="MPG302") from None
+
+
+def _roa_metric(inst: PrimitiveInstance, sys: CompiledSystem) -> np.ndarray:
+    """W of the explicit RoA E = {||x - x*(t)||_W < r}: roa.matrix, or diag(roa.weights) (ones by
+    default); event clocks have no distance to x*."""
+    roa = inst.spec.roa
     if roa.matrix is not None:
         W = np.asarray(roa.matrix, float)
         if W.shape != (sys.nx, sys.nx) or not np.allclose(W, W.T) or np.linalg.eigvalsh(W).min() <= 0:
@@ -327,17 +354,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         W = np.diag(w)
     W[sys.event_clocks, :] = 0.0  # times since contact events: no distance to x*
     W[:, sys.event_clocks] = 0.0
-    radius = float(roa.radius) if roa.radius is not None else 0.0  # 0 until a verifier sizes E
-    ctx.info["roa_W"] = W.tolist()
-    roa_margin = _roa_margin(sys, setpoint, W, radius, ident)
-    grid = p.grid
-    return CompiledPrimitive(
-        name=inst.name, cls=p.class_, system=sys, period=period, domain=domain, next=p.next, horizon=p.horizon,
-        grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=radius,
-        f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info, jump=jump,
-        loop=loop_fn, loop_raw=loop_raw, windows=windows, boundaries=_boundaries(windows, schedule, period, domain),
-        hybrid=sys.events or schedule is not None, sampled=ctx.sampled, loop_u=loop_u,
-    )
+    return W
 
 
 def _boundaries(windows, schedule, period, domain) -> tuple[float, ...]:
@@ -355,51 +372,10 @@ def _boundaries(windows, schedule, period, domain) -> tuple[float, ...]:
     return tuple(sorted(times))
 
 
-def _trot_setup(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, consts: dict) -> dict:
-    """Speed, calibrated command, gains and the gait table's header of a trot controller."""
-    from ..spec.paths import ReadProblem
-    from .rigidbody.trot import check_quadruped, gains_of, gait_header, trot_inputs
-
-    c = inst.spec.controller
-    owner = f"primitive '{inst.name}'"
-    check_quadruped(sys, ec)
-    speed = ec.number(c.speed, ("controller", "speed"), consts, finite=True)
-    out = {"speed": speed, "command": speed, "gait": None, "inputs": trot_inputs(c, sys, speed)}
-    if c.gait is not None:
-        where = inst.locate(("controller", "gait"))
-        raw, path = spec_file(inst, c.gait, where, f"{owner}: controller.gait")
-        if not path.is_file():
-            raise SpecError("the gait table does not exist", location=where, key=f"{owner}: controller.gait",
-                            expected="a table written by `mpgspec gait`", found=str(raw), code="MPG110",
-                            hint="generate it with `mpgspec gait <project>/gaits.yaml`")
-        try:
-            head = gait_header(path)
-        except ReadProblem as prob:
-            raise SpecError(f"cannot read the gait table: {prob.message}", location=where,
-                            key=f"{owner}: controller.gait", expected=prob.expected or "a table written by "
-                            "`mpgspec gait`", found=f"{raw} ({prob.found})" if prob.found else raw,
-                            code="MPG110") from None
-        if head.get("inputs") != out["inputs"]:
-            raise SpecError("the gait table is stale: it was generated for other settings", location=where,
-                            key=f"{owner}: controller.gait", expected=f"inputs {out['inputs']}",
-                            found=f"inputs {head.get('inputs')}", code="MPG110",
-                            hint="regenerate it with `mpgspec gait <project>/gaits.yaml`")
-        try:
-            out["command"] = float(head["command"])
-        except (KeyError, ValueError):
-            raise SpecError("the gait table has no calibrated command", location=where,
-                            key=f"{owner}: controller.gait", expected="a header line '# command: <m/s>'",
-                            found=str(head.get("command")), code="MPG110") from None
-        out["gait"] = {k: head[k] for k in head}
-        out["gait_file"] = str(raw)
-    out["gains"] = gains_of(c, out["command"])
-    return out
-
-
-def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, trot: dict | None):
-    """(until, feet) over the clock: the spec's contact schedule, or the one the trot's timing implies."""
-    if trot is not None:
-        return [(u, tuple(f)) for u, f in trot["gains"].schedule(tuple(sys.model.contact_frames))]
+def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, planned: list | None):
+    """(until, feet) over the clock: the one the controller kind's setup plans, else the spec's."""
+    if planned is not None:
+        return planned
     sched = inst.spec.contact_schedule
     if sched is None:
         return None
@@ -499,70 +475,6 @@ def held_feet(prim: "CompiledPrimitive"):
     return held
 
 
-def spec_file(inst: PrimitiveInstance, raw: str, where, key: str):
-    """(name, path) of a file a primitive names: `{<argument>}` takes the node's value (one file per
-    node), and the path must stay inside the project folder or an allowed folder (spec.paths)."""
-    from ..spec.paths import confine
-
-    for k, v in inst.argument.items():
-        raw = raw.replace("{" + k + "}", f"{v:g}")
-    if not inst.roots:  # an instance built without the loader: no project folder known
-        return raw, (inst.source.parent / raw).resolve()
-    return raw, confine(raw, inst.source.parent, inst.roots, where=where, key=key)
-
-
-def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) -> tuple[np.ndarray, np.ndarray]:
-    """Times and full-state samples of a setpoint table; states without a column take their default.
-
-    The table must lie inside the project folder (or an allowed folder), be a regular UTF-8 file
-    of at most MAX_FILE_BYTES and hold finite numbers; errors never echo more than a short piece
-    of a line.
-    """
-    from ..spec.paths import MAX_FILE_BYTES, ReadProblem, clip, clip_repr, read_text_bounded
-
-    where = inst.locate(("setpoint", "file"))
-    key = f"primitive '{clip(inst.name, 60)}': setpoint.file"
-    raw, path = spec_file(inst, inst.spec.setpoint.file, where, key)
-
-    def fail(msg, expected, found, line=0):
-        loc = where if not line else type(where)(str(path), line, 1)
-        raise SpecError(msg, location=loc, key=key, expected=expected, found=found, code="MPG110")
-
-    try:
-        lines = ["" if ln.startswith("#") else ln for ln in read_text_bounded(path, MAX_FILE_BYTES).splitlines()]
-    except ReadProblem as p:
-        fail(f"cannot read the setpoint table: {p.message}", p.expected or "a CSV file relative to the spec",
-             f"{clip_repr(raw)} ({p.found})" if p.found else clip_repr(raw))
-    first = next((k for k, ln in enumerate(lines) if ln.strip()), len(lines))  # after `# key: value` lines
-    header = [h.strip() for h in lines[first].split(",")] if first < len(lines) else []
-    if not header or header[0] != "t":
-        fail("the first column must be the time", "a header 't,<state>,...'",
-             clip_repr(lines[first] if first < len(lines) else ""), first + 1)
-    unknown = [h for h in header[1:] if h not in sys.state_names]
-    if unknown:
-        fail("unknown state in the header", "state names of the system", clip_repr(unknown[0]), first + 1)
-    rows = []
-    for n, text in enumerate(lines[first + 1:], start=first + 2):
-        if not text.strip():
-            continue
-        try:
-            vals = [float(v) for v in text.split(",")]
-        except ValueError:
-            fail("not a number", "numbers separated by commas", repr(text[:60]), n)
-        if not all(np.isfinite(vals)):
-            fail("not a finite number", "finite numbers (no nan or inf)", repr(text[:60]), n)
-        if len(vals) != len(header):
-            fail("wrong number of columns", f"{len(header)}", f"{len(vals)}", n)
-        rows.append(vals)
-    data = np.asarray(rows, float).reshape(-1, len(header))
-    if data.shape[0] < 2 or np.any(np.diff(data[:, 0]) <= 0):
-        fail("times must be strictly increasing, with at least two rows", "increasing t", f"{data.shape[0]} rows")
-    ys = np.tile(sys.default_state(contacts), (data.shape[0], 1))
-    for j, name in enumerate(header[1:], start=1):
-        ys[:, sys.state_names.index(name)] = data[:, j]
-    return data[:, 0], ys
-
-
 def saturate(u, lo: np.ndarray, hi: np.ndarray):
     """Clip u to [lo, hi] in a form that lets NaN through (fmin/fmax would replace it by a bound).
 
@@ -606,25 +518,6 @@ def _open_loop(ident: str, args: list, f_u: ca.Function, h_u: ca.Function, sys: 
     ur = a[4]
     return ca.Function(f"loop_u_{ident}", a, [f_u(*a), h_u(*a), ur, saturate(ur, sys.u_lo, sys.u_hi)],
                        ["x", "t", "s", "x_sw", "u_held"], ["xdot", "h", "u_raw", "u"])
-
-
-TABLE_KNOTS = 64
-"""Tabulated setpoints with more samples than this are evaluated by a linear lookup (CasADi's
-interpolant) in an MX Function instead of an SX expression tree."""
-
-
-def _table_setpoint(name: str, ts: np.ndarray, ys: np.ndarray, interpolation: str, period) -> ca.Function:
-    """t -> x*(t) from a table by linear lookup, held outside its range, wrapped into one period."""
-    if interpolation != "linear":
-        ts_f = np.linspace(ts[0], ts[-1], 8 * len(ts))  # cubic tables: sampled densely, then linear
-        from scipy.interpolate import CubicSpline
-
-        ys, ts = CubicSpline(ts, ys, axis=0)(ts_f), ts_f
-    lookup = ca.interpolant(name + "_lookup", "linear", [np.asarray(ts, float)],
-                            np.asarray(ys, float).ravel(order="C"))
-    t = ca.MX.sym("t")
-    tc = t - period * ca.floor(t / period) if period is not None else t
-    return ca.Function(name, [t], [lookup(ca.fmin(ca.fmax(tc, float(ts[0])), float(ts[-1])))])
 
 
 def _roa_margin(sys: CompiledSystem, setpoint: ca.Function, W: np.ndarray, radius: float, ident: str) -> ca.Function:

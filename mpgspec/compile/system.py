@@ -4,6 +4,8 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from typing import Protocol
 
 import casadi as ca
 import numpy as np
@@ -46,7 +48,7 @@ class CompiledSystem:
     wrap: np.ndarray  # period per state, 0 = none
     extra_env: dict[str, ca.SX] = field(default_factory=dict)
 
-    kind = "analytic"  # the registry key this system was compiled by (SYSTEM_KINDS)
+    kind = "analytic"  # the system kind this system was compiled by (entry points `mpgspec.systems`)
     events = False  # the state jumps at contact events (rigid bodies with contact_events)
 
     @property
@@ -90,6 +92,10 @@ class CompiledSystem:
                          env: dict | None = None) -> list[tuple[str, ca.SX]]:
         raise KeyError(name)
 
+    def ground_setpoint(self, x_star: ca.SX, t: ca.SX) -> ca.SX | None:
+        """x*(t) with the lowest foot put on the ground (`setpoint.feet_on_ground`); None: no feet."""
+        return None
+
     def wrapped_error(self, dx: ca.SX) -> ca.SX:
         """x - x* with wrapped states (angles) mapped into [-P/2, P/2)."""
         parts = []
@@ -100,20 +106,33 @@ class CompiledSystem:
         return ca.vertcat(*parts)
 
 
-def _rigid_body(spec: ProjectSpec) -> CompiledSystem:
-    from .rigidbody.system import compile_rigid_body  # pinocchio is loaded only for robots
+class SystemKind(Protocol):
+    """A system kind: builds the CompiledSystem of a project whose `system.kind` is its name."""
 
-    return compile_rigid_body(spec)
+    def __call__(self, spec: ProjectSpec) -> CompiledSystem: ...
+
+
+SYSTEM_GROUP = "mpgspec.systems"
+"""Entry-point group of the system kinds (analytic here, rigid_body in compile/rigidbody/system.py:
+pinocchio is loaded only for robots)."""
+
+
+def system_kind(name: str) -> SystemKind:
+    """The system kind registered under `name`."""
+    found = {ep.name: ep for ep in entry_points(group=SYSTEM_GROUP)}
+    if name not in found:
+        raise KeyError(f"no system kind {name!r} is installed; installed: {', '.join(sorted(found))}")
+    return found[name].load()
 
 
 def compile_system(spec: ProjectSpec) -> CompiledSystem:
-    """Build the CasADi symbols and dynamics of the project's system, by its kind (SYSTEM_KINDS).
+    """Build the CasADi symbols and dynamics of the project's system, by its kind (system_kind).
 
     Checks first what concerns the whole project (transient hand-over chains), then, with the
     system's names known, that parameters shadow nothing an expression can name.
     """
     check_transients(spec)
-    sys = SYSTEM_KINDS[spec.system.kind](spec)
+    sys = system_kind(spec.system.kind)(spec)
     taken = taken_names(sys, parameters=False)
     errors = [e for n in sys.parameters
               if (e := shadowing_error(n, sys, spec.system_locate(("parameters", n)), f"parameters.{n}",
@@ -271,7 +290,3 @@ def compile_analytic(spec: ProjectSpec) -> CompiledSystem:
                             expected="one of " + ", ".join(s.states), found=repr(k), code="MPG107")
         wrap[s.states.index(k)] = p
     return CompiledSystem(s.name, list(s.states), list(s.inputs), dict(s.parameters), x, u, xdot, lo, hi, wrap)
-
-
-SYSTEM_KINDS = {"analytic": compile_analytic, "rigid_body": _rigid_body}
-"""System kinds by the `kind` key of a system spec: each builds a CompiledSystem."""

@@ -249,7 +249,7 @@ def _event_window_errors(project: Project, p: Primitive, loc_fn: Locator, block_
     """Windows anchored on a contact event need contact events in the state: a rigid-body system with
     `contact_events: true`, whose contact set is not set by a clock (contact_schedule, trot)."""
     events = bool(getattr(project.system, "contact_events", False))
-    scheduled = p.contact_schedule is not None or p.controller.type == "trot"
+    scheduled = p.contact_schedule is not None or getattr(p.controller, "schedules_contacts", False)
     if events and not scheduled:
         return []
     out = []
@@ -297,6 +297,30 @@ def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = No
     """
     path = Path(path)
     roots = resolve_roots(project_root(path), allow_paths)
+    data, pos = _read_project(path, roots)
+    name_errors = _name_errors(data, pos)  # reported with the errors of whichever later pass fails
+    errors: list[SpecError] = []
+    sys_included = isinstance(data.get("system"), str)
+    data, system_locate = _include_system(data, pos, path, roots, errors)
+    prims_in, prim_locates, prim_sources = _include_primitives(data, pos, path, roots, errors)
+    if errors:
+        raise SpecErrors(name_errors + errors)
+    data = {**data, "primitives": prims_in}
+    merged = _MergedPositions(pos, system_locate if sys_included else None, prim_locates)
+    try:
+        project = Project.model_validate(data)
+    except ValidationError as e:
+        raise SpecErrors(name_errors + _validation_errors(e, merged, data=data)) from None
+    errors = name_errors + _check_named_files(path, project, prim_locates, prim_sources, system_locate, roots)
+    instances = _instances(project, prim_locates, prim_sources, roots, merged, errors)
+    errors += _reference_errors(project, {p.name for p in instances}, prim_locates, merged)
+    if errors:
+        raise SpecErrors(errors)
+    return ProjectSpec(path, project, project.system, system_locate, instances, merged.locate, roots)
+
+
+def _read_project(path: Path, roots) -> tuple[dict, PositionMap]:
+    """The project file's mapping and its positions; the file must lie inside the allowed folders."""
     try:
         confine(path.name, path.absolute().parent, roots, where=Location(str(path)), key="project file")
     except SpecError as err:
@@ -306,15 +330,21 @@ def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = No
         raise SpecErrors([SpecError("a project file must be a mapping", location=Location(str(path), 1, 1),
                                     expected="keys project, system, primitives", found=type(data).__name__,
                                     code="MPG104")])
-    errors: list[SpecError] = []
-    name_errors: list[SpecError] = []  # reported with the errors of whichever later pass fails
+    return data, pos
+
+
+def _name_errors(data: dict, pos: PositionMap) -> list[SpecError]:
+    """The project's name must be safe as a folder name (reports go to <out>/<project>)."""
     name = data.get("project")
     if isinstance(name, str) and name_problem(name):
-        name_errors.append(SpecError(f"project name is not a safe name ({name_problem(name)})",
-                                     location=pos.locate(("project",)), key="project", expected=SAFE_NAME_TEXT,
-                                     found=clip_repr(name), code="MPG104",
-                                     hint="reports are written to <out>/<project>"))
-    # resolve included files, keeping each one's positions
+        return [SpecError(f"project name is not a safe name ({name_problem(name)})",
+                          location=pos.locate(("project",)), key="project", expected=SAFE_NAME_TEXT,
+                          found=clip_repr(name), code="MPG104", hint="reports are written to <out>/<project>")]
+    return []
+
+
+def _include_system(data: dict, pos: PositionMap, path: Path, roots, errors: list) -> tuple[dict, Locator]:
+    """The document with an included system file read in, and a locator into the system's source."""
     system_locate: Locator = lambda loc, offset=None: _at(pos, ("system",) + tuple(loc), offset)
     sys_data = data.get("system")
     if isinstance(sys_data, str):
@@ -326,6 +356,11 @@ def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = No
         else:
             data = {**data, "system": sd}
             system_locate = lambda loc, offset=None, spos=spos: _at(spos, tuple(loc), offset)
+    return data, system_locate
+
+
+def _include_primitives(data: dict, pos: PositionMap, path: Path, roots, errors: list):
+    """(primitives, a locator per primitive, the file each is written in): included files read in."""
     prim_locates: list[Locator] = []
     prim_sources: list[Path] = []
     prims_in: list = []
@@ -336,79 +371,55 @@ def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = No
                                 found=type(prims_raw).__name__, code="MPG104"))
         prims_raw = None
     for i, item in enumerate(prims_raw or []):
-        if isinstance(item, str):
-            key = f"primitives.{i}"
-            try:
-                ppath = confine(item, path.parent, roots, where=pos.locate(("primitives", i)), key=key)
-                pd_, ppos = _read_included(ppath, item, pos.locate_value(("primitives", i)), key)
-            except SpecError as err:
-                errors.append(err)
-                continue
-            if not isinstance(pd_, (dict, list)):
-                errors.append(SpecError("an included primitive file must hold a mapping or a list of mappings",
-                                        location=pos.locate_value(("primitives", i)), key=key,
-                                        expected="a primitive (mapping) or a list of primitives",
-                                        found=type(pd_).__name__, code="MPG104"))
-                continue
-            items = pd_ if isinstance(pd_, list) else [pd_]
-            for j, it in enumerate(items):
-                prims_in.append(it)
-                pre = (j,) if isinstance(pd_, list) else ()
-                prim_locates.append(lambda loc, offset=None, ppos=ppos, pre=pre: _at(ppos, pre + tuple(loc), offset))
-                prim_sources.append(ppath)
-        else:
+        if not isinstance(item, str):
             prims_in.append(item)
             prim_locates.append(lambda loc, offset=None, i=i: _at(pos, ("primitives", i) + tuple(loc), offset))
             prim_sources.append(path)
-    if errors:
-        raise SpecErrors(name_errors + errors)
-    data = {**data, "primitives": prims_in}
+            continue
+        key = f"primitives.{i}"
+        try:
+            ppath = confine(item, path.parent, roots, where=pos.locate(("primitives", i)), key=key)
+            pd_, ppos = _read_included(ppath, item, pos.locate_value(("primitives", i)), key)
+        except SpecError as err:
+            errors.append(err)
+            continue
+        if not isinstance(pd_, (dict, list)):
+            errors.append(SpecError("an included primitive file must hold a mapping or a list of mappings",
+                                    location=pos.locate_value(("primitives", i)), key=key,
+                                    expected="a primitive (mapping) or a list of primitives",
+                                    found=type(pd_).__name__, code="MPG104"))
+            continue
+        items = pd_ if isinstance(pd_, list) else [pd_]
+        for j, it in enumerate(items):
+            prims_in.append(it)
+            pre = (j,) if isinstance(pd_, list) else ()
+            prim_locates.append(lambda loc, offset=None, ppos=ppos, pre=pre: _at(ppos, pre + tuple(loc), offset))
+            prim_sources.append(ppath)
+    return prims_in, prim_locates, prim_sources
 
-    class _Pos:
-        """Positions for the merged document: route into the file each part came from."""
 
-        def locate(self, loc, offset=None):
-            if loc and loc[0] == "system" and isinstance(sys_data, str):
-                return system_locate(loc[1:], offset)
-            if len(loc) >= 2 and loc[0] == "primitives" and isinstance(loc[1], int) and loc[1] < len(prim_locates):
-                return prim_locates[loc[1]](loc[2:], offset)
-            return _at(pos, loc, offset)
+class _MergedPositions:
+    """Positions for the merged document: route into the file each part came from."""
 
-    merged = _Pos()
-    try:
-        project = Project.model_validate(data)
-    except ValidationError as e:
-        raise SpecErrors(name_errors + _validation_errors(e, merged, data=data)) from None
-    errors = name_errors + _check_named_files(path, project, prim_locates, prim_sources, system_locate, roots)
+    def __init__(self, pos: PositionMap, system_locate: Locator | None, prim_locates: list[Locator]):
+        self.pos, self.system_locate, self.prim_locates = pos, system_locate, prim_locates
 
+    def locate(self, loc, offset=None):
+        if loc and loc[0] == "system" and self.system_locate is not None:
+            return self.system_locate(loc[1:], offset)
+        if len(loc) >= 2 and loc[0] == "primitives" and isinstance(loc[1], int) and loc[1] < len(self.prim_locates):
+            return self.prim_locates[loc[1]](loc[2:], offset)
+        return _at(self.pos, loc, offset)
+
+
+def _instances(project: Project, prim_locates: list[Locator], prim_sources: list[Path], roots,
+               merged: _MergedPositions, errors: list) -> list[PrimitiveInstance]:
+    """One node per primitive and argument value (Section III-B), with its safe set resolved."""
     instances: list[PrimitiveInstance] = []
     names: dict[str, Location] = {}
     for i, p in enumerate(project.primitives):
         loc_fn = prim_locates[i]
-        resolved: list[SafetyFunction] = []
-        for j, sf in enumerate(p.safe_set):
-            if sf.use is not None:
-                if sf.use in BUILTIN_BLOCKS and sf.use not in project.safe_sets:
-                    resolved.append(sf)  # expanded by the system at compile time
-                elif sf.use not in project.safe_sets:
-                    errors.append(SpecError("unknown safe-set block", location=loc_fn(("safe_set", j, "use")),
-                                            key=f"primitive '{clip(p.name, 60)}': safe_set.{j}.use",
-                                            expected=clip("one of " + ", ".join(
-                                                sorted(project.safe_sets) + list(BUILTIN_BLOCKS)), 300),
-                                            found=clip_repr(sf.use), code="MPG302"))
-                else:
-                    for k, item in enumerate(project.safe_sets[sf.use]):
-                        try:
-                            resolved.append(_within(item, sf.when))
-                        except ValueError as why:
-                            errors.append(SpecError(
-                                "cannot restrict this block to the use's window",
-                                location=loc_fn(("safe_set", j, "when")),
-                                key=f"primitive '{clip(p.name, 60)}': safe_set.{j}.when",
-                                expected="a use window only for block functions without one, or clock windows on both",
-                                found=f"{why} (safe_sets.{clip(sf.use, 60)}.{k}.when)", code="MPG104"))
-            else:
-                resolved.append(sf)
+        resolved = _resolve_safe_set(project, p, loc_fn, errors)
         errors += [e for e in _event_window_errors(project, p, loc_fn, merged.locate)  # a block's: once
                    if all((e.key, str(e.location)) != (o.key, str(o.location)) for o in errors)]
         for name, arg in _expand(p):
@@ -419,7 +430,41 @@ def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = No
             names[name] = loc_fn(("name",))
             instances.append(PrimitiveInstance(name, p.name, p, arg, tuple(resolved), loc_fn, prim_sources[i],
                                                roots))
-    node_names = {p.name for p in instances}
+    return instances
+
+
+def _resolve_safe_set(project: Project, p: Primitive, loc_fn: Locator, errors: list) -> list[SafetyFunction]:
+    """The primitive's safety functions with project blocks (`use`) expanded; the system's own
+    blocks are expanded at compile time."""
+    resolved: list[SafetyFunction] = []
+    for j, sf in enumerate(p.safe_set):
+        if sf.use is None:
+            resolved.append(sf)
+        elif sf.use in BUILTIN_BLOCKS and sf.use not in project.safe_sets:
+            resolved.append(sf)  # expanded by the system at compile time
+        elif sf.use not in project.safe_sets:
+            errors.append(SpecError("unknown safe-set block", location=loc_fn(("safe_set", j, "use")),
+                                    key=f"primitive '{clip(p.name, 60)}': safe_set.{j}.use",
+                                    expected=clip("one of " + ", ".join(
+                                        sorted(project.safe_sets) + list(BUILTIN_BLOCKS)), 300),
+                                    found=clip_repr(sf.use), code="MPG302"))
+        else:
+            for k, item in enumerate(project.safe_sets[sf.use]):
+                try:
+                    resolved.append(_within(item, sf.when))
+                except ValueError as why:
+                    errors.append(SpecError(
+                        "cannot restrict this block to the use's window", location=loc_fn(("safe_set", j, "when")),
+                        key=f"primitive '{clip(p.name, 60)}': safe_set.{j}.when",
+                        expected="a use window only for block functions without one, or clock windows on both",
+                        found=f"{why} (safe_sets.{clip(sf.use, 60)}.{k}.when)", code="MPG104"))
+    return resolved
+
+
+def _reference_errors(project: Project, node_names: set[str], prim_locates: list[Locator],
+                      merged: _MergedPositions) -> list[SpecError]:
+    """Node names a project refers to (next, assertions, the sequence) must exist."""
+    errors: list[SpecError] = []
 
     def check_name(n: str, loc: tuple, key: str):
         if n not in node_names:
@@ -440,9 +485,7 @@ def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = No
         check_name(project.sequence.start, ("sequence", "start"), "sequence.start")
         for i, c in enumerate(project.sequence.commands):
             check_name(c.goal, ("sequence", "commands", i, "goal"), f"sequence.commands.{i}.goal")
-    if errors:
-        raise SpecErrors(errors)
-    return ProjectSpec(path, project, project.system, system_locate, instances, merged.locate, roots)
+    return errors
 
 
 def _check_named_files(path: Path, project: Project, prim_locates: list[Locator], prim_sources: list[Path],

@@ -5,9 +5,10 @@ CasADi by later stages. Unknown keys are rejected so a typo never passes silentl
 base.py, system.py, primitive.py and project.py; this module gathers them.
 """
 from .base import ExprText, Strict
-from .primitive import (ContactEvent, Controller, ContactPhase, EventWindow, ExplicitRoA, ExpressionController, Grid,
-                        IDQPController, LQRController, MotionProfile, PDController, Primitive, PrimitiveClass,
-                        SafetyFunction, Setpoint)
+from .controllers import ExpressionController, IDQPController, LQRController, MotionProfile, PDController
+from .kinds import controller_union
+from .primitive import (ContactEvent, Controller, ContactPhase, EventWindow, ExplicitRoA, Grid, Primitive,
+                        PrimitiveClass, SafetyFunction, Setpoint)
 from .project import (ASSERTION_KEYS, Assertion, EdgeRef, EdgeWithClass, ForbidEdge, GoalCommand, OracleConfig,
                       PlanRef, Project, RequireConclusive, RequireEdge, RequirePlan, RequireReachable,
                       RequireSimulation, Sequence)
@@ -18,5 +19,13 @@ __all__ = [
     "Controller", "EdgeRef", "EdgeWithClass", "EventWindow", "ExplicitRoA", "ExprText", "ExpressionController", "ForbidEdge", "GoalCommand", "Grid",
     "IDQPController", "LQRController", "MotionProfile", "OracleConfig", "PDController", "PlanRef", "Primitive",
     "PrimitiveClass", "Project", "RequireConclusive", "RequireEdge", "RequirePlan", "RequireReachable", "RequireSimulation",
-    "RigidBodySystem", "SafetyFunction", "Sequence", "Setpoint", "Strict", "System",
+    "RigidBodySystem", "SafetyFunction", "Sequence", "Setpoint", "Strict", "System", "refresh_controllers",
 ]
+
+
+def refresh_controllers() -> None:
+    """Rebuild the `controller:` union of Primitive, and Project that holds it, from the kinds
+    registered now (after one was added in-process, spec/kinds.py)."""
+    Primitive.model_fields["controller"].annotation = controller_union().__origin__
+    Primitive.model_rebuild(force=True)
+    Project.model_rebuild(force=True)

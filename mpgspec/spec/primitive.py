@@ -9,14 +9,9 @@ from pydantic import BeforeValidator, ConfigDict, Discriminator, Field, Tag, fie
 from pydantic_core import PydanticCustomError
 
 from .base import Strict
+from .controllers import rectangular
+from .kinds import controller_union
 from .system import Expr, Number, Text
-
-
-def _rectangular(rows, what: str) -> None:
-    """A matrix written as a list of rows: every row as long as the first."""
-    if rows and isinstance(rows[0], list) and any(len(r) != len(rows[0]) for r in rows):
-        raise ValueError(f"{what}: every row needs the same number of entries; found rows of lengths "
-                         f"{[len(r) for r in rows][:10]}")
 
 
 class PrimitiveClass(str, Enum):
@@ -52,140 +47,8 @@ class Setpoint(Strict):
         return self
 
 
-class MotionProfile(Strict):
-    """Cubic motion profile (paper eq. 7) from the output at switch-in to the setpoint over duration."""
-
-    duration: Number = Field(gt=0)
-
-
-class ExpressionController(Strict):
-    """u = k(x, t) written out, one expression per input."""
-
-    type: Literal["expression"]
-    u: list[Expr]
-
-
-class PDController(Strict):
-    """u = -Kp (y - y_d) - Kd (ydot - ydot_d) + feedforward, on named outputs y(x) (paper eq. 8)."""
-
-    type: Literal["pd"]
-    outputs: list[Expr] = Field(min_length=1, description="y(x); a state name or an expression")
-    kp: list[Number]
-    kd: list[Number]
-    input_map: list[list[Number]] | Literal["jacobian_transpose"] | None = Field(
-        default=None,
-        description="inputs x outputs matrix B_y, identity when omitted, or 'jacobian_transpose' for the "
-                    "task-space law u = J_y^T (-Kp y - Kd ydot) (J_y: d ydot / d(actuated velocities))",
-    )
-    feedforward: list[Expr] | None = None
-    gravity_compensation: bool = Field(
-        default=False, description="rigid bodies: add the torques that hold the current pose on the contact feet")
-    profile: MotionProfile | None = None
-    target: list[Number] | None = Field(
-        default=None, description="fixed desired outputs y_d (rates 0) instead of y(x*(t)): a regulator whose law "
-                                  "does not read the setpoint, so that x* can be the loop's own flow or rest state")
-
-    @field_validator("input_map")
-    @classmethod
-    def _map_rows(cls, v):
-        if isinstance(v, list):
-            _rectangular(v, "input_map")
-        return v
-
-    @model_validator(mode="after")
-    def _sizes(self):
-        n = len(self.outputs)
-        if len(self.kp) != n or len(self.kd) != n:
-            raise ValueError(f"kp and kd need one gain per output ({n})")
-        if self.target is not None and len(self.target) != n:
-            raise ValueError(f"target needs one value per output ({n})")
-        if self.target is not None and self.profile is not None:
-            raise ValueError("a fixed target has no motion profile to follow")
-        return self
-
-
-class LQRController(Strict):
-    """u = u* - K (x - x*) with K from the linearisation at a fixed setpoint (continuous ARE)."""
-
-    type: Literal["lqr"]
-    Q: list[Number] | list[list[Number]]
-    R: list[Number] | list[list[Number]]
-    u_eq: list[Expr] | None = Field(default=None, description="equilibrium input; solved when omitted")
-
-    @field_validator("Q", "R")
-    @classmethod
-    def _weight_rows(cls, v, info):
-        _rectangular(v, info.field_name)
-        return v
-
-
-class IDQPController(Strict):
-    """The ID-QP of the paper's Stand: CoM task with a cubic profile, posture task, friction cone."""
-
-    type: Literal["id_qp"]
-    kp: list[Number] = Field(default=[100.0, 100.0, 100.0], min_length=3, max_length=3)
-    kd: list[Number] = Field(default=[20.0, 20.0, 20.0], min_length=3, max_length=3)
-    profile_duration: Number = Field(default=1.0, gt=0)
-    posture_kp: Number = Field(default=50.0, ge=0)
-    posture_kd: Number = Field(default=5.0, ge=0)
-    posture_weight: Number = Field(default=0.01, ge=0)
-    regularization: Number = Field(default=1e-8, gt=0)
-    max_iter: int = Field(default=100, ge=1)
-    rate: Number | None = Field(default=None, gt=0, description="control rate (Hz): the QP is solved every "
-                                "1/rate seconds and its torques held in between; 1/rate must be a whole number "
-                                "of oracle steps. Omitted: solved at the start of every oracle step")
-    warm_start: bool = Field(default=True, description="start each solve from the previous solution and its "
-                             "active set")
-
-
-class TrotController(Strict):
-    """A trot for point-foot quadrupeds (compile/rigidbody/trot.py): stance feet share the trunk wrench,
-    swing feet land at the Raibert point; the contact schedule follows from the timing."""
-
-    type: Literal["trot"]
-    speed: Expr = Field(description="commanded mean forward speed (m/s), usually the primitive's argument")
-    gait: Text | None = Field(default=None, description="gait table written by `mpgspec gait` (its header "
-                                                        "holds the calibrated command); `{<argument>}` is replaced")
-    pose: dict[Text, Number] = Field(default_factory=dict, description="joint angles of the nominal stance (others 0): "
-                                                                      "its CoM offsets and inertia shape the law")
-    swing: Number = Field(default=0.16, gt=0, description="swing time T_sw (s)")
-    double_support: Number = Field(default=0.02, gt=0, description="time with all four feet down T_ds (s)")
-    height: Number = Field(default=0.2586, gt=0, description="CoM height h_d (m)")
-    apex: Number = Field(default=0.07, gt=0, description="swing foot apex (m)")
-    touchdown_speed: Number = Field(default=0.3, ge=0, description="downward foot speed at touchdown (m/s)")
-    kv: Number = Field(default=10.0, ge=0, description="CoM velocity gain (1/s)")
-    raibert: Number = Field(default=0.08, ge=0, description="foot placement gain on the velocity error (s)")
-    kp_swing: Number = Field(default=12000.0, gt=0, description="swing foot stiffness (N/m)")
-    kd_swing: Number = Field(default=200.0, ge=0, description="swing foot damping (N s/m)")
-    k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
-    d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
-
-
-class JumpController(Strict):
-    """The paper's Jump for point-foot quadrupeds (compile/rigidbody/jump.py): a cubic CoM profile to
-    the takeoff velocity tracked through the stance feet until T_t, then the legs tucked."""
-
-    type: Literal["jump"]
-    takeoff_time: Number = Field(default=0.15, gt=0, description="T_t: end of the push (s on the clock)")
-    takeoff_velocity: Number = Field(default=1.0, gt=0, description="upward CoM speed at T_t (m/s)")
-    rise: Number = Field(default=0.06, gt=0, description="CoM rise over the push (m)")
-    pose: dict[Text, Number] = Field(default_factory=dict, description="joint angles of the stance the push "
-                                     "starts from (others 0): its CoM height is h_0")
-    tuck: dict[Text, Number] = Field(default_factory=dict, description="joint angles the legs fold to after T_t")
-    kz: Number = Field(default=400.0, ge=0, description="CoM height stiffness (1/s^2)")
-    dz: Number = Field(default=40.0, ge=0, description="CoM height damping (1/s)")
-    kv: Number = Field(default=10.0, ge=0, description="horizontal CoM velocity gain (1/s)")
-    k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
-    d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
-    d_yaw: Number = Field(default=10.0, ge=0, description="yaw-rate damping (1/s)")
-    kp_joint: Number = Field(default=60.0, ge=0, description="joint stiffness of the tuck (N m/rad)")
-    kd_joint: Number = Field(default=2.0, ge=0, description="joint damping of the tuck (N m s/rad)")
-
-
-Controller = Annotated[
-    Union[ExpressionController, PDController, LQRController, IDQPController, TrotController, JumpController],
-    Field(discriminator="type"),
-]
+Controller = controller_union()
+"""The control law k(x, t): the spec model of a registered controller kind (spec/kinds.py)."""
 
 
 class ContactEvent(str, Enum):
@@ -301,7 +164,7 @@ class ExplicitRoA(Strict):
     @classmethod
     def _matrix_rows(cls, v):
         if v is not None:
-            _rectangular(v, "matrix")
+            rectangular(v, "matrix")
         return v
 
     @model_validator(mode="after")

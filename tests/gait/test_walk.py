@@ -8,8 +8,8 @@ import pytest
 from mpgspec.api import compile_project
 from mpgspec.compile.rigidbody.system import feet_on_ground
 from mpgspec.compile.system import compile_system
-from mpgspec.gait.library import compare, generate, load_gait_file
-from mpgspec.gait.orbit import StrideMap, find_orbit
+from mpgspec.robots.quadruped.gait.library import compare, generate, load_gait_file
+from mpgspec.robots.quadruped.gait.orbit import StrideMap, find_orbit
 from mpgspec.spec.loader import load_project
 
 A1 = Path(__file__).parents[2] / "specs" / "a1"

@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from ...errors import SpecError
-from ..controllers import ControlContext, cubic_profile
+from ..laws.base import ControlContext, cubic_profile
 from ..hold import SampledLaw, warm_or_cold
 from .linalg import dense_ldl_solve, dof_parents, scale_rows, tree_ldl, tree_solve_l, tree_solve_lt
 

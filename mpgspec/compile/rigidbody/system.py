@@ -252,6 +252,12 @@ class RigidBodyCompiledSystem(CompiledSystem):
         return ca.Function("uncertain_plant", [self.x, self.u, k, F, t], [xdot, lam, c],
                            ["x", "u", "k", "F", "t"], ["xdot", "lam", "c"])
 
+    def ground_setpoint(self, x_star: ca.SX, t: ca.SX) -> ca.SX:
+        """x*(t) with base_z shifted (by its value at t = 0) so that the lowest contact frame touches z = 0."""
+        x_fixed = feet_on_ground(self, np.array(ca.Function("x0", [t], [x_star])(0.0)).ravel())
+        i = self.state_names.index("base_z")
+        return ca.vertcat(x_star[:i], x_fixed[i], x_star[i + 1:])
+
     def _when_in_contact(self, frame: str, h: ca.SX, mode: dict | None = None, flags: bool = True) -> ca.SX:
         """A contact condition binds only while the foot is held: by the scheduled mode, or with
         contact events (`flags`) while the foot's flag is set."""

@@ -19,11 +19,12 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ..compile.primitive import _jump, saturate, scheduled_mode
-from ..compile.rigidbody.symmetry import (NEUTRAL, lift_function, lift_jacobian, reduce_function,
+from ....compile.primitive import _jump, saturate, scheduled_mode
+from ....compile.rigidbody.symmetry import (NEUTRAL, lift_function, lift_jacobian, reduce_function,
                                           reduced_monodromy)
-from ..compile.rigidbody.trot import gains_of, nominal_geometry, trot_torque
-from ..oracle.integrator import LEFT, compile_cached, rk4_jump
+from ..stance import nominal_geometry
+from ..trot import gains_of, trot_torque
+from ....oracle.integrator import LEFT, compile_cached, rk4_jump
 
 FD = 1e-6
 

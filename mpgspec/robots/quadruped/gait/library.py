@@ -14,6 +14,8 @@ into memory and compares with the tables on disk instead of writing.
 """
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,8 +23,17 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field
 
-from ..errors import SpecError
-from ..spec.base import Strict
+from ....compile.primitive import compile_primitive, spec_file
+from ....compile.system import compile_system
+from ....errors import SpecError
+from ....oracle.integrator import switched_flow
+from ....report.write import write_atomic
+from ....spec.base import Strict
+from ....spec.loader import _read, load_project
+from ....spec.primitive import Setpoint
+from ..models import TrotController
+from ..setup import trot_inputs
+from ..stance import nominal_state
 from .orbit import Orbit, StrideMap, find_orbit
 
 TOLERANCE = 1e-6  # tables agree when every state differs by less than this (the Newton tolerance is 1e-10)
@@ -107,9 +118,6 @@ class FlowTable:
 def _start_state(spec, sys, entry: TransientEntry, done: dict) -> np.ndarray:
     """x0 of a flow: the stance of the controller's pose, or another transient's x* at the end of its
     domain (from the table generated before it, else from the compiled primitive)."""
-    from ..compile.primitive import compile_primitive
-    from ..compile.rigidbody.trot import nominal_state
-
     if entry.start is None:
         inst = next(i for i in spec.primitives if i.name == entry.primitive)
         return nominal_state(sys, dict(inst.spec.controller.pose))
@@ -129,17 +137,9 @@ def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print, done
     """Roll out a transient primitive's closed loop from its start for entry.duration, with the
     oracle's step (RK4, the step-end rule, the jump with contact events); with `rest`, x* is the
     end state held."""
-    import dataclasses
-    import hashlib
-    import json
-
-    from ..compile.primitive import compile_primitive, spec_file
-    from ..oracle.integrator import switched_flow
-    from ..spec.primitive import Setpoint
-
     inst = next((i for i in spec.primitives if i.name == entry.primitive), None)
     ctrl = inst.spec.controller if inst is not None else None
-    free = ctrl is not None and (ctrl.type == "jump" or (ctrl.type == "pd" and ctrl.target is not None))
+    free = ctrl is not None and not getattr(ctrl, "reads_setpoint", True)
     if inst is None or not free or inst.spec.setpoint.file is None:
         raise SpecError("no transient primitive of that name whose law does not read x*, with a setpoint table",
                         location=None, key="transients.primitive",
@@ -171,8 +171,6 @@ def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print, done
 
 
 def load_gait_file(path: Path) -> GaitFile:
-    from ..spec.loader import _read
-
     data, pos = _read(path)
     try:
         return GaitFile.model_validate(data)
@@ -187,17 +185,12 @@ def load_gait_file(path: Path) -> GaitFile:
 def generate(path: str | Path, progress=print) -> list:
     """Find the orbit of every node of the gait file's primitive and the flow of every transient
     entry; return the tables (not yet written)."""
-    from ..compile.primitive import spec_file
-    from ..compile.rigidbody.trot import nominal_state, trot_inputs
-    from ..compile.system import compile_system
-    from ..spec.loader import load_project
-
     path = Path(path)
     gf = load_gait_file(path)
     spec = load_project(path.parent / gf.project)
     sys = compile_system(spec)
     nodes = [i for i in spec.primitives if i.base == gf.primitive]
-    if not nodes or nodes[0].spec.controller.type != "trot":
+    if not nodes or not isinstance(nodes[0].spec.controller, TrotController):
         raise SpecError("no trot primitive of that name", location=None, key="primitive",
                         expected="the name of a primitive with controller type trot", found=gf.primitive,
                         code="MPG104")
@@ -227,8 +220,6 @@ def generate(path: str | Path, progress=print) -> list:
 
 
 def write(tables: list[GaitTable], state_names: list[str]) -> None:
-    from ..report.write import write_atomic
-
     for t in tables:
         t.path.parent.mkdir(parents=True, exist_ok=True)
         write_atomic(t.path, t.text(state_names))

@@ -26,13 +26,9 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..controllers import cubic_profile
-from .linalg import dense_ldl_solve
-from .liegroup import qdot, quat_to_rotation
-from .spatial import skew
-
-PAIR_A = ("FL_foot", "RR_foot")
-PAIR_B = ("FR_foot", "RL_foot")
+from ...compile.laws.base import cubic_profile
+from ...errors import SpecError
+from .stance import PAIR_A, PAIR_B, level_trunk_moment, nominal_geometry, split_wrench, trunk
 
 
 @dataclass(frozen=True)
@@ -74,60 +70,6 @@ class TrotGains:
         """(until, feet in contact) over one period."""
         h, ds = self.half, self.double_support
         return [(ds, feet), (h, PAIR_A), (h + ds, feet), (2 * h, PAIR_B)]
-
-
-@dataclass
-class Trunk:
-    """Symbols of the floating base that the centroidal laws share (functions of sys.x)."""
-
-    mass: float
-    grav: float
-    R: ca.SX  # base rotation
-    Ryaw: ca.SX  # the heading's rotation about z
-    com: ca.SX
-    cdot: ca.SX
-    omega: ca.SX  # base angular velocity, world axes
-    pos: dict  # foot -> world position
-    vel: dict  # foot -> world velocity
-    H: ca.SX  # nonlinear effects h(q, v)
-    sub: object  # expression of (dyn.q, dyn.v) -> of the state
-
-
-def trunk(sys) -> Trunk:
-    m, dyn, env = sys.model, sys.dyn, sys.extra_env
-    q, v = sys.x[:m.nq], sys.x[m.nq:m.nq + m.nv]
-    sub = lambda e: ca.substitute(e, ca.vertcat(dyn.q, dyn.v), ca.vertcat(q, v))  # noqa: E731
-    R = quat_to_rotation(q[3:7])
-    yaw = ca.atan2(R[1, 0], R[0, 0])
-    cy, sy = ca.cos(yaw), ca.sin(yaw)
-    Ryaw = ca.vertcat(ca.horzcat(cy, -sy, 0), ca.horzcat(sy, cy, 0), ca.horzcat(0, 0, 1))
-    com = ca.vertcat(*[env[f"com_{a}"] for a in "xyz"])
-    feet = m.contact_frames
-    return Trunk(mass=float(m.total_mass), grav=float(-m.gravity[2]), R=R, Ryaw=Ryaw, com=com,
-                 cdot=ca.jtimes(com, q, qdot(m, q, v)), omega=ca.mtimes(R, v[3:6]),
-                 pos={f: ca.vertcat(*[env[f"{f}_{a}"] for a in "xyz"]) for f in feet},
-                 vel={f: ca.vertcat(*[env[f"{f}_v{a}"] for a in "xyz"]) for f in feet},
-                 H=sub(dyn.nle_expr), sub=sub)
-
-
-def level_trunk_moment(tk: Trunk, inertia: np.ndarray, k_tilt: float, d_tilt: float, d_yaw: float) -> ca.SX:
-    """Moment about the CoM that levels the trunk (roll, pitch PD in the heading frame) and damps yaw."""
-    E = ca.mtimes(tk.Ryaw, tk.R.T)
-    e_R = 0.5 * ca.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1])
-    I_G = ca.mtimes([tk.Ryaw, ca.DM(inertia), tk.Ryaw.T])  # the nominal inertia turned with the heading
-    alpha = ca.vertcat(k_tilt * e_R[0] - d_tilt * tk.omega[0], k_tilt * e_R[1] - d_tilt * tk.omega[1],
-                       -d_yaw * tk.omega[2])
-    return ca.mtimes(I_G, alpha)
-
-
-def split_wrench(tk: Trunk, flags: dict, feet, wrench: ca.SX, moment_weight: float, reg: float) -> ca.SX:
-    """Ground forces on the feet with flag 1 whose wrench about the CoM is nearest `wrench`:
-    argmin ||A f - w||_S^2 + reg ||f||^2 in closed form (the force on a foot with flag 0 is 0)."""
-    cols = [flags[f] * ca.vertcat(ca.DM.eye(3), skew(tk.pos[f] - tk.com)) for f in feet]
-    A = ca.horzcat(*cols)
-    S = ca.DM(np.diag([1, 1, 1] + [moment_weight] * 3))
-    K = ca.mtimes([A.T, S, A]) + reg * ca.DM.eye(3 * len(feet))
-    return dense_ldl_solve(K, ca.mtimes([A.T, S, wrench]))
 
 
 def _smoothstep(sig):
@@ -194,37 +136,8 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
     return ca.vertcat(*u)
 
 
-def nominal_state(sys, pose: dict) -> np.ndarray:
-    """The nominal stance at rest: the system's default state with the `pose` joint angles, feet on the ground."""
-    from .system import feet_on_ground
-
-    x = sys.default_state()
-    for j, a in pose.items():
-        x[sys.state_names.index(j)] = float(a)
-    return feet_on_ground(sys, x)
-
-
-def nominal_geometry(sys, pose: dict) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Centroidal inertia and horizontal foot offsets from the CoM in the nominal stance (`pose`,
-    feet on the ground)."""
-    import pinocchio as pin
-
-    m = sys.model
-    x = nominal_state(sys, pose)
-    pm = m.pin_model
-    data = pm.createData()
-    q = np.asarray(x[:m.nq], float)
-    pin.ccrba(pm, data, q, np.zeros(m.nv))
-    pin.framesForwardKinematics(pm, data, q)
-    com = pin.centerOfMass(pm, data, q)
-    offsets = {f: np.asarray(data.oMf[pm.getFrameId(f)].translation[:2] - com[:2]) for f in m.contact_frames}
-    return np.array(data.Ig.inertia), offsets
-
-
 def trot_law(c, ctx) -> ca.SX:
-    """The trot's u(x, t) for a compiled primitive (the command and gains come from _trot_setup)."""
-    from ...errors import SpecError
-
+    """The trot's u(x, t) for a compiled primitive (the command and gains come from trot_setup)."""
     unknown = [j for j in c.pose if j not in ctx.sys.state_names]
     if unknown:
         raise SpecError("unknown joint in the trot's pose", location=ctx.ec.locate(("controller", "pose", unknown[0])),
@@ -237,50 +150,9 @@ def trot_law(c, ctx) -> ca.SX:
     return trot_torque(ctx.sys, g, ctx.t, ctx.mode, inertia, offsets)
 
 
-def gait_header(path) -> dict[str, str]:
-    """The `# key: value` lines at the top of a gait table (read with the bound of every spec file)."""
-    from ...spec.paths import MAX_FILE_BYTES, read_text_bounded
-
-    out = {}
-    for line in read_text_bounded(path, MAX_FILE_BYTES).splitlines():
-        if not line.startswith("#"):
-            break
-        key, _, value = line[1:].partition(":")
-        out[key.strip()] = value.strip()
-    return out
-
-
-def trot_inputs(c, sys, speed: float) -> str:
-    """Hash of what a gait table depends on: the robot model and limits, the trot's settings and the speed."""
-    import hashlib
-    import json
-
-    m = sys.model
-    ctrl = c.model_dump(mode="json", exclude={"gait", "speed"})
-    robot = {"mass": round(float(m.total_mass), 9), "nq": m.nq, "feet": list(m.contact_frames),
-             "friction": float(sys.friction), "u_hi": [float(v) for v in sys.u_hi],
-             "baumgarte": [float(sys.baumgarte.alpha), float(sys.baumgarte.beta)]}
-    text = json.dumps({"robot": robot, "trot": ctrl, "speed": round(float(speed), 12)}, sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
 def gains_of(c, speed: float) -> TrotGains:
     speed = speed if isinstance(speed, (ca.SX, ca.MX)) else float(speed)  # float() of a symbol would be NaN
     return TrotGains(speed=speed, swing=float(c.swing), double_support=float(c.double_support),
                      height=float(c.height), apex=float(c.apex), touchdown_speed=float(c.touchdown_speed),
                      kv=float(c.kv), raibert=float(c.raibert), kp_swing=float(c.kp_swing),
                      kd_swing=float(c.kd_swing), k_tilt=float(c.k_tilt), d_tilt=float(c.d_tilt))
-
-
-def check_quadruped(sys, ec) -> None:
-    """A SpecError at controller.type unless sys is a floating-base quadruped with FL, FR, RL, RR feet."""
-    from ...errors import SpecError
-
-    ok = sys.is_rigid_body and sys.model.floating_base and len(sys.model.contact_frames) == 4 \
-        and tuple(sys.model.contact_frames) == PAIR_A[:1] + PAIR_B + PAIR_A[1:]
-    if not ok:
-        raise SpecError("the trot needs a floating-base quadruped with contact frames FL_foot, FR_foot, RL_foot, "
-                        "RR_foot in this order", location=ec.locate(("controller", "type")),
-                        key=f"{ec.owner}: controller.type", expected="system kind rigid_body with four feet",
-                        found=f"contacts {list(getattr(getattr(sys, 'model', None), 'contact_frames', []))}",
-                        code="MPG108")

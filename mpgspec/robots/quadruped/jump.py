@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ..controllers import cubic_profile
-from .trot import level_trunk_moment, nominal_geometry, nominal_state, split_wrench, trunk
+from ...compile.laws.base import cubic_profile
+from ...errors import SpecError
+from .stance import check_quadruped, level_trunk_moment, nominal_geometry, nominal_state, split_wrench, trunk
 
 
 def jump_torque(sys, c, mode: dict, t: ca.SX) -> ca.SX:
@@ -57,9 +58,6 @@ def jump_torque(sys, c, mode: dict, t: ca.SX) -> ca.SX:
 def jump_law(c, ctx) -> ca.SX:
     """Jump's u(x, t) for a compiled primitive: the contact flags in the state (contact events), else
     the primitive's contact set."""
-    from ...errors import SpecError
-    from .trot import check_quadruped
-
     check_quadruped(ctx.sys, ctx.ec)
     for key in ("pose", "tuck"):
         unknown = [j for j in getattr(c, key) if j not in ctx.sys.state_names[7:ctx.sys.model.nq]]

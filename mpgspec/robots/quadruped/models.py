@@ -1,0 +1,56 @@
+"""Spec models of the quadruped controller kinds trot and jump (no CasADi here: the spec layer
+reads them through the entry points `mpgspec.controllers`)."""
+from __future__ import annotations
+
+from typing import ClassVar, Literal
+
+from pydantic import Field
+
+from ...spec.base import Strict
+from ...spec.system import Expr, Number, Text
+
+
+class TrotController(Strict):
+    """A trot for point-foot quadrupeds (compile/rigidbody/trot.py): stance feet share the trunk wrench,
+    swing feet land at the Raibert point; the contact schedule follows from the timing."""
+
+    type: Literal["trot"]
+    schedules_contacts: ClassVar[bool] = True  # the clock sets the contact mode (the trot's timing)
+    speed: Expr = Field(description="commanded mean forward speed (m/s), usually the primitive's argument")
+    gait: Text | None = Field(default=None, description="gait table written by `mpgspec gait` (its header "
+                                                        "holds the calibrated command); `{<argument>}` is replaced")
+    pose: dict[Text, Number] = Field(default_factory=dict, description="joint angles of the nominal stance (others 0): "
+                                                                      "its CoM offsets and inertia shape the law")
+    swing: Number = Field(default=0.16, gt=0, description="swing time T_sw (s)")
+    double_support: Number = Field(default=0.02, gt=0, description="time with all four feet down T_ds (s)")
+    height: Number = Field(default=0.2586, gt=0, description="CoM height h_d (m)")
+    apex: Number = Field(default=0.07, gt=0, description="swing foot apex (m)")
+    touchdown_speed: Number = Field(default=0.3, ge=0, description="downward foot speed at touchdown (m/s)")
+    kv: Number = Field(default=10.0, ge=0, description="CoM velocity gain (1/s)")
+    raibert: Number = Field(default=0.08, ge=0, description="foot placement gain on the velocity error (s)")
+    kp_swing: Number = Field(default=12000.0, gt=0, description="swing foot stiffness (N/m)")
+    kd_swing: Number = Field(default=200.0, ge=0, description="swing foot damping (N s/m)")
+    k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
+    d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
+
+
+class JumpController(Strict):
+    """The paper's Jump for point-foot quadrupeds (compile/rigidbody/jump.py): a cubic CoM profile to
+    the takeoff velocity tracked through the stance feet until T_t, then the legs tucked."""
+
+    type: Literal["jump"]
+    reads_setpoint: ClassVar[bool] = False  # x*(t) may be the loop's own flow (`mpgspec gait`)
+    takeoff_time: Number = Field(default=0.15, gt=0, description="T_t: end of the push (s on the clock)")
+    takeoff_velocity: Number = Field(default=1.0, gt=0, description="upward CoM speed at T_t (m/s)")
+    rise: Number = Field(default=0.06, gt=0, description="CoM rise over the push (m)")
+    pose: dict[Text, Number] = Field(default_factory=dict, description="joint angles of the stance the push "
+                                     "starts from (others 0): its CoM height is h_0")
+    tuck: dict[Text, Number] = Field(default_factory=dict, description="joint angles the legs fold to after T_t")
+    kz: Number = Field(default=400.0, ge=0, description="CoM height stiffness (1/s^2)")
+    dz: Number = Field(default=40.0, ge=0, description="CoM height damping (1/s)")
+    kv: Number = Field(default=10.0, ge=0, description="horizontal CoM velocity gain (1/s)")
+    k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
+    d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
+    d_yaw: Number = Field(default=10.0, ge=0, description="yaw-rate damping (1/s)")
+    kp_joint: Number = Field(default=60.0, ge=0, description="joint stiffness of the tuck (N m/rad)")
+    kd_joint: Number = Field(default=2.0, ge=0, description="joint damping of the tuck (N m s/rad)")

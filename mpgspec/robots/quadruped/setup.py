@@ -1,0 +1,75 @@
+"""The trot's setup: its contact schedule from the gait timing, and the calibrated command read
+from the gait table `mpgspec gait` wrote for it (stale tables are refused)."""
+from __future__ import annotations
+
+import hashlib
+import json
+
+from ...compile.laws.kind import Setup
+from ...compile.primitive import spec_file
+from ...errors import SpecError
+from ...spec.paths import MAX_FILE_BYTES, ReadProblem, read_text_bounded
+from .stance import check_quadruped
+from .trot import gains_of
+
+
+def trot_setup(inst, sys, ec, consts: dict) -> Setup:
+    """The trot's contact schedule (from its timing) and, for its info and law, the speed, the
+    calibrated command of its gait table and the table's header."""
+    c = inst.spec.controller
+    owner = f"primitive '{inst.name}'"
+    check_quadruped(sys, ec)
+    speed = ec.number(c.speed, ("controller", "speed"), consts, finite=True)
+    out = {"speed": speed, "command": speed, "gait": None, "inputs": trot_inputs(c, sys, speed)}
+    if c.gait is not None:
+        where = inst.locate(("controller", "gait"))
+        raw, path = spec_file(inst, c.gait, where, f"{owner}: controller.gait")
+        if not path.is_file():
+            raise SpecError("the gait table does not exist", location=where, key=f"{owner}: controller.gait",
+                            expected="a table written by `mpgspec gait`", found=str(raw), code="MPG110",
+                            hint="generate it with `mpgspec gait <project>/gaits.yaml`")
+        try:
+            head = gait_header(path)
+        except ReadProblem as prob:
+            raise SpecError(f"cannot read the gait table: {prob.message}", location=where,
+                            key=f"{owner}: controller.gait", expected=prob.expected or "a table written by "
+                            "`mpgspec gait`", found=f"{raw} ({prob.found})" if prob.found else raw,
+                            code="MPG110") from None
+        if head.get("inputs") != out["inputs"]:
+            raise SpecError("the gait table is stale: it was generated for other settings", location=where,
+                            key=f"{owner}: controller.gait", expected=f"inputs {out['inputs']}",
+                            found=f"inputs {head.get('inputs')}", code="MPG110",
+                            hint="regenerate it with `mpgspec gait <project>/gaits.yaml`")
+        try:
+            out["command"] = float(head["command"])
+        except (KeyError, ValueError):
+            raise SpecError("the gait table has no calibrated command", location=where,
+                            key=f"{owner}: controller.gait", expected="a header line '# command: <m/s>'",
+                            found=str(head.get("command")), code="MPG110") from None
+        out["gait"] = {k: head[k] for k in head}
+        out["gait_file"] = str(raw)
+    gains = gains_of(c, out["command"])
+    schedule = [(u, tuple(f)) for u, f in gains.schedule(tuple(sys.model.contact_frames))]
+    return Setup(schedule=schedule, info={"trot": out})
+
+
+def gait_header(path) -> dict[str, str]:
+    """The `# key: value` lines at the top of a gait table (read with the bound of every spec file)."""
+    out = {}
+    for line in read_text_bounded(path, MAX_FILE_BYTES).splitlines():
+        if not line.startswith("#"):
+            break
+        key, _, value = line[1:].partition(":")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def trot_inputs(c, sys, speed: float) -> str:
+    """Hash of what a gait table depends on: the robot model and limits, the trot's settings and the speed."""
+    m = sys.model
+    ctrl = c.model_dump(mode="json", exclude={"gait", "speed"})
+    robot = {"mass": round(float(m.total_mass), 9), "nq": m.nq, "feet": list(m.contact_frames),
+             "friction": float(sys.friction), "u_hi": [float(v) for v in sys.u_hi],
+             "baumgarte": [float(sys.baumgarte.alpha), float(sys.baumgarte.beta)]}
+    text = json.dumps({"robot": robot, "trot": ctrl, "speed": round(float(speed), 12)}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

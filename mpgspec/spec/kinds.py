@@ -1,0 +1,45 @@
+"""Controller kinds as the spec layer sees them: the entry points of the group
+`mpgspec.controllers` (installed, or added in-process) and the `controller:` union of their spec
+models. Loading a kind's object must not import CasADi (compile/laws/kind.py)."""
+from __future__ import annotations
+
+from functools import lru_cache
+from importlib.metadata import EntryPoint, entry_points
+from typing import Annotated, Union
+
+from pydantic import Field
+
+GROUP = "mpgspec.controllers"
+_ADDED: dict[str, EntryPoint] = {}
+
+
+def controller_entry_points() -> dict[str, EntryPoint]:
+    """The group's entry points by name: the installed ones, then those added in-process."""
+    found = {ep.name: ep for ep in entry_points(group=GROUP)}
+    found.update(_ADDED)
+    return found
+
+
+def add_entry_point(ep: EntryPoint) -> None:
+    """Register a controller kind in this process, as an installed entry point would."""
+    if ep.group != GROUP:
+        raise ValueError(f"a controller kind's entry point belongs to the group {GROUP!r}; got {ep.group!r}")
+    _ADDED[ep.name] = ep
+    loaded_kinds.cache_clear()
+
+
+@lru_cache(maxsize=1)
+def loaded_kinds() -> dict[str, object]:
+    """Every registered kind's object by its entry-point name."""
+    return {name: ep.load() for name, ep in controller_entry_points().items()}
+
+
+def controller_models() -> tuple[type, ...]:
+    """The spec models of the registered kinds, by their `position` (then their name)."""
+    kinds = sorted(loaded_kinds().items(), key=lambda item: (getattr(item[1], "position", 100), item[0]))
+    return tuple(kind.spec_model for _, kind in kinds)
+
+
+def controller_union():
+    """`controller:` of a primitive: one of the registered spec models, told apart by `type`."""
+    return Annotated[Union[controller_models()], Field(discriminator="type")]
