@@ -17,6 +17,8 @@ derivatives of the closed loop see.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import casadi as ca
 import numpy as np
 
@@ -63,18 +65,51 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
         raise SpecError("the ID-QP needs a rigid-body system", location=ctx.ec.locate(("controller", "type")),
                         key=f"{ctx.ec.owner}: controller.type", expected="system kind rigid_body",
                         found="an analytic system", code="MPG108")
-    m, dyn = sys.model, sys.dyn
-    nq, nv, nu = m.nq, m.nv, m.nu
-    x, contacts = sys.x, ctx.contacts
-    q, v = x[:nq], x[nq:nq + nv]  # contact flags and event clocks may follow
+    qp = _qp(c, ctx)
+    X, solve, nws, na = _warm_solve(c, qp, [sys.x, ctx.t, ctx.s, ctx.x_sw])
+    where = ("controller", "rate") if c.rate is not None else ("controller", "type")
+    ctx.sampled = SampledLaw(1.0 / c.rate if c.rate is not None else None, solve, nws, ctx.ec.locate(where),
+                             f"{ctx.ec.owner}: controller.rate")
+    ctx.info["id_qp"] = {"solver": "qrqp", "variables": qp.nw, "constraints": na,
+                         "control_rate": ctx.sampled.describe(), "warm_start": bool(c.warm_start)}
+    return ca.Function("k_idqp", X, [solve(*X, ca.DM.zeros(nws))[0]])
+
+
+@dataclass
+class _QP:
+    """min 1/2 w^T H w + g^T w s.t. lba <= A w <= uba, lbx <= w <= ubx over w = [u; lam], with the
+    optimum w_eq when no inequality is active and ok = 1 when that is the optimum."""
+
+    H: ca.SX
+    g: ca.SX
+    A: ca.SX
+    lba: ca.SX
+    uba: ca.SX
+    lbx: np.ndarray
+    ubx: np.ndarray
+    w_eq: ca.SX
+    ok: ca.SX
+    nw: int
+    nu: int
+
+
+def _contact_rows(sys, contacts, q, v):
+    """D(q), H(q, v), the contact Jacobian J, its drift Jdot v and the Baumgarte target gamma."""
+    dyn = sys.dyn
     sub = lambda e: ca.substitute(e, ca.vertcat(dyn.q, dyn.v), ca.vertcat(q, v))  # noqa: E731
     M, H = sub(dyn.M_expr), sub(dyn.nle_expr)  # D(q), H(q, v)
     J, drift = sub(dyn.contact_jacobian_expr(contacts)), sub(dyn.contact_drift_expr(contacts))
-    nc = J.shape[0]
     gamma = -2 * sys.baumgarte.alpha * ca.mtimes(J, v)
-    if nc:
+    if J.shape[0]:
         heights = ca.vertcat(*[ca.vertcat(0, 0, sys.extra_env[f"{f}_z"]) for f in contacts])
         gamma = gamma - sys.baumgarte.beta**2 * heights
+    return M, H, J, drift, gamma
+
+
+def _tasks(c, ctx: ControlContext, q, v):
+    """The CoM task (Jc qddot + drift_c = a_d along the cubic profile) and the posture task S qddot = a_post."""
+    sys, x = ctx.sys, ctx.sys.x
+    nq, nv, nu = sys.model.nq, sys.model.nv, sys.model.nu
     qd = sys.xdot[:nq]  # qdot(q, v), linear in v
     com = ca.vertcat(*[sys.extra_env[f"com_{a}"] for a in "xyz"])
     comdot = ca.jtimes(com, q, qd)
@@ -89,7 +124,19 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
     S = ca.DM(np.hstack([np.zeros((nu, nv - nu)), np.eye(nu)]))
     qj, qj_star = x[nq - nu:nq], ctx.x_star[nq - nu:nq]
     a_post = -c.posture_kp * (qj - qj_star) - c.posture_kd * ca.mtimes(S, v)
-    # qddot is eliminated with the dynamics: qddot = D^-1 (B u + J^T lam - H) = Aq w + bq, w = [u; lam]
+    return Jc, drift_c, a_d, S, a_post
+
+
+def _qp(c, ctx: ControlContext) -> _QP:
+    """The QP over [u; lam]: qddot = D^-1 (B u + J^T lam - H) = Aq w + bq eliminated, the contact
+    rows as equalities, u in U and lam in the inner friction pyramid."""
+    sys = ctx.sys
+    m = sys.model
+    nq, nv, nu = m.nq, m.nv, m.nu
+    q, v = sys.x[:nq], sys.x[nq:nq + nv]  # contact flags and event clocks may follow
+    M, H, J, drift, gamma = _contact_rows(sys, ctx.contacts, q, v)
+    nc = J.shape[0]
+    Jc, drift_c, a_d, S, a_post = _tasks(c, ctx, q, v)
     B = ca.DM(m.actuation_matrix)
     parents = dof_parents(m)
     L, Dg = tree_ldl(M, parents)
@@ -105,7 +152,21 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
     gqp = 2 * ca.mtimes(Aq.T, ca.mtimes(Q, bq) - ca.mtimes(Jc.T, a_d - drift_c) - c.posture_weight * ca.mtimes(S.T, a_post))
     A_con = ca.mtimes(J, Aq)
     con = gamma - drift - ca.mtimes(J, bq)
-    mu = sys.friction / np.sqrt(2.0)
+    A_fc = _friction_pyramid(sys.friction / np.sqrt(2.0), nu, nc)
+    A = ca.vertcat(A_con, A_fc)
+    lba = ca.vertcat(con, -np.inf * ca.DM.ones(A_fc.shape[0]))
+    uba = ca.vertcat(con, ca.DM.zeros(A_fc.shape[0]))
+    lbx = np.full(nw, -np.inf)
+    ubx = np.full(nw, np.inf)
+    lbx[:nu], ubx[:nu] = sys.u_lo, sys.u_hi
+    lbx[nu + 2::3] = 0.0
+    w_eq, ok = _no_inequality_active(Aq, Q, c.regularization, gqp, A_con, con, A_fc, lbx, ubx, nu)
+    return _QP(Hqp, gqp, A, lba, uba, lbx, ubx, w_eq, ok, nw, nu)
+
+
+def _friction_pyramid(mu: float, nu: int, nc: int) -> ca.DM:
+    """Rows of |lam_x|, |lam_y| <= mu lam_z per foot, as A_fc w <= 0 over w = [u; lam]."""
+    nw = nu + nc
     rows = []
     for k in range(nc // 3):
         for ax in (0, 1):
@@ -114,27 +175,24 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
                 r[nu + 3 * k + ax] = sign
                 r[nu + 3 * k + 2] = -mu
                 rows.append(r)
-    A_fc = ca.DM(np.array(rows)) if rows else ca.DM(0, nw)
-    A = ca.vertcat(A_con, A_fc)
-    lba = ca.vertcat(con, -np.inf * ca.DM.ones(A_fc.shape[0]))
-    uba = ca.vertcat(con, ca.DM.zeros(A_fc.shape[0]))
-    lbx = np.full(nw, -np.inf)
-    ubx = np.full(nw, np.inf)
-    lbx[:nu], ubx[:nu] = sys.u_lo, sys.u_hi
-    lbx[nu + 2::3] = 0.0
-    args = [x, ctx.t, ctx.s, ctx.x_sw]
-    w_eq, ok = _no_inequality_active(Aq, Q, c.regularization, gqp, A_con, con, A_fc, lbx, ubx, nu)
-    data = ca.Function("idqp_data", args, [ca.densify(Hqp), gqp, ca.densify(A), lba, uba, w_eq, ok])
-    solver = ca.conic("idqp", "qrqp", {"h": ca.Sparsity.dense(nw, nw), "a": ca.Sparsity.dense(A.shape[0], nw)},
+    return ca.DM(np.array(rows)) if rows else ca.DM(0, nw)
+
+
+def _warm_solve(c, qp: _QP, args: list):
+    """(X, solve, nws, na): solve(x, t, s, x_sw, w) -> (u, w_next) by qrqp warm-started from w (the
+    previous solution and its multipliers), or the shortcut w_eq when no inequality is active."""
+    nw = qp.nw
+    data = ca.Function("idqp_data", args, [ca.densify(qp.H), qp.g, ca.densify(qp.A), qp.lba, qp.uba, qp.w_eq, qp.ok])
+    solver = ca.conic("idqp", "qrqp", {"h": ca.Sparsity.dense(nw, nw), "a": ca.Sparsity.dense(qp.A.shape[0], nw)},
                       {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False,
                        "max_iter": c.max_iter})
-    na = int(A.shape[0])
+    na = int(qp.A.shape[0])
     nws = 2 * nw + na if c.warm_start else 0  # [X_ext; lam_x; lam_a] of the previous solve
     # the QP's data, the warm start and the shortcut's solution; qrqp runs only when the shortcut fails
     P = [ca.MX.sym(n, data.sparsity_out(i)) for i, n in enumerate(("H", "g", "A", "lba", "uba", "w_eq"))]
     W = ca.MX.sym("w", nws)
     warm = dict(x0=W[:nw], lam_x0=W[nw:2 * nw], lam_a0=W[2 * nw:]) if nws else {}
-    sol = solver(h=P[0], g=P[1], a=P[2], lba=P[3], uba=P[4], lbx=lbx, ubx=ubx, **warm)
+    sol = solver(h=P[0], g=P[1], a=P[2], lba=P[3], uba=P[4], lbx=qp.lbx, ubx=qp.ubx, **warm)
     active_set = ca.Function("idqp_active_set", P + [W],
                              [sol["x"], ca.vertcat(sol["x"], sol["lam_x"], sol["lam_a"]) if nws else W])
     shortcut = ca.Function("idqp_shortcut", P + [W], [P[5], ca.vertcat(P[5], ca.DM.zeros(nw + na)) if nws else W])
@@ -143,14 +201,9 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
     Xw = ca.MX.sym("w", nws)
     *Dm, ok_m = data(*X)
     w_sol, w_next = path(ok_m, *Dm, Xw)
-    solve = ca.Function("k_idqp_warm", X + [Xw], [w_sol[:nu], warm_or_cold(w_next) if nws else Xw],
+    solve = ca.Function("k_idqp_warm", X + [Xw], [w_sol[:qp.nu], warm_or_cold(w_next) if nws else Xw],
                         ["x", "t", "s", "x_sw", "w"], ["u", "w_next"])
-    where = ("controller", "rate") if c.rate is not None else ("controller", "type")
-    ctx.sampled = SampledLaw(1.0 / c.rate if c.rate is not None else None, solve, nws, ctx.ec.locate(where),
-                             f"{ctx.ec.owner}: controller.rate")
-    ctx.info["id_qp"] = {"solver": "qrqp", "variables": nw, "constraints": na,
-                         "control_rate": ctx.sampled.describe(), "warm_start": bool(c.warm_start)}
-    return ca.Function("k_idqp", X, [solve(*X, ca.DM.zeros(nws))[0]])
+    return X, solve, nws, na
 
 
 def _no_inequality_active(Aq, Q, sigma: float, gqp, A_con, con, A_fc, lbx, ubx, nu: int):

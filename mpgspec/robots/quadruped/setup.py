@@ -6,7 +6,7 @@ import hashlib
 import json
 
 from ...compile.laws.kind import Setup
-from ...compile.primitive import spec_file
+from ...compile.setpoint import spec_file
 from ...errors import SpecError
 from ...spec.paths import MAX_FILE_BYTES, ReadProblem, read_text_bounded
 from .stance import check_quadruped

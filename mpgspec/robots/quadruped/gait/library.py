@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field
 
-from ....compile.primitive import compile_primitive, spec_file
+from ....compile.primitive import compile_primitive
+from ....compile.setpoint import spec_file
 from ....compile.system import compile_system
 from ....errors import SpecError
 from ....oracle.integrator import switched_flow
