@@ -28,6 +28,12 @@ def add_entry_point(ep: EntryPoint) -> None:
     loaded_kinds.cache_clear()
 
 
+def remove_entry_point(name: str) -> None:
+    """Forget a kind added in-process (installed kinds stay)."""
+    _ADDED.pop(name, None)
+    loaded_kinds.cache_clear()
+
+
 @lru_cache(maxsize=1)
 def loaded_kinds() -> dict[str, object]:
     """Every registered kind's object by its entry-point name."""

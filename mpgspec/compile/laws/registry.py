@@ -13,7 +13,7 @@ from __future__ import annotations
 from importlib.metadata import EntryPoint
 
 from ...errors import SpecError
-from ...spec.kinds import GROUP, add_entry_point, loaded_kinds
+from ...spec.kinds import GROUP, add_entry_point, loaded_kinds, remove_entry_point
 from ...spec.models import refresh_controllers
 from .kind import ControllerKind
 
@@ -39,4 +39,10 @@ def register(entry_point: EntryPoint | str, value: str | None = None) -> None:
     if not isinstance(entry_point, EntryPoint):
         entry_point = EntryPoint(name=entry_point, value=value, group=GROUP)
     add_entry_point(entry_point)
+    refresh_controllers()
+
+
+def unregister(name: str) -> None:
+    """Undo `register` for the kind `name` (installed kinds stay registered)."""
+    remove_entry_point(name)
     refresh_controllers()
