@@ -216,7 +216,7 @@ class PinocchioRollout:
     """Joint PD (cubic profile, saturation, optional least-norm gravity compensation) on the A1
     with the feet held by Baumgarte-stabilised contact constraints, integrated by RK4 in Python.
 
-    Mirrors mpgspec.compile.controllers.pd_law, system.static_torque, constrained.solve_contact,
+    Mirrors mpgspec.compile.laws.pd.pd_law, system.static_torque, constrained.solve_contact,
     liegroup.qdot and system.project, but every quantity comes from pinocchio and numpy.
     """
 

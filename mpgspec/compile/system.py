@@ -121,7 +121,8 @@ def system_kind(name: str) -> SystemKind:
     """The system kind registered under `name`."""
     found = {ep.name: ep for ep in entry_points(group=SYSTEM_GROUP)}
     if name not in found:
-        raise KeyError(f"no system kind {name!r} is installed; installed: {', '.join(sorted(found))}")
+        raise KeyError(f"no system kind {name!r} is registered under the entry points {SYSTEM_GROUP!r} (installed: "
+                       f"{', '.join(sorted(found)) or 'none'}); install mpgspec (pip install -e .)")
     return found[name].load()
 
 

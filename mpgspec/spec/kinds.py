@@ -37,7 +37,11 @@ def remove_entry_point(name: str) -> None:
 @lru_cache(maxsize=1)
 def loaded_kinds() -> dict[str, object]:
     """Every registered kind's object by its entry-point name."""
-    return {name: ep.load() for name, ep in controller_entry_points().items()}
+    found = controller_entry_points()
+    if not found:
+        raise ImportError(f"no controller kinds are registered under the entry points {GROUP!r}: install mpgspec "
+                          "(pip install -e .) so that its metadata declares them")
+    return {name: ep.load() for name, ep in found.items()}
 
 
 def controller_models() -> tuple[type, ...]:

@@ -32,8 +32,9 @@ def _resolve(target: str) -> Callable:
 
 @dataclass(frozen=True)
 class ControllerKind:
-    """A controller type: its spec model (a pydantic model whose `type` literal is the kind's name),
-    its law `law(spec, ctx) -> u_raw` and an optional `setup(inst, sys, ec, consts) -> Setup`.
+    """A controller type: its spec model (a pydantic model whose `type` literal is the name of the
+    kind's entry point), its law `law(spec, ctx) -> u_raw` and an optional
+    `setup(inst, sys, ec, consts) -> Setup`.
 
     `law` and `setup` are "module:function" references, imported on first use; `position` orders
     the kinds in the `controller:` union (and so in the JSON schema).
@@ -43,10 +44,6 @@ class ControllerKind:
     law: str
     setup: str | None = None
     position: int = 100
-
-    @property
-    def name(self) -> str:
-        return self.spec_model.model_fields["type"].annotation.__args__[0]
 
     def build_law(self, spec, ctx):
         """u_raw = k(x, t, s, x_sw) of a primitive: an SX expression or a CasADi Function."""

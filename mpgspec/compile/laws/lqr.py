@@ -69,26 +69,7 @@ def lqr_law(c: LQRController, ctx: ControlContext) -> ca.SX:
     if not np.isfinite(xs).all():
         raise _lqr_error(ctx, "LQR setpoint is not finite", expected="a finite setpoint x*",
                          found=f"x* = {xs.tolist()}")
-    if c.u_eq is not None:
-        if len(c.u_eq) != sys.nu:
-            raise SpecError("u_eq needs one value per input", location=ctx.ec.locate(("controller", "u_eq")),
-                            key=f"{ctx.ec.owner}: controller.u_eq", expected=f"{sys.nu} values",
-                            found=f"{len(c.u_eq)}", code="MPG106")
-        env = {k: float(v2) for k, v2 in ctx.env.items() if isinstance(v2, (int, float))}
-        us = np.array([ctx.ec.number(v, ("controller", "u_eq", i), env, finite=True) for i, v in enumerate(c.u_eq)])
-    else:  # Gauss-Newton on xdot(x*, u) = 0
-        us = np.zeros(sys.nu)
-        for _ in range(20):
-            r = np.array(f(xs, us)).ravel()
-            B = np.array(A_fn(xs, us)[1])
-            if not (np.isfinite(r).all() and np.isfinite(B).all()):
-                break
-            step, *_ = np.linalg.lstsq(B, -r, rcond=None)
-            if not np.isfinite(step).all():
-                break
-            us = us + step
-            if np.linalg.norm(step) < 1e-12:
-                break
+    us = _equilibrium_input(c, ctx, xs, f, A_fn)
     resid = float(np.linalg.norm(np.array(f(xs, us)).ravel()))
     A, B = (np.array(m, dtype=float) for m in A_fn(xs, us))
     if not (np.isfinite(A).all() and np.isfinite(B).all() and np.isfinite(resid)):
@@ -124,6 +105,32 @@ def lqr_law(c: LQRController, ctx: ControlContext) -> ca.SX:
     }
     dx = sys.wrapped_error(sys.x - ctx.x_star)
     return ca.DM(us) - ca.mtimes(ca.DM(K), dx)
+
+
+def _equilibrium_input(c: LQRController, ctx: ControlContext, xs: np.ndarray, f: ca.Function,
+                       A_fn: ca.Function) -> np.ndarray:
+    """u* with xdot(x*, u*) = 0: the spec's u_eq, else Gauss-Newton from u = 0 (at most 20 steps)."""
+    sys = ctx.sys
+    if c.u_eq is not None:
+        if len(c.u_eq) != sys.nu:
+            raise SpecError("u_eq needs one value per input", location=ctx.ec.locate(("controller", "u_eq")),
+                            key=f"{ctx.ec.owner}: controller.u_eq", expected=f"{sys.nu} values",
+                            found=f"{len(c.u_eq)}", code="MPG106")
+        env = {k: float(v2) for k, v2 in ctx.env.items() if isinstance(v2, (int, float))}
+        return np.array([ctx.ec.number(v, ("controller", "u_eq", i), env, finite=True) for i, v in enumerate(c.u_eq)])
+    us = np.zeros(sys.nu)
+    for _ in range(20):
+        r = np.array(f(xs, us)).ravel()
+        B = np.array(A_fn(xs, us)[1])
+        if not (np.isfinite(r).all() and np.isfinite(B).all()):
+            break
+        step, *_ = np.linalg.lstsq(B, -r, rcond=None)
+        if not np.isfinite(step).all():
+            break
+        us = us + step
+        if np.linalg.norm(step) < 1e-12:
+            break
+    return us
 
 
 def _unstabilisable_modes(A: np.ndarray, B: np.ndarray) -> list[str]:

@@ -10,6 +10,7 @@ from ...spec.base import Strict
 from ...spec.system import Expr, Number, Text
 
 
+# The docstrings are the schema's descriptions (`mpgspec schema`), kept as published.
 class TrotController(Strict):
     """A trot for point-foot quadrupeds (compile/rigidbody/trot.py): stance feet share the trunk wrench,
     swing feet land at the Raibert point; the contact schedule follows from the timing."""

@@ -7,7 +7,7 @@ A gait file (e.g. specs/a1/gaits.yaml) names the project, the trot primitive and
     dt: 0.001
 
 `mpgspec gait specs/a1/gaits.yaml` compiles every node of the primitive, finds its orbit
-(mpgspec.gait.orbit) and writes the table its `controller.gait` and `setpoint.file` name: a header
+(gait/orbit.py) and writes the table its `controller.gait` and `setpoint.file` name: a header
 of `# key: value` lines (solver status, residual, calibrated command, Floquet multipliers, the hash
 of the inputs the table depends on) and one row per step of one period. `--check` regenerates
 into memory and compares with the tables on disk instead of writing.
