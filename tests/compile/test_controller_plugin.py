@@ -100,3 +100,13 @@ def test_the_spec_union_follows_the_registry(state_feedback_kind):
     unregister("state_feedback")
     assert "StateFeedback" not in Primitive.model_json_schema()["$defs"]
     assert "state_feedback" not in controller_kinds()
+
+
+def test_the_spec_layer_loads_every_kind_without_casadi():
+    import subprocess
+    import sys
+
+    code = ("import sys, mpgspec.spec.models; "
+            "from mpgspec.spec.kinds import controller_models; assert len(controller_models()) >= 6; "
+            "sys.exit('casadi' in sys.modules or 'cvxpy' in sys.modules)")
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 0
