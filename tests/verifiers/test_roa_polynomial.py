@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from verifiers import polyv, sos
-from verifiers.roa_common import RoAProblem
+from mpgspec.certify.problem import RoAProblem
 
 x = ca.SX.sym("x", 2)
 VDP = RoAProblem(ca.Function("f", [x], [ca.vertcat(-x[1], x[0] + (x[0] ** 2 - 1) * x[1])]), np.zeros(2),
