@@ -39,24 +39,10 @@ class LyapunovVerifier:
         o = dict(options or {})
         method = o.get("method_name", self.name)
         n, xs = problem.nx, np.asarray(problem.x_star, float).ravel()
-        A, f0 = linearise(problem.f, xs)
-        if not (np.isfinite(A).all() and np.isfinite(f0).all()):
-            return RoAResult(0.0, "failed", method, {"equilibrium_defect": None},
-                             "the closed loop or its Jacobian is not finite at x_star (inf or NaN)")
-        ev: dict = {"A_eigenvalues": [[z.real, z.imag] for z in np.linalg.eigvals(A)],
-                    "equilibrium_defect": float(np.abs(f0).max(initial=0.0))}
-        if ev["equilibrium_defect"] > o.get("equilibrium_tol", 1e-8):
-            return RoAResult(0.0, "failed", method, ev, f"x_star is not an equilibrium: |f(x*)| = "
-                             f"{ev['equilibrium_defect']:.3g}")
-        if np.linalg.eigvals(A).real.max() >= 0:
-            return RoAResult(0.0, "failed", method, ev, "linearisation is not Hurwitz: eigenvalues "
-                             f"{np.round(np.linalg.eigvals(A), 6).tolist()}")
-        P = np.asarray(o["P"], float) if "P" in o else lyapunov_P(A, o.get("Q"))
-        Qdec = -(A.T @ P + P @ A)
-        ev["P"] = P
-        if np.linalg.eigvalsh(P).min() <= 0 or np.linalg.eigvalsh(Qdec).min() <= 0:
-            return RoAResult(0.0, "failed", method, ev, "P is not a Lyapunov matrix of the linearisation "
-                             "(needs P > 0 and A'P + PA < 0)")
+        lin = _linear_lyapunov(problem, xs, o, method)
+        if isinstance(lin, RoAResult):
+            return lin
+        A, P, Qdec, ev = lin
         y = ca.SX.sym("y", n)
         fy = problem.f(ca.DM(xs) + y)
         vdot = 2 * ca.mtimes([y.T, ca.DM(P), fy])
@@ -126,6 +112,30 @@ class LyapunovVerifier:
                                          "estimated by sampling for " +
                                          ", ".join(pt["part"] for pt in parts if pt["level"] == "empirical"))
         return RoAResult(r, level, method, ev, msg)
+
+
+def _linear_lyapunov(problem: RoAProblem, xs: np.ndarray, o: dict, method: str):
+    """(A, P, -(A'P + PA), evidence) of the linearisation at x*, or the failed RoAResult when x* is
+    no equilibrium, A is not Hurwitz or P is not a Lyapunov matrix of it."""
+    A, f0 = linearise(problem.f, xs)
+    if not (np.isfinite(A).all() and np.isfinite(f0).all()):
+        return RoAResult(0.0, "failed", method, {"equilibrium_defect": None},
+                         "the closed loop or its Jacobian is not finite at x_star (inf or NaN)")
+    ev: dict = {"A_eigenvalues": [[z.real, z.imag] for z in np.linalg.eigvals(A)],
+                "equilibrium_defect": float(np.abs(f0).max(initial=0.0))}
+    if ev["equilibrium_defect"] > o.get("equilibrium_tol", 1e-8):
+        return RoAResult(0.0, "failed", method, ev, f"x_star is not an equilibrium: |f(x*)| = "
+                         f"{ev['equilibrium_defect']:.3g}")
+    if np.linalg.eigvals(A).real.max() >= 0:
+        return RoAResult(0.0, "failed", method, ev, "linearisation is not Hurwitz: eigenvalues "
+                         f"{np.round(np.linalg.eigvals(A), 6).tolist()}")
+    P = np.asarray(o["P"], float) if "P" in o else lyapunov_P(A, o.get("Q"))
+    Qdec = -(A.T @ P + P @ A)
+    ev["P"] = P
+    if np.linalg.eigvalsh(P).min() <= 0 or np.linalg.eigvalsh(Qdec).min() <= 0:
+        return RoAResult(0.0, "failed", method, ev, "P is not a Lyapunov matrix of the linearisation "
+                         "(needs P > 0 and A'P + PA < 0)")
+    return A, P, Qdec, ev
 
 
 def _polys(fn: ca.Function, declared: bool | None) -> list[Poly] | str:

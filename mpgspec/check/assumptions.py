@@ -284,6 +284,12 @@ def _roa_on_contact_manifold(p, tol, samples, rng, W, L, r, project, starts: int
                 if m_new >= m - 1e-12:
                     break
                 z, m = z_new, m_new
+    return _manifold_check(p, tol, samples, r, worst, raw_worst, dist, spread, feet)
+
+
+def _manifold_check(p, tol, samples, r, worst, raw_worst, dist, spread, feet) -> AssumptionCheck:
+    """The result of roa_in_safe_set on the contact manifold: least h, and how far the projection
+    moved the samples (distance to the manifold and the projected radius, in ||.||_W)."""
     ok = worst >= -tol
     dist = np.asarray(dist) if dist else np.zeros(1)
     numbers = {"min_h": worst if np.isfinite(worst) else None, "samples": samples, "interior_samples": samples,
