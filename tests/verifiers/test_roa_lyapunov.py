@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from verifiers import lyapunov, sos
 from mpgspec.certify.problem import RoAProblem
+from verifiers import lyapunov, sos
 from verifiers.roa_common import ball_radius
 
 x = ca.SX.sym("x", 2)
