@@ -32,8 +32,8 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from common import machine, revision, write_section  # noqa: E402
 
+from mpgspec.certify.problem import RoAProblem  # noqa: E402
 from verifiers import sos  # noqa: E402
-from verifiers.roa_common import RoAProblem  # noqa: E402
 
 HEADING = "## SOS certificates"
 TRUE_BALL = 1.5317

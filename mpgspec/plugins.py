@@ -2,10 +2,18 @@
 from __future__ import annotations
 
 from importlib.metadata import entry_points
+from typing import Callable
+
+Check = Callable[[str, str, object], None]
+"""(name, target, plug-in) -> None, raising when the plug-in does not implement its contract."""
 
 
-def load_plugins(group: str, builtin: dict[str, str]) -> dict[str, object]:
-    """Installed plug-ins of an entry-point group by name; unimportable or uninstalled ones are skipped."""
+def load_plugins(group: str, builtin: dict[str, str], check: Check | None = None) -> dict[str, object]:
+    """Installed plug-ins of an entry-point group by name; unimportable or uninstalled ones are skipped.
+
+    With `check`, every importable plug-in is checked against its contract before it is asked
+    whether it is installed; a plug-in that fails the check stops the loading with check's error.
+    """
     found = dict(builtin)
     for ep in entry_points(group=group):
         found[ep.name] = ep.value
@@ -16,6 +24,8 @@ def load_plugins(group: str, builtin: dict[str, str]) -> dict[str, object]:
             plugin = getattr(__import__(mod, fromlist=[attr]), attr)
         except ImportError:
             continue
+        if check is not None:
+            check(name, target, plugin)
         if plugin.is_installed():
             out[name] = plugin
     return out

@@ -1,44 +1,21 @@
 """Floquet stability of a periodic primitive's orbit and an empirical tube radius around it.
 
-The monodromy matrix Phi(T) comes from RK4 on the state and its variational equation
-Phi' = df/dx(x, t) Phi, started on the orbit at x*(t0). Its eigenvalues are the Floquet
-multipliers; the orbit is locally exponentially stable when all lie inside the unit circle (for
-an autonomous loop, the trivial multiplier 1 along the orbit is set aside). The radius of E is
-then sized by simulation at random phases, as in sampling.py, so it is 'empirical'.
+The monodromy matrix Phi(T) and its Floquet multipliers come from the core
+(mpgspec.certify.monodromy); the orbit is locally exponentially stable when all lie inside the
+unit circle (for an autonomous loop, the trivial multiplier 1 along the orbit is set aside). The
+radius of E is then sized by simulation at random phases, as in sampling.py, so it is 'empirical'.
 """
 from __future__ import annotations
 
 import time
 
-import casadi as ca
 import numpy as np
 
-from .roa_common import PeriodicProblem, RoAResult
+from mpgspec.certify.monodromy import monodromy
+from mpgspec.certify.problem import PeriodicProblem, RoAResult
+
+from .floquet_hybrid import estimate as estimate_hybrid
 from .sampling import Simulator, search
-
-
-def monodromy(problem: PeriodicProblem, t0: float = 0.0, steps: int = 2000) -> dict:
-    """Phi(t0 + T, t0), the end state and the largest W-distance of the trajectory from x*(t)."""
-    n, T = problem.nx, float(problem.period)
-    x, t, Phi, d = ca.SX.sym("x", n), ca.SX.sym("t"), ca.SX.sym("Phi", n, n), ca.SX.sym("d")
-    fx = problem.f(x, t)
-    J = ca.jacobian(fx, x)
-    F = ca.Function("F", [x, Phi, t], [fx, ca.mtimes(J, Phi)])
-    h = T / steps
-    k1 = F(x, Phi, t)
-    k2 = F(x + h / 2 * k1[0], Phi + h / 2 * k1[1], t + h / 2)
-    k3 = F(x + h / 2 * k2[0], Phi + h / 2 * k2[1], t + h / 2)
-    k4 = F(x + h * k3[0], Phi + h * k3[1], t + h)
-    xn = x + h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
-    Pn = Phi + h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
-    e = xn - problem.x_star(t + h)
-    dn = ca.fmax(d, ca.sqrt(ca.mtimes([e.T, ca.DM(problem.W), e])))
-    z = ca.vertcat(x, ca.vec(Phi), t, d)
-    step = ca.Function("var_step", [z], [ca.vertcat(xn, ca.vec(Pn), t + h, dn)])
-    z0 = np.concatenate([np.array(problem.x_star(t0), float).ravel(), np.eye(n).ravel(order="F"), [t0, 0.0]])
-    zT = np.array(step.fold(steps)(z0), float).ravel()
-    return {"Phi": zT[n:n + n * n].reshape(n, n, order="F"), "x_end": zT[:n], "orbit_defect": float(zT[-1]),
-            "autonomous": not ca.depends_on(fx, t)}
 
 
 class FloquetVerifier:
@@ -53,9 +30,7 @@ class FloquetVerifier:
     def estimate(self, problem: PeriodicProblem, options: dict | None = None) -> RoAResult:
         o = dict(options or {})
         if getattr(problem, "source", None) is not None:  # the state jumps: the discrete flow's own map
-            from .floquet_hybrid import estimate
-
-            return estimate(problem, o, self.name)
+            return estimate_hybrid(problem, o, self.name)
         t_start = time.perf_counter()
         T = float(problem.period)
         m = monodromy(problem, float(o.get("t0", 0.0)), int(o.get("steps", 2000)))

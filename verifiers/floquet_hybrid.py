@@ -1,96 +1,27 @@
 """Floquet multipliers and an empirical tube for periodic primitives whose state jumps (gaits).
 
-The flow is the oracle's own discrete one: RK4 steps of dt from clock times on the dt grid (every
-contact switch lies on it), each followed by the primitive's jump (quaternion renormalised,
-plastic impact of feet that join the contact mode). The monodromy is the derivative of one
-period of that map by central differences; with `neutral` (base_x, base_y, yaw of a floating
-base on flat ground) it is taken on the reduced state, and the neutral multipliers are measured
-along the symmetry's generators and reported by name. The tube radius of E is sized by batched
-rollouts from random phases (starts put on the contact manifold of the feet held at that phase),
-so it is 'empirical'.
+The flow, its orbit defect and the monodromy of one period (with `neutral`, base_x, base_y, yaw
+of a floating base on flat ground, on the reduced state, the neutral multipliers measured along
+the symmetry's generators and reported by name) come from the core, mpgspec.certify.hybrid_orbit.
+The tube radius of E is sized by batched rollouts from random phases (starts put on the contact
+manifold of the feet held at that phase), so it is 'empirical'.
 """
 from __future__ import annotations
 
 import time
 
-import casadi as ca
 import numpy as np
 
-from .roa_common import PeriodicProblem, RoAResult, bisect, unit_sphere
+from mpgspec.certify.hybrid_orbit import HybridFlow, monodromy, orbit
+from mpgspec.certify.problem import PeriodicProblem, RoAResult
 from mpgspec.compile.primitive import held_feet
+from mpgspec.compile.rigidbody.symmetry import NEUTRAL
 
-FD = 1e-6
-S_LONG = 1e6  # time since switch-in: long after any motion profile
-
-
-class HybridFlow:
-    """Compiled steps, periods and tubes of a compiled primitive's discrete flow."""
-
-    def __init__(self, prim, dt: float):
-        from mpgspec.oracle.integrator import LEFT, compile_cached, rk4_jump
-
-        self.prim, self.dt = prim, float(dt)
-        T = float(prim.period)
-        self.steps = int(round(T / dt))
-        if abs(self.steps * dt - T) > 1e-9 or any(abs(b / dt - round(b / dt)) > 1e-6 for b in prim.boundaries):
-            raise ValueError(f"the period and switching times must be multiples of dt = {dt:g}")
-        nx = prim.system.nx
-        xs0 = np.array(prim.setpoint(0.0), float).ravel()
-        z = ca.MX.sym("z", nx + 2)  # [x; t; min h so far]
-        x, t, m = z[:nx], z[nx], z[nx + 1]
-        f = lambda xx, tt: prim.f_cl(xx, tt, S_LONG, xs0)  # noqa: E731
-        k = lambda xx, tt: prim.control(xx, tt, S_LONG, xs0)[1]  # noqa: E731
-        h = self.dt
-        xn = rk4_jump(f, k, prim.jump, x, t, h, LEFT if prim.info.get("contact_schedule") else 0.0)
-        hv = prim.h(xn, t + h, S_LONG, xs0)
-        mn = ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
-        body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn)])
-        zz = ca.MX.sym("z", nx + 2)  # one compiled Function: a period, every step's state out
-        self.period_fn = compile_cached(ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)]),
-                                        ("-O1",))
-
-    def states(self, x0: np.ndarray, t0: float = 0.0) -> np.ndarray:
-        """[x; t; least h] after each step of one period from x0 at clock t0 (columns)."""
-        return np.array(self.period_fn(np.concatenate([x0, [t0, np.inf]])), float)
-
-    def run(self, X0: np.ndarray, t0: np.ndarray, periods: int = 1) -> tuple[np.ndarray, np.ndarray]:
-        """End states and least h of rollouts from the columns of X0 at clocks t0."""
-        n, N = X0.shape[1], self.steps
-        Z = np.vstack([X0, t0[None, :], np.full((1, n), np.inf)])
-        fn = self.period_fn.map(n)
-        for _ in range(periods):
-            Z = np.array(fn(Z), float)[:, N - 1::N]
-        return Z[:-2], Z[-1]
-
-
-def orbit(flow: HybridFlow, W: np.ndarray) -> tuple[np.ndarray, float, float]:
-    """(x* on the step grid of one period, orbit defect, least h along it): x*(t) must be a
-    trajectory of the loop's own discrete flow, step by step; the defect is the largest W-distance
-    between a step from x*(t_k) and x*(t_k+1)."""
-    x_star = flow.prim.setpoint.map(flow.steps + 1)
-    ts = np.arange(flow.steps + 1) * flow.dt
-    Xs = np.array(x_star(ts[None, :]), float)
-    Z = flow.states(Xs[:, 0])
-    E = Z[:-2] - Xs[:, 1:]
-    return Xs, float(np.sqrt(np.einsum("ij,ik,kj->j", E, W, E)).max()), float(Z[-1, -1])
-
-
-def monodromy(flow: HybridFlow, x0: np.ndarray, neutral: list[str]) -> tuple[np.ndarray, dict]:
-    """The one-period derivative at x0 (clock 0): reduced if `neutral` names the ground symmetry."""
-    sys = flow.prim.system
-    if neutral:
-        from mpgspec.compile.rigidbody.symmetry import reduced_monodromy
-
-        return reduced_monodromy(sys, lambda X: flow.run(X, np.zeros(X.shape[1]))[0], x0, neutral, FD)
-    nx = sys.nx
-    E = np.eye(nx)
-    XT, _ = flow.run(np.hstack([x0[:, None] + FD * E, x0[:, None] - FD * E]), np.zeros(2 * nx))
-    return (XT[:, :nx] - XT[:, nx:]) / (2 * FD), {}
+from .roa_common import bisect, unit_sphere
 
 
 def estimate(problem: PeriodicProblem, o: dict, name: str) -> RoAResult:
-    from mpgspec.compile.rigidbody.symmetry import NEUTRAL
-
+    """The floquet verifier on a gait: orbit defect, reduced multipliers, then the tube radius."""
     t_start = time.perf_counter()
     prim = problem.source
     T, dt = float(problem.period), float(o.get("dt", 0.001))

@@ -4,7 +4,7 @@ V(y) = y'Py with y = x - x* and P from A'P + PA = -Q at the linearisation. The l
 largest with Vdot < 0 on {0 < V <= rho} for the nonlinear closed loop and {V <= rho} inside C;
 then {V <= rho} is invariant, safe and attracted to x*, and E is the largest W-ball inside it.
 
-Each part is certified by a checked SOS certificate (sos.py) when its polynomial is exact (the
+Each part is certified by a checked SOS certificate (sos_certificates.py) when its polynomial is exact (the
 closed loop, or h_i, read as a polynomial from CasADi); otherwise it is estimated by dense
 sampling plus local optimisation and labelled 'empirical'. The result's level is the weakest.
 With `degree` > 2 (polynomial loops and h only) V is a polynomial of that degree found by V-rho
@@ -19,9 +19,11 @@ import cvxpy as cp
 import numpy as np
 from scipy.optimize import minimize
 
-from . import polyv, sos
-from .roa_common import (RoAProblem, RoAResult, ball_radius, batch, bisect, linearise, lyapunov_P, unit_sphere,
-                         weakest)
+from mpgspec.certify.problem import RoAProblem, RoAResult, weakest
+
+from . import polyv
+from .roa_common import ball_radius, batch, bisect, linearise, lyapunov_P, unit_sphere
+from .sos_certificates import LevelSetProgram, NotPolynomial, Poly, from_casadi, padd, pmul, quadratic
 
 
 class LyapunovVerifier:
@@ -37,24 +39,10 @@ class LyapunovVerifier:
         o = dict(options or {})
         method = o.get("method_name", self.name)
         n, xs = problem.nx, np.asarray(problem.x_star, float).ravel()
-        A, f0 = linearise(problem.f, xs)
-        if not (np.isfinite(A).all() and np.isfinite(f0).all()):
-            return RoAResult(0.0, "failed", method, {"equilibrium_defect": None},
-                             "the closed loop or its Jacobian is not finite at x_star (inf or NaN)")
-        ev: dict = {"A_eigenvalues": [[z.real, z.imag] for z in np.linalg.eigvals(A)],
-                    "equilibrium_defect": float(np.abs(f0).max(initial=0.0))}
-        if ev["equilibrium_defect"] > o.get("equilibrium_tol", 1e-8):
-            return RoAResult(0.0, "failed", method, ev, f"x_star is not an equilibrium: |f(x*)| = "
-                             f"{ev['equilibrium_defect']:.3g}")
-        if np.linalg.eigvals(A).real.max() >= 0:
-            return RoAResult(0.0, "failed", method, ev, "linearisation is not Hurwitz: eigenvalues "
-                             f"{np.round(np.linalg.eigvals(A), 6).tolist()}")
-        P = np.asarray(o["P"], float) if "P" in o else lyapunov_P(A, o.get("Q"))
-        Qdec = -(A.T @ P + P @ A)
-        ev["P"] = P
-        if np.linalg.eigvalsh(P).min() <= 0 or np.linalg.eigvalsh(Qdec).min() <= 0:
-            return RoAResult(0.0, "failed", method, ev, "P is not a Lyapunov matrix of the linearisation "
-                             "(needs P > 0 and A'P + PA < 0)")
+        lin = _linear_lyapunov(problem, xs, o, method)
+        if isinstance(lin, RoAResult):
+            return lin
+        A, P, Qdec, ev = lin
         y = ca.SX.sym("y", n)
         fy = problem.f(ca.DM(xs) + y)
         vdot = 2 * ca.mtimes([y.T, ca.DM(P), fy])
@@ -79,7 +67,7 @@ class LyapunovVerifier:
                 return RoAResult(0.0, "failed", method, ev, f"degree {degree} needs polynomial loop and h: {why}")
             return polyv.estimate(problem, {k: v for k, v in o.items() if k != "rho"}, fpoly, [hp[0] for hp in hpoly],
                                   P, A, ev, method, _certified)
-        Vp = sos.quadratic(P)
+        Vp = quadratic(P)
         scale = float(np.linalg.eigvalsh(P).max())
         cap = float(o.get("rho_max", 1e4 * scale))
         rng = np.random.default_rng(o.get("seed", 0))
@@ -105,7 +93,7 @@ class LyapunovVerifier:
             lev = "empirical"
         else:
             eps = float(o.get("eps", 1e-4)) * float(np.linalg.eigvalsh(Qdec).min())
-            p = sos.padd(_vdot_poly(fpoly, P, n, -1.0), sos.quadratic(eps * np.eye(n)), -1.0)
+            p = padd(_vdot_poly(fpoly, P, n, -1.0), quadratic(eps * np.eye(n)), -1.0)
             rho_dyn, lev, info = _certified(p, Vp, n, rho_safe, scale, cap, o)
             info["eps"] = eps
         parts.append({"part": "Vdot", "level": lev, "rho": rho_dyn, **info})
@@ -126,31 +114,55 @@ class LyapunovVerifier:
         return RoAResult(r, level, method, ev, msg)
 
 
-def _polys(fn: ca.Function, declared: bool | None) -> list[sos.Poly] | str:
+def _linear_lyapunov(problem: RoAProblem, xs: np.ndarray, o: dict, method: str):
+    """(A, P, -(A'P + PA), evidence) of the linearisation at x*, or the failed RoAResult when x* is
+    no equilibrium, A is not Hurwitz or P is not a Lyapunov matrix of it."""
+    A, f0 = linearise(problem.f, xs)
+    if not (np.isfinite(A).all() and np.isfinite(f0).all()):
+        return RoAResult(0.0, "failed", method, {"equilibrium_defect": None},
+                         "the closed loop or its Jacobian is not finite at x_star (inf or NaN)")
+    ev: dict = {"A_eigenvalues": [[z.real, z.imag] for z in np.linalg.eigvals(A)],
+                "equilibrium_defect": float(np.abs(f0).max(initial=0.0))}
+    if ev["equilibrium_defect"] > o.get("equilibrium_tol", 1e-8):
+        return RoAResult(0.0, "failed", method, ev, f"x_star is not an equilibrium: |f(x*)| = "
+                         f"{ev['equilibrium_defect']:.3g}")
+    if np.linalg.eigvals(A).real.max() >= 0:
+        return RoAResult(0.0, "failed", method, ev, "linearisation is not Hurwitz: eigenvalues "
+                         f"{np.round(np.linalg.eigvals(A), 6).tolist()}")
+    P = np.asarray(o["P"], float) if "P" in o else lyapunov_P(A, o.get("Q"))
+    Qdec = -(A.T @ P + P @ A)
+    ev["P"] = P
+    if np.linalg.eigvalsh(P).min() <= 0 or np.linalg.eigvalsh(Qdec).min() <= 0:
+        return RoAResult(0.0, "failed", method, ev, "P is not a Lyapunov matrix of the linearisation "
+                         "(needs P > 0 and A'P + PA < 0)")
+    return A, P, Qdec, ev
+
+
+def _polys(fn: ca.Function, declared: bool | None) -> list[Poly] | str:
     """Polynomials of fn's outputs, or the reason they are not polynomial."""
     if declared is False:
         return "closed loop declared non-polynomial"
     try:
-        return sos.from_casadi(fn)
-    except sos.NotPolynomial as e:
+        return from_casadi(fn)
+    except NotPolynomial as e:
         return f"not polynomial ({e})"
 
 
-def _vdot_poly(f: list[sos.Poly], P: np.ndarray, n: int, sign: float) -> sos.Poly:
+def _vdot_poly(f: list[Poly], P: np.ndarray, n: int, sign: float) -> Poly:
     """sign * 2 y'P f(y), dropping f's constant terms (x* is an equilibrium to tolerance)."""
-    out: sos.Poly = {}
+    out: Poly = {}
     zero = (0,) * n
     for i in range(n):
         for j in range(n):
             if P[i, j]:
                 yi = {tuple(int(m == i) for m in range(n)): sign * 2 * P[i, j]}
-                out = sos.padd(out, sos.pmul(yi, {k: v for k, v in f[j].items() if k != zero}))
+                out = padd(out, pmul(yi, {k: v for k, v in f[j].items() if k != zero}))
     return out
 
 
-def _certified(p: sos.Poly, V: sos.Poly, n: int, hi: float, guess: float, cap: float, o: dict):
+def _certified(p: Poly, V: Poly, n: int, hi: float, guess: float, cap: float, o: dict):
     """Largest rho <= min(hi, cap) with a validated certificate of p >= 0 on {V <= rho}."""
-    prog = sos.LevelSetProgram(p, V, n, o.get("mult_half_degree"), o.get("solver", "CLARABEL"),
+    prog = LevelSetProgram(p, V, n, o.get("mult_half_degree"), o.get("solver", "CLARABEL"),
                                o.get("solver_opts"), o.get("tol_eig", 1e-8), o.get("tol_res", 1e-6),
                                interior=bool(o.get("interior", False)))
     last = {"ok": None, "bad": None}

@@ -12,7 +12,7 @@ again, so r is a proven lower bound and not a sampled estimate).
 
 The search is bilinear in V and the multipliers; it alternates two convex steps:
   A (V fixed): the largest rho, then the largest ball, by bisection over checked certificates
-    (sos.LevelSetProgram with the most interior Gram matrix, whose float64 check decides acceptance);
+    (LevelSetProgram with the most interior Gram matrix, whose float64 check decides acceptance);
   B (multipliers of A fixed, V rescaled to rho = 1): a new V whose level 1 still passes with those
     multipliers and that holds A's ball at the lowest level gamma - V - s (t - y'Wy) SOS, s SOS;
     the previous V is feasible at gamma = 1, so the next step A finds at least that ball.
@@ -30,12 +30,12 @@ import cvxpy as cp
 import numpy as np
 import scipy.sparse as sp
 
+from mpgspec.certify.problem import RoAResult, weakest
 from mpgspec.streams import stdout_to_stderr
 
-from . import sos
-from .roa_common import RoAResult, inv_sqrt, weakest
-
-Poly = sos.Poly
+from .roa_common import inv_sqrt
+from .sos_certificates import (LevelSetProgram, Poly, degree, gram_poly, monomials, padd, pconst, pmul, prove_sos,
+                               quadratic)
 
 
 def _unit(n: int, i: int) -> tuple[int, ...]:
@@ -58,7 +58,7 @@ def lie_derivative(V: Poly, f: list[Poly]) -> Poly:
         for i in range(n):
             d = _derivative(m, i)
             if d:
-                out = sos.padd(out, sos.pmul({k: c * v for k, v in d.items()}, fz[i]))
+                out = padd(out, pmul({k: c * v for k, v in d.items()}, fz[i]))
     return out
 
 
@@ -84,7 +84,7 @@ class _Identity:
         self.n, self.const, self.terms = n, {}, []
 
     def add_poly(self, p: Poly, s: float = 1.0):
-        self.const = sos.padd(self.const, p, s)
+        self.const = padd(self.const, p, s)
 
     def add_gram(self, Q: cp.Variable, basis, mult: Poly | None = None, s: float = 1.0):
         """+ s * (z'Qz) * mult."""
@@ -114,7 +114,7 @@ class _Identity:
 
 
 def _gram_basis(n: int, lo_deg: int, hi_deg: int) -> list[tuple[int, ...]]:
-    return sos.monomials(n, math.ceil(lo_deg / 2), hi_deg // 2)
+    return monomials(n, math.ceil(lo_deg / 2), hi_deg // 2)
 
 
 def _solve(problem: cp.Problem, solver: str, opts: dict) -> str:
@@ -140,10 +140,10 @@ class PolyLyapunov:
         self.certified = certified  # (p, V, n, hi, guess, cap, o) -> (rho, level, info), as lyapunov._certified
         self.solver = o.get("solver", "CLARABEL")
         self.solver_opts = dict(o.get("solver_opts") or {})
-        self.mv = sos.monomials(self.n, 2, self.d)  # monomials of V
-        self.bv = sos.monomials(self.n, 1, self.d // 2)  # Gram basis of V - epsV |y|^2
-        self.ball = sos.quadratic(self.W)
-        self.deg_f = max(sos.degree(fi) for fi in f)
+        self.mv = monomials(self.n, 2, self.d)  # monomials of V
+        self.bv = monomials(self.n, 1, self.d // 2)  # Gram basis of V - epsV |y|^2
+        self.ball = quadratic(self.W)
+        self.deg_f = max(degree(fi) for fi in f)
 
     def eps(self, V: Poly) -> float:
         P = quadratic_part(V, self.n)
@@ -163,7 +163,7 @@ class PolyLyapunov:
             rho_safe = min(rho_safe, r)
             if rho_safe <= 0:
                 return None
-        p = sos.padd(sos.padd({}, lie_derivative(V, self.f), -1.0), sos.quadratic(eps * np.eye(self.n)), -1.0)
+        p = padd(padd({}, lie_derivative(V, self.f), -1.0), quadratic(eps * np.eye(self.n)), -1.0)
         rho, lev, info = self.certified(p, V, self.n, rho_safe, guess, cap, self.o)
         info["eps"] = eps
         parts.append({"part": "Vdot", "level": lev, "rho": rho, **info})
@@ -179,7 +179,7 @@ class PolyLyapunov:
 
     def ball_level(self, V: Poly, rho: float) -> tuple[float, dict]:
         """Largest checked t with rho - V >= 0 on {y'Wy <= t} (S-procedure, bisection on t)."""
-        p = sos.padd(sos.pconst(rho, self.n), V, -1.0)
+        p = padd(pconst(rho, self.n), V, -1.0)
         Wi = inv_sqrt(self.W)
         P = quadratic_part(V, self.n) / rho
         t_lin = 1.0 / float(np.linalg.eigvalsh(Wi @ P @ Wi).max())  # ball inside the quadratic part's level
@@ -193,7 +193,7 @@ class PolyLyapunov:
         if not lo > 0:
             return False, {"reason": "quadratic part of V is not positive definite"}
         epsv = 1e-6 * lo
-        cert = sos.prove_sos(sos.padd(V, sos.quadratic(epsv * np.eye(self.n)), -1.0), self.n,
+        cert = prove_sos(padd(V, quadratic(epsv * np.eye(self.n)), -1.0), self.n,
                              solver=self.solver, solver_opts=self.solver_opts,
                              tol_eig=self.o.get("tol_eig", 1e-8), tol_res=self.o.get("tol_res", 1e-6))
         return cert.ok, {"epsV": epsv, **cert.summary()}
@@ -211,39 +211,39 @@ class PolyLyapunov:
         epsv = 1e-3 * float(np.linalg.eigvalsh(Pq).min())
         ident = _Identity(n)  # V - epsV|y|^2 - z'Gz = 0
         ident.add_coeffs(v, basis_polys)
-        ident.add_poly(sos.quadratic(epsv * np.eye(n)), -1.0)
+        ident.add_poly(quadratic(epsv * np.eye(n)), -1.0)
         ident.add_gram(G, self.bv, s=-1.0)
         cons.append(ident.constraint())
-        one = sos.pconst(1.0, n)
+        one = pconst(1.0, n)
         for part in a["parts"]:
             cert = part["certificate"]
             # p - lam (rho - V) = SOS at level rho is p/rho - lam (1 - V/rho) for Vdot, p - rho lam (1 - V/rho) for h
-            lam = sos.gram_poly(np.asarray(cert["Q1"], float) * (1.0 if part["part"] == "Vdot" else rho),
+            lam = gram_poly(np.asarray(cert["Q1"], float) * (1.0 if part["part"] == "Vdot" else rho),
                                 [tuple(m) for m in cert["B1"]])
             ident = _Identity(n)
             if part["part"] == "Vdot":
                 # -Vdot(v) - eps|y|^2 - lam (1 - V(v)) = z'Qz
                 ident.add_coeffs(v, [lie_derivative({m: 1.0}, self.f) for m in self.mv], -1.0)
-                ident.add_poly(sos.quadratic(part["eps"] / rho * np.eye(n)), -1.0)
-                deg = max(self.d - 1 + self.deg_f, sos.degree(lam) + self.d, 2)
+                ident.add_poly(quadratic(part["eps"] / rho * np.eye(n)), -1.0)
+                deg = max(self.d - 1 + self.deg_f, degree(lam) + self.d, 2)
             else:
                 hp = self.h[int(part["part"][2:-1])]
                 ident.add_poly(hp)
-                deg = max(sos.degree(hp), sos.degree(lam) + self.d)
-            ident.add_poly(sos.pmul(lam, one), -1.0)
-            ident.add_coeffs(v, [sos.pmul(lam, b) for b in basis_polys])
+                deg = max(degree(hp), degree(lam) + self.d)
+            ident.add_poly(pmul(lam, one), -1.0)
+            ident.add_coeffs(v, [pmul(lam, b) for b in basis_polys])
             basis = _gram_basis(n, 0, deg)
             Q = cp.Variable((len(basis),) * 2, PSD=True)
             ident.add_gram(Q, basis, s=-1.0)
             cons += [Q >> 0, ident.constraint()]
         # gamma - V(v) - s (t - y'Wy) = z'Qz with the ball t of step A and s SOS: the ball lies in {V <= gamma}
         t = a["r2"]
-        sb = sos.monomials(n, 0, max(self.d - 2, 0) // 2)
+        sb = monomials(n, 0, max(self.d - 2, 0) // 2)
         S = cp.Variable((len(sb),) * 2, PSD=True)
         ident = _Identity(n)
         ident.add_coeffs(cp.reshape(gamma, (1,), order="F"), [one])
         ident.add_coeffs(v, basis_polys, -1.0)
-        ident.add_gram(S, sb, sos.padd(sos.pconst(t, n), self.ball, -1.0), s=-1.0)
+        ident.add_gram(S, sb, padd(pconst(t, n), self.ball, -1.0), s=-1.0)
         basis = _gram_basis(n, 0, max(self.d, 2 * (max(self.d - 2, 0) // 2) + 2))
         Q = cp.Variable((len(basis),) * 2, PSD=True)
         ident.add_gram(Q, basis, s=-1.0)
@@ -297,7 +297,7 @@ def estimate(problem, o: dict, fpoly: list[Poly], hpoly: list[Poly], P: np.ndarr
     t0 = time.perf_counter()
     cap = float(o.get("rho_max", 1e4 * float(np.linalg.eigvalsh(P).max())))
     search = PolyLyapunov(fpoly, hpoly, problem.W, A, o, certified)
-    best, history = search.run(sos.quadratic(P), cap)
+    best, history = search.run(quadratic(P), cap)
     ev.update(degree=d, iterations=history, time_s=time.perf_counter() - t0)
     if best is None:
         return RoAResult(0.0, "failed", method, ev, f"no validated degree-{d} level set")

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from mpgspec.compile.primitive import CompiledPrimitive
+from mpgspec.oracle.backend import HYBRID
 from mpgspec.oracle.evidence import OracleEvidence, Reason
 from mpgspec.oracle.integrator import Chunk, build_chunk, build_first
 from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidences, judge
@@ -166,11 +167,11 @@ def _non_finite(out: np.ndarray, r, end_state: bool) -> str:
 
 
 class RK4Backend:
-    """Entry point object: name, capabilities and a factory of runners."""
+    """The `rk4` entry point (an OracleBackend): it runs jump maps, so it declares HYBRID."""
 
     name = "rk4"
     description = "jit-compiled RK4, batched, early termination, error-aware three-valued verdicts"
-    capabilities = frozenset({"hybrid"})
+    capabilities = frozenset({HYBRID})
 
     @staticmethod
     def is_installed() -> bool:

@@ -13,7 +13,9 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .roa_common import RoAProblem, RoAResult, batch, bisect, inv_sqrt, linearise, rk4, rk4_flow, unit_sphere
+from mpgspec.certify.problem import RoAProblem, RoAResult
+
+from .roa_common import batch, bisect, inv_sqrt, linearise, rk4, rk4_flow, unit_sphere
 
 
 @dataclass

@@ -185,6 +185,8 @@ def _active(p: CompiledPrimitive, t: np.ndarray) -> np.ndarray:
 
 
 class ScipyBackend:
+    """The `scipy` entry point (an OracleBackend): it has no discrete part, so it declares no capability."""
+
     name = "scipy"
     description = "scipy LSODA at rtol 1e-10 with the same error-aware judge (reference, slow; no jump maps)"
     capabilities = frozenset()

@@ -1,7 +1,7 @@
 """Registry of region-of-attraction verifiers, loaded through the `mpgspec.roa` entry-point group.
 
 A verifier has `name`, `description`, `is_installed()` and `estimate(problem, options) -> RoAResult`
-(see verifiers/roa_common.py); third parties add theirs with an entry point of their package. A
+(the RoAVerifier contract of certify/problem.py); third parties add theirs with an entry point of their package. A
 verifier may list the keys of `roa.options` it reads in an `options` attribute; the spec's options
 are then checked against it (unknown keys are spec errors). The built-in verifiers' keys are listed
 here; `sos` and `lyapunov` also type their values (certify/options.py).
@@ -12,6 +12,7 @@ from functools import lru_cache
 
 from ..plugins import load_plugins
 from .options import OPTION_MODELS
+from .problem import RoAVerifier
 
 GROUP = "mpgspec.roa"
 _BUILTIN = {"lyapunov": "verifiers.lyapunov:verifier", "sos": "verifiers.sos:verifier",
@@ -27,14 +28,14 @@ BUILTIN_OPTIONS: dict[str, frozenset[str]] = {
 
 
 @lru_cache(maxsize=None)
-def roa_verifiers() -> dict[str, object]:
+def roa_methods() -> dict[str, RoAVerifier]:
     """Installed RoA verifiers by name (entry points override the built-in table)."""
     return load_plugins(GROUP, _BUILTIN)
 
 
 def option_model(name: str):
     """The pydantic model of the built-in verifier `name`'s options, when it has one (not a plug-in's)."""
-    verifier = roa_verifiers().get(name)
+    verifier = roa_methods().get(name)
     builtin = _BUILTIN.get(name, "").partition(":")[0]
     if verifier is not None and builtin and type(verifier).__module__ == builtin:
         return OPTION_MODELS.get(name)
@@ -43,7 +44,7 @@ def option_model(name: str):
 
 def accepted_options(name: str) -> frozenset[str] | None:
     """Option keys the installed verifier `name` accepts, or None when it does not say (any key)."""
-    verifier = roa_verifiers().get(name)
+    verifier = roa_methods().get(name)
     if verifier is None:
         return None
     declared = getattr(verifier, "options", None)

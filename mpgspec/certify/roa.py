@@ -21,7 +21,8 @@ from ..compile.primitive import CompiledPrimitive
 from ..errors import SpecError, SpecErrors
 from ..spec.loader import ProjectSpec
 from .level_set import level_set_of, use_level_set
-from .registry import accepted_options, option_model, roa_verifiers
+from .problem import RoAResult, from_primitive
+from .registry import accepted_options, option_model, roa_methods
 
 RANK = {"certified": 3, "empirical": 2, "given": 1, "failed": 0}
 
@@ -43,10 +44,8 @@ class RoARecord:
         return dataclasses.asdict(self)
 
 
-def _estimate(method: str, prim: CompiledPrimitive, options: dict):
-    from verifiers.roa_common import from_primitive
-
-    verifiers = roa_verifiers()
+def _estimate(method: str, prim: CompiledPrimitive, options: dict) -> RoAResult:
+    verifiers = roa_methods()
     if method not in verifiers:
         raise KeyError(f"no RoA verifier {method!r}; installed: {', '.join(sorted(verifiers))}")
     W = np.asarray(prim.info.get("roa_W", np.eye(prim.system.nx)))
@@ -78,7 +77,7 @@ def check_roa_specs(spec: ProjectSpec) -> None:
     """Every `roa.method` names an installed verifier (or 'given'), every `roa.options` key is one
     the verifier reads and, for verifiers with typed options, every value has its type and range;
     raises SpecErrors naming each wrong value, with a suggestion."""
-    verifiers = roa_verifiers()
+    verifiers = roa_methods()
     methods = sorted({"given", *verifiers})
     errors: dict[str, SpecError] = {}
     for inst in spec.primitives:

@@ -5,10 +5,10 @@
 - roa_in_safe_set: E(t) lies inside C(t) (sampled points of E plus a local worst-case search; with
   contact constraints, on the contact manifold the constrained flows stay on);
 - local_stability: eigenvalues of the closed-loop Jacobian at a fixed setpoint (Floquet
-  multipliers of the orbit for periodic primitives come from the floquet verifier).
+  multipliers of the orbit for periodic primitives, certify/monodromy.py).
 
 Periodic primitives whose state jumps (gaits under a contact schedule) are checked on the loop's
-own discrete flow (RK4 steps and impacts, verifiers.floquet_hybrid): x*(t) by its orbit defect,
+own discrete flow (RK4 steps and impacts, certify/hybrid_orbit.py): x*(t) by its orbit defect,
 stability by the multipliers of the one-period map with the ground symmetry's neutral directions
 set aside, and E on the contact manifold of the feet the schedule holds at each clock time.
 
@@ -22,7 +22,12 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
+from ..certify.hybrid_orbit import HybridFlow, orbit
+from ..certify.hybrid_orbit import monodromy as hybrid_monodromy
+from ..certify.monodromy import monodromy
+from ..certify.problem import from_primitive
 from ..compile.primitive import INACTIVE, CompiledPrimitive, held_feet
+from ..compile.rigidbody.symmetry import NEUTRAL
 from ..spec.models import PrimitiveClass
 
 S_SETTLED = 1e3  # time since switch-in at which every motion profile has finished
@@ -68,14 +73,11 @@ def _hybrid(p: CompiledPrimitive) -> bool:
 def _hybrid_orbit(p: CompiledPrimitive) -> dict:
     """Orbit defect and reduced multipliers of a gait's discrete flow (computed once per primitive)."""
     if "hybrid_orbit" not in p.cache:
-        from mpgspec.compile.rigidbody.symmetry import NEUTRAL
-        from verifiers.floquet_hybrid import HybridFlow, monodromy, orbit
-
         W = np.asarray(p.info.get("roa_W", np.eye(p.system.nx)), float)
         flow = HybridFlow(p, HYBRID_DT)
         Xs, defect, least_h = orbit(flow, W)
         neutral = list(NEUTRAL) if p.system.model.n_base else []
-        M, found = monodromy(flow, Xs[:, 0], neutral)
+        M, found = hybrid_monodromy(flow, Xs[:, 0], neutral)
         p.cache["hybrid_orbit"] = {"defect": defect, "least_h": least_h, "mu": np.linalg.eigvals(M),
                                    "neutral": {k: float(v["multiplier"]) for k, v in found.items()}}
     return p.cache["hybrid_orbit"]
@@ -282,6 +284,12 @@ def _roa_on_contact_manifold(p, tol, samples, rng, W, L, r, project, starts: int
                 if m_new >= m - 1e-12:
                     break
                 z, m = z_new, m_new
+    return _manifold_check(p, tol, samples, r, worst, raw_worst, dist, spread, feet)
+
+
+def _manifold_check(p, tol, samples, r, worst, raw_worst, dist, spread, feet) -> AssumptionCheck:
+    """The result of roa_in_safe_set on the contact manifold: least h, and how far the projection
+    moved the samples (distance to the manifold and the projected radius, in ||.||_W)."""
     ok = worst >= -tol
     dist = np.asarray(dist) if dist else np.zeros(1)
     numbers = {"min_h": worst if np.isfinite(worst) else None, "samples": samples, "interior_samples": samples,
@@ -351,9 +359,6 @@ def local_stability(p: CompiledPrimitive, rel_tol: float = 1e-6) -> AssumptionCh
 
 def floquet_stability(p: CompiledPrimitive, tol: float = 1e-6) -> AssumptionCheck:
     """Periodic primitives: Floquet multipliers of the orbit (monodromy from the variational equation)."""
-    from verifiers.floquet import monodromy
-    from verifiers.roa_common import from_primitive
-
     m = monodromy(from_primitive(p))
     if not np.isfinite(m["Phi"]).all():
         return AssumptionCheck(p.name, "local_stability", "fail", "computed",

@@ -21,7 +21,7 @@ from functools import lru_cache
 
 from .. import __version__
 from .evidence import OracleEvidence, Reason
-from .executors import Executor, Task
+from .tasks import Executor, Task
 
 
 @lru_cache(maxsize=1)

@@ -12,38 +12,17 @@ from __future__ import annotations
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
-from typing import Callable, Protocol
-
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
+from ..errors import UsageError
 from ..settings import OracleSettings
+from .cache import CachedExecutor
 from .evidence import OracleEvidence, Reason
 from .oracle import SafetyOracle
-
-Progress = Callable[[str, int, int], None]
+from .tasks import Executor, Task
 TASKS_PER_WORKER = 4
 MIN_BATCH = 16
-
-
-@dataclass
-class Task:
-    """Start points (rows of x0s, clocks t0s) of one target primitive."""
-
-    target: str
-    x0s: np.ndarray
-    t0s: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.t0s)
-
-
-class Executor(Protocol):
-    workers: int
-
-    def run(self, prims: dict[str, CompiledPrimitive], settings: OracleSettings, tasks: list[Task],
-            progress: Progress | None = None) -> list[list[OracleEvidence]]: ...
 
 
 def split(points: dict[str, tuple[np.ndarray, np.ndarray]], workers: int) -> list[Task]:
@@ -178,8 +157,6 @@ class DaskExecutor:
         try:
             from dask.distributed import Client, LocalCluster, as_completed as dask_completed
         except ImportError as err:  # pragma: no cover - depends on the installation
-            from ..errors import UsageError
-
             raise UsageError("Dask is not installed; install mpgspec with the 'dask' extra: "
                              "pip install 'mpgspec[dask]'") from err
         cluster = None
@@ -214,7 +191,5 @@ def make_executor(jobs: int = 1, dask: str | None = None, cache: bool = False) -
         jobs = min(int(jobs), os.cpu_count() or 1) if jobs > 1 else 1
         ex = ProcessPool(jobs) if jobs > 1 else InProcess()
     if cache:
-        from .cache import CachedExecutor
-
         ex = CachedExecutor(ex)
     return ex

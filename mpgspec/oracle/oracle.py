@@ -5,24 +5,9 @@ import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
 from ..settings import OracleSettings
+from .backend import CapabilityError, require_capabilities  # noqa: F401 - CapabilityError: callers catch it here
 from .evidence import OracleEvidence
-from ..errors import UsageError
 from .registry import get_backend
-
-
-class CapabilityError(UsageError):
-    """The chosen backend cannot run a primitive of the project."""
-
-
-
-def require_capabilities(backend, prim: CompiledPrimitive) -> None:
-    """Refuse, with a message naming what is missing, a backend that cannot run the primitive."""
-    missing = prim.needs - set(getattr(backend, "capabilities", ()))
-    if missing:
-        raise CapabilityError(
-            f"oracle method {backend.name!r} cannot run primitive {prim.name!r}: it lacks the capability "
-            f"{', '.join(sorted(missing))} (the state jumps at contact events or a contact schedule); "
-            f"use a backend that has it, e.g. method: rk4")
 
 
 class SafetyOracle:

@@ -9,8 +9,8 @@ import pytest
 
 from mpgspec.api import compile_project
 from mpgspec.spec.loader import load_project
+from mpgspec.certify.problem import PeriodicProblem, from_primitive
 from verifiers import floquet
-from verifiers.roa_common import PeriodicProblem, from_primitive
 
 x, t = ca.SX.sym("x", 2), ca.SX.sym("t")
 ZERO = ca.Function("xs", [t], [ca.DM.zeros(2)])

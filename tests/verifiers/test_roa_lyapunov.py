@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from mpgspec.certify.problem import RoAProblem
 from verifiers import lyapunov, sos
-from verifiers.roa_common import RoAProblem, ball_radius
+from verifiers.roa_common import ball_radius
 
 x = ca.SX.sym("x", 2)
 A = np.array([[0.0, 1.0], [-2.0, -3.0]])

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from mpgspec.certify.problem import RoAProblem
 from verifiers import polyv, sos
-from verifiers.roa_common import RoAProblem
 
 x = ca.SX.sym("x", 2)
 VDP = RoAProblem(ca.Function("f", [x], [ca.vertcat(-x[1], x[0] + (x[0] ** 2 - 1) * x[1])]), np.zeros(2),

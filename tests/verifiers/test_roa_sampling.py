@@ -6,8 +6,8 @@ import numpy as np
 
 from mpgspec.api import compile_project
 from mpgspec.spec.loader import load_project
+from mpgspec.certify.problem import RoAProblem, from_primitive
 from verifiers import lyapunov, sampling
-from verifiers.roa_common import RoAProblem, from_primitive
 
 x = ca.SX.sym("x", 2)
 VDP = RoAProblem(ca.Function("f", [x], [ca.vertcat(-x[1], x[0] + (x[0] ** 2 - 1) * x[1])]), np.zeros(2))

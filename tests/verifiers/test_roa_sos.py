@@ -5,7 +5,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from verifiers import sos
+from verifiers import sos_certificates as sos
 from verifiers.roa_common import ball_radius, validate_gram
 
 x = ca.SX.sym("x", 2)
