@@ -6,6 +6,7 @@ from pathlib import Path
 from ..errors import MpgError, SpecError, SpecErrors
 from ..oracle.executors import Executor
 from ..report.build import build_report
+from ..report.sections.registry import report_sections
 from ..spec.loader import ProjectSpec, load_project
 from .results import ProjectResult
 from .settings import settings_for
@@ -103,8 +104,7 @@ def _finish_project(res: ProjectResult, cp: CompiledProject, vg: VerifiedGraph, 
                           table=ch.table, assertions=ch.assertions, runs=ch.runs, failures=vg.failure_traces,
                           timing=timing, status=ch.status, assumptions=ch.assumptions, roa=cp.roa,
                           edge_series=vg.edge_traces, digest=_digest(cp.spec.path),
-                          robust=ch.robust.to_dict() if ch.robust is not None else None,
-                          crosscheck=ch.crosscheck.to_dict() if ch.crosscheck is not None else None)
+                          sections={name: s.data(cp, vg, ch) for name, s in report_sections().items()})
     _locate_checks(cp.spec, ch, report)
     res.status, res.report, res.compiled = ch.status, report, cp
     if out_dir is not None:

@@ -8,6 +8,7 @@ import numpy as np
 
 from .. import __version__
 from ..compile.primitive import CompiledPrimitive
+from .sections.registry import plugin_sections, report_sections
 from .compact import REASONS, STATUS, compact_cells, compact_run, compact_series, rnd
 
 SCHEMA_VERSION = "2.0"
@@ -108,14 +109,15 @@ def edge_entries(graph) -> list[dict]:
 
 def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs, failures, timing,
                  status: str, assumptions=(), roa=None, edge_series=(), digest: str | None = None,
-                 robust: dict | None = None, crosscheck: dict | None = None) -> dict:
+                 sections: dict[str, dict | None] | None = None) -> dict:
     """The report dict; see mpgspec/report/schema/report-v2.json. digest: of the spec files (see
-    mpgspec.spec.digest), so that readers can tell whether the report is up to date."""
+    mpgspec.spec.digest), so that readers can tell whether the report is up to date; sections: the
+    data of each registered report section by name (see mpgspec.report.sections)."""
     sysm = spec.system
     csys = next(iter(prims.values())).system
     bounds = {n: [float(lo), float(hi)] for n, lo, hi in zip(csys.input_names, csys.u_lo, csys.u_hi)
               if np.isfinite(lo) or np.isfinite(hi)}
-    return {
+    return {**{
         "schema_version": SCHEMA_VERSION,
         "mpgspec_version": __version__,
         "generated_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
@@ -144,9 +146,23 @@ def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs
             "runs": {m: compact_run(finite_json(r.to_dict())) for m, r in runs.items()},
         },
         "timing": timing,
-        "robust": None if robust is None else rnd(finite_json(robust)),
-        "crosscheck": None if crosscheck is None else rnd(finite_json(crosscheck)),
-    }
+    }, **section_entries(sections or {})}
+
+
+def section_entries(data: dict[str, dict | None]) -> dict:
+    """The report keys of the registered sections: each built-in one under its own key (null when
+    the project has nothing to show), the plug-ins' under `sections` (only when one is registered)."""
+    out, plugins = {}, {}
+    for name, section in report_sections().items():
+        d = data.get(name)
+        d = None if d is None else rnd(finite_json(d))
+        if section.top_level:
+            out[name] = d
+        elif d is not None:
+            plugins[name] = d
+    if plugin_sections():
+        out["sections"] = plugins
+    return out
 
 
 def _traced(f: dict) -> dict:
