@@ -8,8 +8,8 @@ import numpy as np
 
 from .. import __version__
 from ..compile.primitive import CompiledPrimitive
-from .sections.registry import plugin_sections, report_sections
 from .compact import REASONS, STATUS, compact_cells, compact_run, compact_series, rnd
+from .sections.registry import plugin_sections, report_sections
 
 SCHEMA_VERSION = "2.0"
 
