@@ -6,7 +6,6 @@ from pathlib import Path
 from ..errors import MpgError, SpecError, SpecErrors
 from ..oracle.executors import Executor
 from ..report.build import build_report
-from ..report.sections.registry import report_sections
 from ..spec.loader import ProjectSpec, load_project
 from .results import ProjectResult
 from .settings import settings_for
@@ -99,12 +98,7 @@ def _locate_checks(spec: ProjectSpec, ch: Checks, report: dict) -> None:
 def _finish_project(res: ProjectResult, cp: CompiledProject, vg: VerifiedGraph, ch: Checks, out_dir,
                     formats) -> ProjectResult:
     """The report of a project whose graph is built and checked, written when out_dir is given."""
-    timing = {**cp.timing, **vg.timing, **ch.timing}
-    report = build_report(spec=cp.spec, prims=cp.prims, graph=vg.graph, settings=cp.settings, plans=ch.plans,
-                          table=ch.table, assertions=ch.assertions, runs=ch.runs, failures=vg.failure_traces,
-                          timing=timing, status=ch.status, assumptions=ch.assumptions, roa=cp.roa,
-                          edge_series=vg.edge_traces, digest=_digest(cp.spec.path),
-                          sections={name: s.data(cp, vg, ch) for name, s in report_sections().items()})
+    report = build_report(cp, vg, ch, digest=_digest(cp.spec.path))
     _locate_checks(cp.spec, ch, report)
     res.status, res.report, res.compiled = ch.status, report, cp
     if out_dir is not None:

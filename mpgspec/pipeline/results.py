@@ -30,13 +30,12 @@ class ProjectResult:
     errors: list[dict] = field(default_factory=list)
     files: dict[str, str] = field(default_factory=dict)
     mpg: MotionPrimitiveGraph | None = None
-    compiled: "CompiledProject | None" = field(default=None, repr=False)
+    compiled: CompiledProject | None = field(default=None, repr=False)
 
     @property
     def graph(self):
         """The planner's graph: the edges plans and the lookup table may use, edge class as `class`."""
         if self.mpg is not None:
-
             G = plan_graph(self.mpg).copy()
             for _, _, d in G.edges(data=True):
                 d["class"] = d.pop("cls", d.get("class"))
@@ -66,23 +65,20 @@ class ProjectResult:
         to_dict() is what the report stores)."""
         if mode not in ("naive", "graph"):
             raise UsageError(f"mode must be 'naive' or 'graph', not {mode!r}")
+        from ..execute.sequence import simulate_sequence
+        from .reuse import compiled
+
         cp = self.compiled
         if cp is None:
             from ..spec.loader import load_project
-            from .settings import settings_for
-            from .stages import compile_stage
 
-            spec = load_project(self.path)
-            cp = compile_stage(spec, settings_for(spec))
-            self.compiled = cp
+            cp = self.compiled = compiled(load_project(self.path), cache=False)
         if cp.spec.project.sequence is None:
             raise UsageError(f"{cp.spec.path}: the project has no 'sequence'")
         if self.mpg is not None:
             g, table = self.mpg, lookup_table(self.mpg, "duration")
         else:
             g, table = ReportGraph(self.report), self.report["lookup_table"]["next"]
-        from ..execute.sequence import simulate_sequence
-
         return simulate_sequence(cp.prims, g, table, cp.spec.project.sequence, cp.settings, mode)
 
     def _repr_html_(self) -> str:

@@ -70,9 +70,11 @@ def rebuild(spec, executor=None):
     return build(spec, settings_for(spec), executor=executor or cached_executor())
 
 
-def compiled(spec):
-    """The project's closed loops with E sized (the graph is read from a report)."""
+def compiled(spec, cache: bool = True):
+    """The project's closed loops with E sized (the graph is read from a report); with cache, the
+    sizing of E is kept in (and taken from) the oracle cache."""
     from .settings import settings_for
     from .stages import compile_stage
 
-    return compile_stage(spec, settings_for(spec), memo=getattr(cached_executor(), "memo", None))
+    memo = getattr(cached_executor(), "memo", None) if cache else None
+    return compile_stage(spec, settings_for(spec), memo=memo)
