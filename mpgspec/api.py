@@ -8,6 +8,7 @@
     p.simulate("graph")                           # the goal sequence through the graph
     p.graph                                       # networkx graph the planner searches
     api.load_report("reports/pendulum")           # the same from what `mpgspec verify` wrote
+    api.write_reports(res, "reports")             # each project's report set, written as a unit
     api.plan("specs/pendulum", "Hang", "Balance") # from the verified report while it is current
 
 The stages themselves (compile_stage, graph_stage, check_stage, build) live in mpgspec.pipeline;
@@ -19,12 +20,12 @@ import importlib
 from pathlib import Path
 
 from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, UsageError  # noqa: F401
-from .pipeline.results import ProjectResult, VerifyResult, load_report
+from .pipeline.results import ProjectResult, VerifyResult, load_report, write_reports
 from .pipeline.reuse import Notify
 
 __all__ = ["verify", "load_report", "ProjectResult", "VerifyResult", "run_project", "compile_stage", "graph_stage",
            "check_stage", "build", "settings_for", "compile_project", "load_project", "discover",
-           "CompiledProject", "VerifiedGraph", "Checks", "plan", "simulate", "simulate_uncertain",
+           "CompiledProject", "VerifiedGraph", "Checks", "plan", "simulate", "simulate_uncertain", "write_reports",
            "EXIT_OK", "EXIT_CHECK_FAILED", "EXIT_USAGE"]
 
 _LAZY = {

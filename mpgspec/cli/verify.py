@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import TYPE_CHECKING
 import time
+from typing import TYPE_CHECKING
 
 from .. import api
 from ..errors import UsageError
@@ -106,28 +106,6 @@ def _check_jobs(jobs: int) -> None:
                              f"({JOBS_PER_CORE} per core, {cores} cores), not {jobs}")
 
 
-def _write(res: VerifyResult, out_dir: str, progress=None) -> None:
-    """Each project's report set into out_dir/<project>/ as a unit; a failure to write makes the
-    project an error (exit 2) with the reason, never a PASS."""
-    from ..report.files import ReportWriteError, write_project_reports
-
-    for p in res.projects:
-        if p.report is None:
-            continue
-        if progress is not None:
-            progress(p.name, "report (JSON, HTML, graph files)", 0, 1)
-        try:
-            p.files = write_project_reports(p.report, out_dir, p.report["project"]["name"])
-        except ReportWriteError as e:
-            why = str(e)
-        except Exception as e:  # noqa: BLE001 - a bug in a writer: this project's error, not the run's end
-            why = f"internal error while writing reports: {type(e).__name__}: {e}"
-        else:
-            continue
-        p.status, p.files = "error", {}
-        p.errors.append({"code": "MPG400", "file": str(p.path), "message": why, "text": f"{p.path}: MPG400 {why}"})
-
-
 def cmd_verify(args) -> int:
     overrides = {}
     if args.method:
@@ -145,7 +123,7 @@ def cmd_verify(args) -> int:
             res = api.verify(args.paths, out_dir=None, overrides=overrides, progress=show, executor=executor,
                              allow_paths=args.allow_path or None)
             if not args.no_write:
-                _write(res, args.out, show)
+                api.write_reports(res, args.out, show)
     finally:
         if show is not None:
             show.close()

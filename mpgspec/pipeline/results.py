@@ -137,3 +137,25 @@ def load_report(path) -> ProjectResult:
     return ProjectResult(Path(report.get("project", {}).get("path", "")), name, report.get("status", "error"), report,
                          files={"json": str(p / "report.json" if p.is_dir() else p),
                                 **({"html": str(html)} if html.is_file() else {})})
+
+
+def write_reports(res: VerifyResult, out_dir, progress=None) -> None:
+    """Each project's report set into out_dir/<project>/ as a unit; a failure to write makes the
+    project an error (exit 2) with the reason, never a PASS."""
+    from ..report.files import ReportWriteError, write_project_reports
+
+    for p in res.projects:
+        if p.report is None:
+            continue
+        if progress is not None:
+            progress(p.name, "report (JSON, HTML, graph files)", 0, 1)
+        try:
+            p.files = write_project_reports(p.report, out_dir, p.report["project"]["name"])
+        except ReportWriteError as e:
+            why = str(e)
+        except Exception as e:  # noqa: BLE001 - a bug in a writer: this project's error, not the run's end
+            why = f"internal error while writing reports: {type(e).__name__}: {e}"
+        else:
+            continue
+        p.status, p.files = "error", {}
+        p.errors.append({"code": "MPG400", "file": str(p.path), "message": why, "text": f"{p.path}: MPG400 {why}"})
