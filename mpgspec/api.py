@@ -20,7 +20,7 @@ import importlib
 from pathlib import Path
 
 from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, UsageError  # noqa: F401
-from .pipeline.results import ProjectResult, VerifyResult, load_report, write_reports
+from .pipeline.results import Progress, ProjectResult, VerifyResult, load_report, write_reports
 from .pipeline.reuse import Notify
 
 __all__ = ["verify", "load_report", "ProjectResult", "VerifyResult", "run_project", "compile_stage", "graph_stage",
@@ -30,7 +30,7 @@ __all__ = ["verify", "load_report", "ProjectResult", "VerifyResult", "run_projec
 
 _LAZY = {
     **dict.fromkeys(("compile_stage", "graph_stage", "check_stage", "build", "compile_project", "CompiledProject",
-                     "VerifiedGraph", "Checks", "Progress"), "mpgspec.pipeline.stages"),
+                     "VerifiedGraph", "Checks"), "mpgspec.pipeline.stages"),
     "settings_for": "mpgspec.pipeline.settings",
     "robust_stage": "mpgspec.robust.graph",
     **dict.fromkeys(("load_project", "discover", "ProjectSpec"), "mpgspec.spec.loader"),
@@ -52,7 +52,7 @@ def _stage(name: str):
     return globals()[name] if name in globals() else __getattr__(name)
 
 
-def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None, progress=None,
+def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None, progress: Progress | None = None,
                 formats: tuple[str, ...] = FORMATS, executor=None, allow_paths=None) -> ProjectResult:
     """Verify one project file and write its reports under out_dir/<project>/.
 
@@ -64,7 +64,7 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
 
 
 def verify(paths, out_dir: str | Path | None = None, overrides: dict | None = None,
-           progress=None, executor=None, allow_paths=None) -> VerifyResult:
+           progress: Progress | None = None, executor=None, allow_paths=None) -> VerifyResult:
     """Verify every project found under `paths`; reports go to out_dir (None: write nothing).
 
     progress(project, phase, done, total): told as each stage starts.

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Callable
 
 from ..certify.roa import size_regions
 from ..check.assertions import AssertionResult, evaluate_assertions, roa_requirements
@@ -28,10 +27,7 @@ from ..robust.check import check_uncertainty, check_uncertainty_compiled
 from ..robust.graph import RobustResult, robust_stage
 from ..settings import OracleSettings
 from ..spec.loader import ProjectSpec
-
-Progress = Callable[[str, str, int, int], None]
-"""progress(project, phase, done, total): called as each stage starts."""
-
+from .results import Progress
 
 def compile_project(spec: ProjectSpec) -> dict[str, CompiledPrimitive]:
     """System and every primitive of a project as CasADi Functions, keyed by node name."""
