@@ -20,8 +20,9 @@ import importlib
 from pathlib import Path
 
 from .errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, MpgError, SpecError, SpecErrors, UsageError  # noqa: F401
-from .pipeline.results import Progress, ProjectResult, VerifyResult, load_report, write_reports
+from .pipeline.results import ProjectResult, VerifyResult, load_report, write_reports
 from .pipeline.reuse import Notify
+from .progress import Progress
 
 __all__ = ["verify", "load_report", "ProjectResult", "VerifyResult", "run_project", "compile_stage", "graph_stage",
            "check_stage", "build", "settings_for", "compile_project", "load_project", "discover",

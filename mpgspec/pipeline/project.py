@@ -5,11 +5,12 @@ from pathlib import Path
 
 from ..errors import MpgError, SpecError, SpecErrors
 from ..oracle.executors import Executor
+from ..progress import Progress
 from ..report.build import build_report
 from ..spec.loader import ProjectSpec, load_project
 from .results import ProjectResult
 from .settings import settings_for
-from .stages import Checks, CompiledProject, Progress, VerifiedGraph, build, check_stage
+from .stages import Checks, CompiledProject, VerifiedGraph, build, check_stage
 
 FORMATS = ("json", "html", "dot", "graphml")
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 from ..errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, UsageError
 from ..plan.planner import hops, lookup_table, plan_graph, shortest_path
@@ -13,10 +13,6 @@ from ..report.read import ReportGraph, load_report as read
 if TYPE_CHECKING:
     from ..graph.transition import MotionPrimitiveGraph
     from .stages import CompiledProject
-
-Progress = Callable[[str, str, int, int], None]
-"""progress(project, phase, done, total): called as each stage starts."""
-
 
 @dataclass
 class ProjectResult:

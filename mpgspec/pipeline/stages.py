@@ -23,11 +23,11 @@ from ..oracle.executors import Executor, InProcess
 from ..oracle.oracle import CapabilityError, require_capabilities
 from ..oracle.registry import get_backend
 from ..plan.planner import lookup_table, shortest_plan
+from ..progress import Progress
 from ..robust.check import check_uncertainty, check_uncertainty_compiled
 from ..robust.graph import RobustResult, robust_stage
 from ..settings import OracleSettings
 from ..spec.loader import ProjectSpec
-from .results import Progress
 
 def compile_project(spec: ProjectSpec) -> dict[str, CompiledPrimitive]:
     """System and every primitive of a project as CasADi Functions, keyed by node name."""
