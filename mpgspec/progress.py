@@ -6,6 +6,10 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import Callable
+
+Progress = Callable[[str, str, int, int], None]
+"""progress(project, phase, done, total): called as each stage of a build starts (Display is one)."""
 
 PHASES = ("load", "compile", "regions of attraction", "oracle", "traces", "sequence", "robust", "assumptions",
           "report")

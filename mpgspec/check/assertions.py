@@ -1,10 +1,11 @@
 """Evaluate a project's assertions: required and forbidden edges, plans, reachability, sequences."""
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import networkx as nx
 
+from ..certify.roa import RANK
 from ..graph.transition import MotionPrimitiveGraph
 from ..plan.planner import plan_graph, shortest_plan
 from ..spec.models import (ForbidEdge, RequireConclusive, RequireEdge, RequirePlan, RequireReachable,
@@ -20,9 +21,11 @@ class AssertionResult:
     description: str
     status: str
     message: str
+    primitive: str | None = field(default=None, compare=False)
+    """The primitive whose spec the assertion comes from (roa_level), to locate it; not reported."""
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return {k: v for k, v in asdict(self).items() if k != "primitive"}
 
 
 def _edge_text(a, b):
@@ -103,4 +106,20 @@ def evaluate_assertions(assertions, g: MotionPrimitiveGraph, runs: dict) -> list
             ok = run.safe == a.expect
             msg = _run_text(run)
             out.append(AssertionResult(i, "simulation_safe", desc, "pass" if ok else "fail", msg))
+    return out
+
+
+def roa_requirements(spec, roa: dict, start: int) -> list[AssertionResult]:
+    """`roa.require` of each primitive as an assertion on the level of evidence of its radius
+    (roa: name -> the sized region's record, with level, method and radius)."""
+    out = []
+    for inst in spec.primitives:
+        need = inst.spec.roa.require
+        if need is None:
+            continue
+        rec = roa[inst.name]
+        ok = RANK[rec.level] >= RANK[need]
+        out.append(AssertionResult(start + len(out), "roa_level", f"E of {inst.name} is {need}",
+                                   "pass" if ok else "fail", f"{rec.level} by {rec.method}, r = {rec.radius:.4g}",
+                                   primitive=inst.name))
     return out

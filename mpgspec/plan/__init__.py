@@ -1,4 +1,4 @@
 """Planning over the motion primitive graph: shortest safe sequences and the lookup table."""
-from .planner import Plan, lookup_table, plan_graph, shortest_plan
+from .planner import Plan, hops, lookup_table, plan_graph, shortest_path, shortest_plan
 
-__all__ = ["Plan", "lookup_table", "plan_graph", "shortest_plan"]
+__all__ = ["Plan", "hops", "lookup_table", "plan_graph", "shortest_path", "shortest_plan"]

@@ -6,10 +6,12 @@ primitive, so in the graph used for planning its only out-edge is the one to `ne
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import networkx as nx
 
-from ..graph.transition import MotionPrimitiveGraph
+if TYPE_CHECKING:  # the planner itself needs only networkx, so that planning from a report stays light
+    from ..graph.transition import MotionPrimitiveGraph
 
 WEIGHTS = ("duration", "peak_input", "hops")
 
@@ -48,19 +50,41 @@ def plan_graph(g: MotionPrimitiveGraph) -> nx.DiGraph:
     return G
 
 
-def shortest_plan(g: MotionPrimitiveGraph, source: str, goal: str, weight: str = "duration",
-                  G: nx.DiGraph | None = None) -> Plan:
-    """Dijkstra on the chosen weight (transition duration, peak input or hop count)."""
+def shortest_path(G: nx.DiGraph, source: str, goal: str,
+                  weight: str = "duration") -> tuple[list[str] | None, float | None]:
+    """Dijkstra on the chosen weight (transition duration, peak input or hop count) over a planner's
+    graph; (None, None) when the goal cannot be reached."""
     if weight not in WEIGHTS:
         raise ValueError(f"unknown weight {weight!r}; expected one of {', '.join(WEIGHTS)}")
-    G = plan_graph(g) if G is None else G
     if source == goal:
-        return Plan(source, goal, weight, [source], 0.0)
+        return [source], 0.0
     try:
         cost, path = nx.single_source_dijkstra(G, source, goal, weight=weight)
     except (nx.NetworkXNoPath, nx.NodeNotFound):
-        return Plan(source, goal, weight, None, None)
-    return Plan(source, goal, weight, path, float(cost))
+        return None, None
+    return path, float(cost)
+
+
+def shortest_plan(g: MotionPrimitiveGraph, source: str, goal: str, weight: str = "duration",
+                  G: nx.DiGraph | None = None) -> Plan:
+    """The shortest safe sequence in g's planner graph (or in G when given)."""
+    if weight not in WEIGHTS:
+        raise ValueError(f"unknown weight {weight!r}; expected one of {', '.join(WEIGHTS)}")
+    path, cost = shortest_path(plan_graph(g) if G is None else G, source, goal, weight)
+    return Plan(source, goal, weight, path, cost)
+
+
+def hops(edge, path: list[str] | None) -> list[dict]:
+    """Each hop of a path: from, to, class, duration and the t_A windows to wait for (Class 2).
+    edge(a, b) returns an object with cls, windows and weights (a Transition or a report's)."""
+    out = []
+    for a, b in zip(path or [], (path or [])[1:]):
+        tr = edge(a, b)
+        cls = int(tr.cls) if tr is not None else None
+        out.append({"from": a, "to": b, "class": cls,
+                    "duration": (tr.weights or {}).get("duration") if tr is not None else None,
+                    "windows": [list(w) for w in tr.windows] if tr is not None and cls == 2 else []})
+    return out
 
 
 def lookup_table(g: MotionPrimitiveGraph, weight: str = "duration") -> dict[str, dict[str, str | None]]:

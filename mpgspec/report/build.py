@@ -9,6 +9,7 @@ import numpy as np
 from .. import __version__
 from ..compile.primitive import CompiledPrimitive
 from .compact import REASONS, STATUS, compact_cells, compact_run, compact_series, rnd
+from .sections.registry import plugin_sections, report_sections
 
 SCHEMA_VERSION = "2.0"
 
@@ -106,47 +107,67 @@ def edge_entries(graph) -> list[dict]:
     return out
 
 
-def build_report(*, spec, prims, graph, settings, plans, table, assertions, runs, failures, timing,
-                 status: str, assumptions=(), roa=None, edge_series=(), digest: str | None = None,
-                 robust: dict | None = None, crosscheck: dict | None = None) -> dict:
-    """The report dict; see mpgspec/report/schema/report-v2.json. digest: of the spec files (see
-    mpgspec.spec.digest), so that readers can tell whether the report is up to date."""
+def build_report(cp, vg, ch, digest: str | None = None) -> dict:
+    """The report dict of a project from its stages' results (mpgspec.pipeline: CompiledProject,
+    VerifiedGraph, Checks); see mpgspec/report/schema/report-v2.json. digest: of the spec files (see
+    mpgspec.spec.digest), so that readers can tell whether the report is up to date. Each registered
+    report section adds its data (mpgspec.report.sections)."""
+    spec, prims, graph = cp.spec, cp.prims, vg.graph
     sysm = spec.system
     csys = next(iter(prims.values())).system
     bounds = {n: [float(lo), float(hi)] for n, lo, hi in zip(csys.input_names, csys.u_lo, csys.u_hi)
               if np.isfinite(lo) or np.isfinite(hi)}
-    return {
+    return {**{
         "schema_version": SCHEMA_VERSION,
         "mpgspec_version": __version__,
         "generated_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "project": {"name": spec.name, "path": str(spec.path), "description": spec.project.description.strip(),
                     "digest": digest},
         "codes": {"status": list(STATUS), "reason": list(REASONS)},
-        "status": status,
-        "settings": asdict(settings),
+        "status": ch.status,
+        "settings": asdict(cp.settings),
         "system": {"name": sysm.name, "kind": sysm.kind, "states": list(csys.state_names),
                    "inputs": list(csys.input_names), "input_bounds": bounds},
-        "primitives": [primitive_entry(prims[i.name], i.spec, (roa or {}).get(i.name)) for i in spec.primitives],
+        "primitives": [primitive_entry(prims[i.name], i.spec, (cp.roa or {}).get(i.name)) for i in spec.primitives],
         "transitions": [transition_entry(tr, prims[tr.target].h_names) for tr in graph.transitions.values()],
         "verdicts": verdict_counts(graph),
         "edges": edge_entries(graph),
-        "failures": [_traced(f) for f in failures],
-        "edge_traces": [_traced(f) for f in edge_series],
-        "plans": [p.to_dict() for p in plans],
-        "lookup_table": table,
-        "assertions": [a.to_dict() for a in assertions],
-        "assumptions": rnd(finite_json([a.to_dict() for a in assumptions])),
-        "sequence": None if spec.project.sequence is None else {
-            "start": spec.project.sequence.start, "duration": spec.project.sequence.duration,
+        "failures": [_traced(f) for f in vg.failure_traces],
+        "edge_traces": [_traced(f) for f in vg.edge_traces],
+        "plans": [p.to_dict() for p in ch.plans],
+        "lookup_table": ch.table,
+        "assertions": [a.to_dict() for a in ch.assertions],
+        "assumptions": rnd(finite_json([a.to_dict() for a in ch.assumptions])),
+        "sequence": _sequence_entry(spec.project.sequence, csys.state_names, ch.runs),
+        "timing": {**cp.timing, **vg.timing, **ch.timing},
+    }, **section_entries({name: s.data(cp, vg, ch) for name, s in report_sections().items()})}
+
+
+def _sequence_entry(seq, state_names, runs: dict) -> dict | None:
+    """The goal sequence and its runs (mode -> SequenceRun), stored by column."""
+    if seq is None:
+        return None
+    return {"start": seq.start, "duration": seq.duration,
             "commands": [{"t": c.t, "goal": c.goal, **({"reference": list(c.reference)} if c.reference else {})}
-                         for c in spec.project.sequence.commands],
-            "state_names": list(csys.state_names),
-            "runs": {m: compact_run(finite_json(r.to_dict())) for m, r in runs.items()},
-        },
-        "timing": timing,
-        "robust": None if robust is None else rnd(finite_json(robust)),
-        "crosscheck": None if crosscheck is None else rnd(finite_json(crosscheck)),
-    }
+                         for c in seq.commands],
+            "state_names": list(state_names),
+            "runs": {m: compact_run(finite_json(r.to_dict())) for m, r in runs.items()}}
+
+
+def section_entries(data: dict[str, dict | None]) -> dict:
+    """The report keys of the registered sections: each built-in one under its own key (null when
+    the project has nothing to show), the plug-ins' under `sections` (only when one is registered)."""
+    out, plugins = {}, {}
+    for name, section in report_sections().items():
+        d = data.get(name)
+        d = None if d is None else rnd(finite_json(d))
+        if section.top_level:
+            out[name] = d
+        elif d is not None:
+            plugins[name] = d
+    if plugin_sections():
+        out["sections"] = plugins
+    return out
 
 
 def _traced(f: dict) -> dict:

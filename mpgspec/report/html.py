@@ -15,6 +15,7 @@ from markupsafe import Markup
 
 from . import fig6, svg
 from .compact import readable
+from .sections.registry import report_sections, section_data
 from .traversal import command_rows
 
 SYMBOLS = {"fixed": "□", "periodic": "○", "transient": "◇"}
@@ -123,62 +124,50 @@ def _summary(report: dict, ids: Anchors) -> dict:
                                   f"{sum(e['class'] == 2 for e in edges)} Class 2"
                                   + (f", {sum(e.get('usable') is False for e in edges)} not usable by the planner"
                                      if any(e.get("usable") is False for e in edges) else "")),
-            *([_robust_count(report["robust"])] if report.get("robust") else []),
+            *_section_counts(report, "edges"),
             ("oracle calls", (report.get("verdicts") or {}).get("total", "–"),
              ", ".join(f"{(report.get('verdicts') or {}).get(k, 0)} {k}" for k in ("safe", "unsafe", "inconclusive"))),
             ("assertions", len(asserts), _counts(asserts)),
             ("assumption checks", len(assumed), _counts(assumed)),
             *([("sequence runs", len(runs), ", ".join(f"{m} {'safe' if r.get('safe') else 'unsafe'}"
                                                        for m, r in runs.items()))] if runs else []),
-            *([_crosscheck_count(report["crosscheck"])] if report.get("crosscheck") else []),
+            *_section_counts(report, "sequence"),
         ],
     }
 
 
-def _robust_count(rob: dict) -> tuple:
-    """The summary line of the robust graph: edges that survive uncertainty, the nominal-only ones and
-    the safe runs of the goal sequence under sampled uncertainty per mode."""
-    sm = rob.get("summary") or {}
-    lost = sm.get("nominal_only") or []
-    runs = ((rob.get("sequence") or {}).get("modes") or {}).items()
-    names = {"graph": "nominal graph", "robust_graph": "robust graph"}
-    seq = "; disturbed sequence safe: " + ", ".join(f"{names.get(m, m)} {x['safe_runs']}/{x['runs']}" for m, x in runs)
-    return ("robust edges", sm.get("robust_edges", "–"),
-            f"of {sm.get('nominal_edges', '–')}; " + (f"nominal only: {', '.join(lost)}" if lost else "none lost")
-            + (seq if runs else "") + " (empirical)")
+def _present(report: dict, after: str):
+    """The registered report sections placed after the page section `after`, with their data, where
+    the report has some."""
+    for section in report_sections().values():
+        data = section_data(report, section)
+        if data and section.after == after:
+            yield section, data
 
 
-def _crosscheck_count(xc: dict) -> tuple:
-    """The summary line of the cross-check: how many replayed runs agree with mpgspec's verdict."""
-    runs = xc.get("runs") or {}
-    agree = sum(bool(r.get("agree")) for r in runs.values())
-    sim = SIMULATORS.get(xc.get("simulator"), str(xc.get("simulator")))
-    return (f"cross-check in {sim}", f"{agree} / {len(runs)}",
-            "runs agree" + "".join(f"; {m} disagrees" for m, r in runs.items() if not r.get("agree")))
+def _section_counts(report: dict, after: str) -> list[tuple]:
+    """The summary lines of the sections placed after `after`."""
+    return [c for section, data in _present(report, after) if section.count and (c := section.count(data))]
 
 
-SIMULATORS = {"mujoco": "MuJoCo"}
-"""How simulator names are written in the report."""
+@lru_cache(maxsize=None)
+def _section_template(name: str, text: str) -> jinja2.Template:
+    """A section's template part; it keeps its last newline, so that it ends its own lines in the page."""
+    env = jinja2.Environment(autoescape=True, trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True,
+                             undefined=jinja2.StrictUndefined)
+    env.filters.update(_env().filters)
+    return env.from_string(text)
 
 
-def _crosscheck(report: dict) -> dict | None:
-    """Each replayed run with its plots: CoM height and least h, simulator vs mpgspec."""
-    xc = report.get("crosscheck")
-    if not xc:
-        return None
-    sim = SIMULATORS.get(xc.get("simulator"), str(xc.get("simulator")))
-    runs = []
-    for mode, r in (xc.get("runs") or {}).items():
-        s = r.get("series") or {}
-        pics = []
-        for key, title, label in (("com_z", f"{mode}: CoM height", "m"), ("least_h", f"{mode}: least active h", "h")):
-            pair = s.get(key) or {}
-            pics.append(Markup(svg.series_svg(s.get("t") or [], {sim: pair.get("mujoco") or [],
-                                                                 "mpgspec": pair.get("mpgspec") or []},
-                                              title=title, ylabel=label, zero_line=key == "least_h",
-                                              shade_negative=key == "least_h", width=420, height=200)))
-        runs.append({"mode": mode, "run": r, "svgs": pics})
-    return {"simulator": sim, "runs": runs}
+def _sections(report: dict, v: dict) -> dict[str, list[dict]]:
+    """Each registered section present in the report, rendered, by the page section it follows."""
+    out = {}
+    for after in ("edges", "sequence"):
+        out[after] = [{"anchor": s.anchor or s.name, "label": s.label or s.name,
+                       "html": Markup(_section_template(s.name, s.template).render(
+                           r=report, v=v, s=data, sv=s.view(data) if s.view else None))}
+                      for s, data in _present(report, after)]
+    return out
 
 
 def _counts(items) -> str:
@@ -245,7 +234,7 @@ def view(report: dict) -> dict:
               "trace": ids.pair("trace", e["from"], e["to"])} for e in report["edges"]]
     edge_methods = Counter(x["tr"]["method"] if x["tr"] else "unknown" for x in edges)
     graph = svg.graphviz_svg(report)
-    return {
+    v = {
         "ids": ids,
         "summary": _summary(report, ids),
         "assertion_links": {a["index"]: assertion_link(a, report, ids) for a in report["assertions"]},
@@ -265,10 +254,11 @@ def view(report: dict) -> dict:
         "edge_traces": _failures(report, ids, "edge_traces"),
         "names": names,
         "sequence": _sequence(report),
-        "crosscheck": _crosscheck(report),
         "assert_counts": dict(Counter(a["status"] for a in report["assertions"])),
         "cell_colors": svg.CELL_COLORS,
     }
+    v["sections"] = _sections(report, v)
+    return v
 
 
 def render_html(report: dict) -> str:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import networkx as nx
 
-WEIGHTS = ("duration", "peak_input", "hops")
+from ..plan.planner import WEIGHTS
 
 
 def load_report(path) -> dict:
@@ -103,29 +103,3 @@ class ReportGraph:
         G.add_nodes_from(self.G.nodes(data=True))
         G.add_edges_from((a, b, d) for a, b, d in self.G.edges(data=True) if d.get("usable", True))
         return G
-
-
-def shortest_path(G: nx.DiGraph, source: str, goal: str, weight: str = "duration") -> tuple[list[str] | None, float | None]:
-    """Dijkstra on the planner's graph, as mpgspec.plan.planner.shortest_plan."""
-    if weight not in WEIGHTS:
-        raise ValueError(f"unknown weight {weight!r}; expected one of {', '.join(WEIGHTS)}")
-    if source == goal:
-        return [source], 0.0
-    try:
-        cost, path = nx.single_source_dijkstra(G, source, goal, weight=weight)
-    except (nx.NetworkXNoPath, nx.NodeNotFound):
-        return None, None
-    return path, float(cost)
-
-
-def hops(edge, path: list[str] | None) -> list[dict]:
-    """Each hop of a path: from, to, class, duration and the t_A windows to wait for (Class 2).
-    edge(a, b) returns an object with cls, windows and weights (a ReportTransition or a Transition)."""
-    out = []
-    for a, b in zip(path or [], (path or [])[1:]):
-        tr = edge(a, b)
-        cls = int(tr.cls) if tr is not None else None
-        out.append({"from": a, "to": b, "class": cls,
-                    "duration": (tr.weights or {}).get("duration") if tr is not None else None,
-                    "windows": [list(w) for w in tr.windows] if tr is not None and cls == 2 else []})
-    return out

@@ -7,11 +7,14 @@ sequence runs by column and rounds floats (see compact.py).
 from __future__ import annotations
 
 import json
+from functools import lru_cache
 from importlib.resources import files
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, create_model, model_validator
+
+from .sections.registry import plugin_sections, report_sections
 
 SCHEMA_FILE = "schema/report-v2.json"
 SCHEMA_ID = "https://mpgspec.invalid/schema/report-v2.json"
@@ -300,104 +303,7 @@ class Sequence(_Strict):
     runs: dict[str, Run]
 
 
-class CrossCheckSwitch(_Strict):
-    t: float
-    from_: str | None = Field(default=None, alias="from")
-    to: str
-    clock: float
-    roa_margin: Num = Field(description="margin of E of the primitive left, at the simulator's state (> 0: inside)")
-
-
-class CrossCheckVerdict(_Strict):
-    safe: bool
-    first_violation: Violation | None
-    violation_samples: int = Field(description="samples at which some active h < -tolerance (mpgspec: recorded ones)")
-    failed: str
-
-
-class CrossCheckCom(_Strict):
-    max: float = Field(description="largest distance between the two centres of mass, metres")
-    t: float
-    mpgspec: list[Num]
-    mujoco: list[Num]
-
-
-class CrossCheckJoint(_Strict):
-    max: float = Field(description="largest |q_mujoco - q_mpgspec| over the joints, radians")
-    t: float
-    joint: str
-
-
-class CrossCheckDivergence(_Strict):
-    samples: int = Field(description="mpgspec's samples compared, each with the nearest control update")
-    com: CrossCheckCom | None
-    joint: CrossCheckJoint | None
-    until: Num = Field(description="the first violation in either simulator; the two may part for good after it")
-    com_until: Num = Field(description="largest CoM divergence up to `until`, metres")
-    joint_until: Num = Field(description="largest joint divergence up to `until`, radians")
-
-
-class CrossCheckWorst(_Strict):
-    primitive: str
-    h: str
-    mujoco: Num = Field(description="least value in the simulator")
-    t: float
-    violated_in_mpgspec: bool = Field(description="whether it is among the violations mpgspec's run recorded "
-                                                  "(its first 50 violation samples)")
-
-
-class CrossCheckFoot(_Strict):
-    t: float
-    foot: str
-    primitive: str | None = None
-
-
-class CrossCheckContact(_Strict):
-    max_penetration: Num = Field(description="deepest foot below z = 0, metres")
-    max_slip_speed: Num = Field(description="largest horizontal speed of a held foot's contact point, m/s")
-    slip_at: CrossCheckFoot | None
-    lift_off: CrossCheckFoot | None = Field(description="the first time a foot the primitive holds left the floor")
-    trunk_contact: Num = Field(description="the first time the trunk touched the floor")
-
-
-class CrossCheckPair(_Strict):
-    mujoco: list[Num]
-    mpgspec: list[Num]
-
-
-class CrossCheckSeries(_Strict):
-    t: list[float]
-    com_z: CrossCheckPair
-    least_h: CrossCheckPair
-
-
-class CrossCheckRun(_Strict):
-    """One sequence run replayed in the simulator and compared with mpgspec's rollout."""
-
-    mode: str
-    agree: bool = Field(description="both say safe, or both unsafe")
-    mujoco: CrossCheckVerdict
-    mpgspec: CrossCheckVerdict
-    switches: list[CrossCheckSwitch]
-    divergence: CrossCheckDivergence
-    worst: list[CrossCheckWorst] = Field(description="the least margin of each kind of h in the simulator")
-    contact: CrossCheckContact
-    start_offset: Num = Field(description="distance of the settled start configuration from x*(t0)")
-    wall_s: float
-    series: CrossCheckSeries
-
-
-class CrossCheck(_Strict):
-    """The sequence's runs replayed in an independent simulator with the same compiled control laws."""
-
-    simulator: str
-    settings: dict[str, Any]
-    model: dict[str, Any] = Field(description="what the simulator's model was built from and holds")
-    agree: bool
-    runs: dict[str, CrossCheckRun]
-
-
-class Report(_Strict):
+class ReportCore(_Strict):
     """One project's verification report; the HTML, DOT and GraphML files are rendered from it."""
 
     model_config = ConfigDict(extra="forbid", populate_by_name=True, title="mpgspec report v2")
@@ -421,21 +327,39 @@ class Report(_Strict):
     assumptions: list[AssumptionCheck] = Field(default_factory=list)
     sequence: Sequence | None
     timing: dict[str, float]
-    robust: dict | None = Field(default=None, description="the robust graph (mpgspec.robust): edges that "
-                                "withstood the project's uncertainty in every scenario tried; empirical, not proof")
-    crosscheck: CrossCheck | None = Field(default=None, description="the sequence's runs replayed in an "
-                                          "independent simulator (mpgspec.execute.crosscheck)")
+
+
+@lru_cache(maxsize=1)
+def _report_model(names: tuple[str, ...]) -> type[BaseModel]:
+    sections = report_sections()
+    fields = {n: (sections[n].model | None, Field(default=None, description=sections[n].description))
+              for n in names if sections[n].top_level}
+    fields["sections"] = (dict[str, dict[str, Any]] | None, Field(
+        default=None, description="the data of report sections added as plug-ins (entry-point group "
+                                  "mpgspec.report_sections), by name; absent when none is installed"))
+    return create_model("Report", __base__=ReportCore, __doc__=ReportCore.__doc__, **fields)
+
+
+def report_model() -> type[BaseModel]:
+    """The report's model: the core fields, then each built-in section's, then `sections`, where the
+    plug-in sections' data goes (each checked against its own model by validate_report)."""
+    return _report_model(tuple(report_sections()))
 
 
 def validate_report(d: dict) -> None:
-    """Raise pydantic.ValidationError when d does not match the report schema."""
-    Report.model_validate(d)
+    """Raise pydantic.ValidationError when d does not match the report schema (a plug-in section's
+    data, too, against its own model)."""
+    report_model().model_validate(d)
+    for name, section in plugin_sections().items():
+        data = (d.get("sections") or {}).get(name)
+        if data is not None:
+            section.validate(data)
 
 
 def report_schema() -> dict:
     """JSON Schema of the report (by alias: 'from', 'class')."""
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": SCHEMA_ID,
-            **Report.model_json_schema(by_alias=True)}
+            **report_model().model_json_schema(by_alias=True)}
 
 
 def schema_path() -> Path:

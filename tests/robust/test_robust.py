@@ -126,7 +126,8 @@ def test_no_uncertainty_reproduces_the_nominal_graph(tmp_path):
 
 
 def test_planner_on_robust_edges_from_the_report(built, rob):
-    from mpgspec.report.read import ReportGraph, shortest_path
+    from mpgspec.plan.planner import shortest_path
+    from mpgspec.report.read import ReportGraph
     from mpgspec.robust.plan import robust_report_graph
 
     cp, vg = built

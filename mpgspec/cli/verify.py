@@ -1,0 +1,139 @@
+"""`mpgspec verify`: every project through mpgspec.api.verify, its reports written as a unit, the
+result as text, JSON or GitHub annotations with a step summary."""
+from __future__ import annotations
+
+import os
+import sys
+import time
+from typing import TYPE_CHECKING
+
+from .. import api
+from ..errors import UsageError
+from ..streams import stdout_to_stderr
+from .output import MARK, _annotation, _json_doc, _line, _num, _print_errors, _progress
+
+JOBS_PER_CORE = 4
+
+if TYPE_CHECKING:
+    from ..pipeline.results import VerifyResult
+
+
+def _step_summary(res) -> None:
+    """A Markdown table of the run appended to $GITHUB_STEP_SUMMARY (when set)."""
+    path = os.environ.get("GITHUB_STEP_SUMMARY")
+    if not path:
+        return
+
+    def cell(v) -> str:
+        return str(v).replace("|", "\\|").replace("\n", " ")
+
+    rows = ["| project | result | primitives | edges | oracle calls | assertions | warnings |",
+            "|---|---|---|---|---|---|---|"]
+    for p in res.projects:
+        if p.report is None:
+            why = "; ".join(e.get("message", "") for e in p.errors)[:300]
+            rows.append(f"| {cell(p.name or p.path)} | ERROR | {cell(why)} | | | | |")
+            continue
+        r = p.report
+        a = r.get("assertions", [])
+        warns = sum(c["status"] == "warn" for c in r.get("assumptions", []))
+        failed = [x for x in a if x["status"] != "pass"]
+        rows.append("| " + " | ".join(cell(v) for v in (
+            p.name or p.path, MARK.get(p.status, p.status.upper()), len(r.get("primitives", [])), len(r.get("edges", [])),
+            (r.get("timing") or {}).get("oracle_calls", "–"),
+            f"{len(a) - len(failed)}/{len(a)} pass" + (f" (failed: {'; '.join(x['description'] for x in failed)})"
+                                                        if failed else ""), warns)) + " |")
+        for e in p.errors:  # e.g. the reports could not be written
+            rows.append(f"| {cell(p.name or p.path)} | ERROR | {cell(e.get('message', ''))} | | | | |")
+    try:
+        with open(path, "a", encoding="utf-8") as f:
+            f.write("### mpgspec verify\n\n" + "\n".join(rows) + "\n\n")
+    except OSError as e:
+        print(f"mpgspec: cannot write the step summary {path}: {e}", file=sys.stderr)
+
+
+def _inconclusive(r: dict) -> str:
+    v = r.get("verdicts") or {}
+    return f", {v['inconclusive']} inconclusive" if v.get("inconclusive") else ""
+
+
+def _cached(t: dict) -> str:
+    return f", {int(t['cache_hits'])} from the cache" if t.get("cache_hits") else ""
+
+
+def _human(res: VerifyResult, fmt: str):
+    def out(text: str):
+        print(_line(text, fmt))
+
+    for p in res.projects:
+        if p.report is None:
+            out(f"{MARK['error']} {p.path}")
+            _print_errors(p.errors, fmt)
+            continue
+        r = p.report
+        t = r["timing"]
+        total = sum(v for k, v in t.items() if k.endswith("_s") and not k.endswith("per_s")
+                    and isinstance(v, (int, float)))
+        out(f"{MARK[p.status]} {p.name}: {len(r['primitives'])} primitives, {len(r['edges'])} edges, "
+            f"{t['oracle_calls']} oracle calls (simulated) in {_num(t['graph_s'], '.2f')} s"
+            f"{_inconclusive(r)}{_cached(t)}; {_num(total, '.1f')} s for the project")
+        for e in r["edges"]:
+            out(f"    {e['from']} -> {e['to']}  class {e['class']}  duration {_num(e.get('duration') or 0)} s")
+        for a in r["assertions"]:
+            if fmt == "github" and a["status"] != "pass":
+                print(_annotation("error", f"{a['description']}: {a['message']}", a.get("location"),
+                                  "mpgspec assertion", file=p.path))
+            else:
+                out(f"  {MARK[a['status']]:5} {a['description']}: {a['message']}")
+        for c in r.get("assumptions", []):
+            if c["status"] == "pass":
+                continue
+            text = f"assumption {c['name']} of {c['primitive']}: {c['message']}"
+            if fmt == "github":
+                print(_annotation("warning" if c["status"] == "warn" else "error", text, c.get("location"),
+                                  "mpgspec assumption", file=p.path))
+            else:
+                out(f"  {c['status'].upper():5} {text}")
+        for k, path in p.files.items():
+            out(f"  wrote {k}: {path}")
+        _print_errors(p.errors, fmt)
+
+
+def _check_jobs(jobs: int) -> None:
+    cores = os.cpu_count() or 1
+    if not 1 <= jobs <= JOBS_PER_CORE * cores:
+        raise UsageError(f"--jobs must be between 1 and {JOBS_PER_CORE * cores} "
+                             f"({JOBS_PER_CORE} per core, {cores} cores), not {jobs}")
+
+
+def cmd_verify(args) -> int:
+    overrides = {}
+    if args.method:
+        overrides["method"] = args.method
+    from ..oracle.executors import make_executor
+
+    from ..progress import summary
+
+    _check_jobs(args.jobs)
+    t0 = time.perf_counter()
+    show = None if args.quiet else _progress(sys.stderr, args.format)
+    try:
+        with stdout_to_stderr():  # solver logs and prints of the pipeline go to stderr
+            executor = make_executor(args.jobs, args.dask or args.scheduler, cache=not args.no_cache)
+            res = api.verify(args.paths, out_dir=None, overrides=overrides, progress=show, executor=executor,
+                             allow_paths=args.allow_path or None)
+            if not args.no_write:
+                api.write_reports(res, args.out, show)
+    finally:
+        if show is not None:
+            show.close()
+    args.exit_code = res.exit_code
+    if args.format == "json":
+        print(_json_doc(res))
+    else:
+        _human(res, args.format)
+        if len(res.projects) > 1 or not args.quiet:
+            print(_line(summary(res.projects, time.perf_counter() - t0), args.format))
+    if args.format == "github":
+        _step_summary(res)
+    return res.exit_code

@@ -1,0 +1,177 @@
+"""The stages of a build, each with its typed result: compile (closed loops as CasADi Functions, E
+sized), graph (Algorithm 1 and the traces the report shows), checks (plans, sequence runs,
+assertions, cross-check, robust graph, Definition-1 assumptions and the verdict)."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from ..certify.roa import size_regions
+from ..check.assertions import AssertionResult, evaluate_assertions, roa_requirements
+from ..check.crosscheck import agreement_assertions
+from ..check.severity import check_assumptions
+from ..compile.primitive import CompiledPrimitive, compile_primitive
+from ..compile.system import compile_system
+from ..errors import SpecError
+from ..execute.crosscheck import CrossCheckResult, crosscheck_runs
+from ..execute.crosscheck.settings import settings_of as crosscheck_settings
+from ..execute.sequence import simulate_sequence
+from ..graph.build import build_graph
+from ..graph.traces import edge_traces, failure_traces
+from ..graph.transition import MotionPrimitiveGraph
+from ..oracle.executors import Executor, InProcess
+from ..oracle.oracle import CapabilityError, require_capabilities
+from ..oracle.registry import get_backend
+from ..plan.planner import lookup_table, shortest_plan
+from ..progress import Progress
+from ..robust.check import check_uncertainty, check_uncertainty_compiled
+from ..robust.graph import RobustResult, robust_stage
+from ..settings import OracleSettings
+from ..spec.loader import ProjectSpec
+
+def compile_project(spec: ProjectSpec) -> dict[str, CompiledPrimitive]:
+    """System and every primitive of a project as CasADi Functions, keyed by node name."""
+    sys = compile_system(spec)
+    return {inst.name: compile_primitive(inst, sys) for inst in spec.primitives}
+
+
+@dataclass
+class CompiledProject:
+    """Compile stage: the project's closed loops with their regions of attraction sized."""
+
+    spec: ProjectSpec
+    settings: OracleSettings
+    prims: dict[str, CompiledPrimitive]
+    roa: dict
+    timing: dict
+
+
+@dataclass
+class VerifiedGraph:
+    """Graph stage: Algorithm 1's graph with its evidence, and the rollouts the report shows."""
+
+    graph: MotionPrimitiveGraph
+    edge_traces: list[dict]
+    failure_traces: list[dict]
+    timing: dict
+
+
+@dataclass
+class Checks:
+    """Check stage: plans, sequence runs, assertions and Definition-1 assumptions, with the verdict."""
+
+    plans: list
+    table: dict
+    runs: dict
+    assertions: list[AssertionResult]
+    assumptions: list
+    status: str
+    timing: dict
+    robust: RobustResult | None = None  # the robust graph when the project declares `uncertainty`
+    crosscheck: CrossCheckResult | None = None  # the runs replayed in MuJoCo when the project asks
+
+
+def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
+                  memo=None) -> CompiledProject:
+    """Closed loops of every primitive, refused early when the backend cannot run them; E sized
+    (memo: mpgspec.oracle.cache.Memo, to reuse the sizing of unchanged primitives)."""
+    t0 = time.perf_counter()
+    check_uncertainty(spec)
+    crosscheck_settings(spec)  # a cross-check that cannot run is a spec error before anything is built
+    if progress:
+        progress(spec.name, "compile (closed loops as CasADi functions)", 0, len(spec.primitives))
+    prims = compile_project(spec)
+    check_uncertainty_compiled(spec, prims)
+    _check_capabilities(spec, settings, prims)
+    for p in prims.values():  # a control period must be a whole number of oracle steps
+        if p.sampled is not None:
+            p.sampled.steps(settings.dt)
+    t1 = time.perf_counter()
+    if progress:
+        progress(spec.name, "regions of attraction", 0, len(prims))
+    roa = size_regions(spec, prims, memo)
+    return CompiledProject(spec, settings, prims, roa,
+                           {"compile_s": t1 - t0, "roa_s": time.perf_counter() - t1})
+
+
+def graph_stage(cp: CompiledProject, progress: Progress | None = None,
+                executor: Executor | None = None) -> VerifiedGraph:
+    """Algorithm 1 through the executor, then the traces of every edge and of the closest failures."""
+    spec, prims, settings = cp.spec, cp.prims, cp.settings
+    executor = executor or InProcess()
+    cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
+    before = dict(getattr(executor, "stats", {}))
+    t0 = time.perf_counter()
+    if progress:
+        progress(spec.name, "oracle (JIT-compiling the rollouts unless cached)", 0, 0)
+    g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, executor)
+    t1 = time.perf_counter()
+    names = list(prims)
+    pairs = [(a, b) for a in names for b in names if a != b]
+    if progress:
+        progress(spec.name, "traces of the edges and failed pairs", 0, 0)
+    edges, failures = edge_traces(g, prims, settings), failure_traces(g, prims, settings, pairs)
+    calls = sum(len(tr.t_A) * len(tr.t_B) for tr in g.transitions.values())
+    timing = {"graph_s": t1 - t0, "oracle_calls": calls, "oracle_calls_per_s": calls / max(t1 - t0, 1e-9),
+              "traces_s": time.perf_counter() - t1,
+              **{k: v - before.get(k, 0) for k, v in getattr(executor, "stats", {}).items()}}  # this project's
+    return VerifiedGraph(g, edges, failures, timing)
+
+
+def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | None = None, memo=None) -> Checks:
+    """Plans, the goal sequence naive and through the graph, assertions and assumptions."""
+    spec, prims, settings, g = cp.spec, cp.prims, cp.settings, vg.graph
+    t0 = time.perf_counter()
+    names = list(prims)
+    plans = [shortest_plan(g, a, b, "duration") for a in names for b in names if a != b]
+    table = {"weight": "duration", "next": lookup_table(g, "duration")}
+    runs = {}
+    if spec.project.sequence is not None:
+        if progress:
+            progress(spec.name, "sequence", 0, 2)
+        for mode in ("naive", "graph"):
+            runs[mode] = simulate_sequence(prims, g, table["next"], spec.project.sequence, settings, mode)
+    checks = evaluate_assertions(spec.project.assertions, g, runs)
+    checks += roa_requirements(spec, cp.roa, start=len(checks))
+    t_x = time.perf_counter()
+    xcs, xc = crosscheck_settings(spec), None
+    if xcs is not None and runs:
+        if progress:
+            progress(spec.name, f"cross-check ({xcs.simulator})", 0, len(xcs.runs))
+        xc = crosscheck_runs(prims, runs, spec.project.sequence.duration, xcs, settings.h_tolerance, memo=memo)
+        if xcs.require_agreement:
+            checks += agreement_assertions(xc, start=len(checks))
+    t1 = time.perf_counter()
+    robust = robust_stage(cp, vg, progress, memo)
+    if robust is not None:
+        for a in robust.assertions:
+            a.index = len(checks)
+            checks.append(a)
+    t2 = time.perf_counter()
+    if progress:
+        progress(spec.name, "assumptions (Definition 1)", 0, len(prims))
+    assumed = check_assumptions(prims, spec.project.assumptions, memo)
+    st = [c.status for c in checks] + [a.status for a in assumed]
+    status = "error" if "error" in st else "fail" if "fail" in st else "pass"
+    return Checks(plans, table, runs, checks, assumed, status,
+                  {"plan_execute_s": t_x - t0, **({"crosscheck_s": t1 - t_x} if xc is not None else {}),
+                   "robust_s": t2 - t1, "assumptions_s": time.perf_counter() - t2}, robust, xc)
+
+
+def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
+          executor: Executor | None = None) -> tuple[CompiledProject, VerifiedGraph]:
+    """Compile and run Algorithm 1; a caching executor also lends its memo to the sizing of E."""
+    cp = compile_stage(spec, settings, progress, getattr(executor, "memo", None))
+    return cp, graph_stage(cp, progress, executor)
+
+
+def _check_capabilities(spec: ProjectSpec, settings: OracleSettings, prims: dict[str, CompiledPrimitive]) -> None:
+    """A backend that cannot run a primitive is the project's error, located at oracle.method."""
+    backend = get_backend(settings.method)
+    for p in prims.values():
+        try:
+            require_capabilities(backend, p)
+        except CapabilityError as err:
+            raise SpecError(str(err), location=spec.locate(("oracle", "method")), key="oracle.method",
+                            expected="a backend with the capabilities " + ", ".join(sorted(p.needs)),
+                            found=repr(settings.method), code="MPG120") from None
