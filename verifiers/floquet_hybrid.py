@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 
 from .roa_common import PeriodicProblem, RoAResult, bisect, unit_sphere
-from mpgspec.compile.primitive import held_feet
+from mpgspec.compile.contacts import Schedule, held_feet
 
 FD = 1e-6
 S_LONG = 1e6  # time since switch-in: long after any motion profile
@@ -27,7 +27,8 @@ class HybridFlow:
     """Compiled steps, periods and tubes of a compiled primitive's discrete flow."""
 
     def __init__(self, prim, dt: float):
-        from mpgspec.oracle.integrator import LEFT, compile_cached, rk4_jump
+        from mpgspec.oracle.flow import LEFT, rk4_jump
+        from mpgspec.oracle.integrator import compile_cached
 
         self.prim, self.dt = prim, float(dt)
         T = float(prim.period)
@@ -41,7 +42,7 @@ class HybridFlow:
         f = lambda xx, tt: prim.f_cl(xx, tt, S_LONG, xs0)  # noqa: E731
         k = lambda xx, tt: prim.control(xx, tt, S_LONG, xs0)[1]  # noqa: E731
         h = self.dt
-        xn = rk4_jump(f, k, prim.jump, x, t, h, LEFT if prim.info.get("contact_schedule") else 0.0)
+        xn = rk4_jump(f, k, prim.jump, x, t, h, LEFT if isinstance(prim.contacts, Schedule) else 0.0)
         hv = prim.h(xn, t + h, S_LONG, xs0)
         mn = ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
         body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn)])
@@ -144,7 +145,7 @@ def _size(flow: HybridFlow, problem: PeriodicProblem, Xs: np.ndarray, W: np.ndar
     w, U = np.linalg.eigh(0.5 * (W + W.T))
     keep = w > 1e-12 * max(w.max(), 1e-300)
     Wi = (U[:, keep] / np.sqrt(w[keep])) @ U[:, keep].T  # pseudo-inverse root: unweighted states are not moved
-    held = held_feet(prim)
+    held = held_feet(prim.contacts)
     log = []
 
     def starts(r):

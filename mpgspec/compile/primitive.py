@@ -6,135 +6,22 @@ oracle composes them; nothing here integrates.
 """
 from __future__ import annotations
 
-import dataclasses
-import hashlib
-import pickle
-import re
-from dataclasses import dataclass, field
-
 import casadi as ca
 import numpy as np
 
 from ..errors import SpecError, SpecErrors
 from ..spec.loader import PrimitiveInstance
 from ..spec.models import PrimitiveClass
+from .closed_loop import CompiledPrimitive, function_name, roa_margin_function
+from .contacts import Events, Fixed, Schedule, plan_jump, wrap_clock
 from .controllers import LAWS, ControlContext
-from .events import EventWindow, event_window
-from .hold import SampledLaw
+from .events import event_window
 from .expr_casadi import interp_cubic, interp_linear
 from .exprs import ExprCompiler
 from .system import CompiledSystem, shadowing_error, taken_names
 
 INACTIVE = 1e9
 """Value of a safety function outside its active window: never binding."""
-
-
-@dataclass
-class CompiledPrimitive:
-    """A motion primitive as CasADi Functions plus the numbers the graph builder needs."""
-
-    name: str
-    cls: PrimitiveClass
-    system: CompiledSystem
-    period: float | None
-    domain: tuple[float, float] | None
-    next: str | None
-    horizon: float | None
-    grid_A: int
-    grid_B: int
-    h_names: list[str]
-    radius: float
-    f_cl: ca.Function  # (x, t, s, x_sw) -> xdot under the saturated control law
-    control: ca.Function  # (x, t, s, x_sw) -> (u_raw, u_sat)
-    h: ca.Function  # (x, t, s, x_sw) -> h values; >= 0 is safe
-    roa_margin: ca.Function  # (x, t) -> r - ||x - x*(t)||_W ; > 0 is inside E
-    setpoint: ca.Function  # t -> x*(t)
-    info: dict = field(default_factory=dict)
-    jump: ca.Function | None = None  # (x, u, t, s) -> x: the discrete part of a step (quaternion, contacts)
-    loop: ca.Function | None = None  # (x, t, s, x_sw) -> (xdot, h, u_raw, u) with one control evaluation
-    loop_raw: ca.Function | None = None  # the same with every safety function active (no `when` windows)
-    windows: list[tuple[float, float] | EventWindow | None] = field(default_factory=list)  # per safety function:
-    # a clock window [t0, t1) or one anchored on a contact event (compile/events.py); None: always active
-    boundaries: tuple[float, ...] = ()  # clock times where C or the contact schedule switches
-    hybrid: bool = False  # the state jumps (contact events or a contact schedule), not only renormalised
-    sampled: SampledLaw | None = None  # a law the oracle solves at a control rate and holds in between
-    loop_u: ca.Function | None = None  # (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): the open loop under a
-    # given input, every safety function active (as loop_raw); set with `sampled`
-    cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
-
-    def __reduce__(self):
-        """Pickles through CasADi's serialisation (compiled chunks are dropped and rebuilt from the
-        on-disk cache where they are needed), so a closed loop can be shipped to worker processes."""
-        state = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "cache"}
-        with ca.global_pickle_context():
-            blob = pickle.dumps(state)
-        return _restore, (blob,)
-
-    @property
-    def needs(self) -> set[str]:
-        """Capabilities a backend must have to run this closed loop."""
-        return {"hybrid"} if self.hybrid else set()
-
-    def horizons(self, T: float, t0s) -> np.ndarray:
-        """How long the oracle runs from each switch-in clock t0: the primitive's own horizon, else
-        the project's T, and never past the end t_f of a transient's domain."""
-        t0s = np.atleast_1d(np.asarray(t0s, float))
-        h = np.full(t0s.shape, float(self.horizon or T))
-        if self.cls is PrimitiveClass.TRANSIENT:
-            h = np.minimum(h, self.domain[1] - t0s)
-        return np.maximum(h, 0.0)
-
-    def digest(self) -> str:
-        """Content hash of everything that decides an oracle verdict of this closed loop."""
-        if "digest" not in self.cache:
-            parts = [f.serialize() for f in (self.loop_raw or self.loop, self.f_cl, self.roa_margin, self.setpoint,
-                                              self.jump, self.loop_u) if f is not None]
-            if self.sampled is not None:
-                parts += [self.sampled.solve.serialize(), repr(self.sampled.period)]
-            nums = repr((self.name, self.cls.value, self.period, self.domain, self.next, self.horizon, self.h_names,
-                         self.radius, self.windows, self.boundaries, self.hybrid, self.info.get("roa_W"),
-                         self.system.u_lo.tolist(), self.system.u_hi.tolist()))
-            self.cache["digest"] = hashlib.sha256("\n".join([*parts, nums]).encode()).hexdigest()
-        return self.cache["digest"]
-
-    @property
-    def t_range(self) -> tuple[float, float]:
-        """Clock interval sampled by the grids (Algorithm 1)."""
-        if self.cls is PrimitiveClass.PERIODIC:
-            return (0.0, float(self.period))
-        if self.cls is PrimitiveClass.TRANSIENT:
-            return self.domain
-        return (0.0, 0.0)
-
-    def clock_grid(self, n: int, role: str = "B") -> np.ndarray:
-        """Grid over the clock: one point (fixed), n over one period, n over the domain.
-
-        As a source (role 'A') a transient's grid ends at t_f, where it hands over to `next`;
-        as a target (role 'B') it stops short of t_f, where no time would be left to converge.
-        """
-        a, b = self.t_range
-        if self.cls is PrimitiveClass.FIXED:
-            return np.zeros(1)
-        if self.cls is PrimitiveClass.PERIODIC:
-            return a + (b - a) * np.arange(n) / n
-        if n == 1:
-            return np.array([b if role == "A" else a])
-        return np.linspace(a, b, n) if role == "A" else np.linspace(a, b, n + 1)[:-1]
-
-    def x_star(self, t) -> np.ndarray:
-        return np.array(self.setpoint(t)).ravel()
-
-    def with_radius(self, radius: float) -> "CompiledPrimitive":
-        """The same primitive with E resized; only the RoA margin is rebuilt."""
-        W = np.asarray(self.info["roa_W"])
-        margin = _roa_margin(self.system, self.setpoint, W, radius, _ident(self.name))
-        return dataclasses.replace(self, radius=radius, roa_margin=margin, cache={})
-
-
-def _restore(blob: bytes) -> "CompiledPrimitive":
-    with ca.global_unpickle_context():
-        state = pickle.loads(blob)
-    return CompiledPrimitive(**state)
 
 
 def _constants(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, loop_env: dict) -> dict[str, float]:
@@ -190,15 +77,17 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     x_sw = ca.SX.sym("x_sw", sys.nx)
     x = sys.x
     # clock seen by setpoint and windows: wrapped into one period for periodic primitives
-    tc = t - period * ca.floor(t / period) if period is not None else t
+    tc = wrap_clock(t, period)
     trot = _trot_setup(inst, sys, ec, consts) if p.controller.type == "trot" else None
-    schedule = _schedule(inst, sys, trot)
-    mode = None  # the contact mode: foot -> 1 while held, a function of the clock under a schedule
-    if schedule is not None:  # the clock sets the contact set (flags in the state follow it, see _jump)
-        mode = scheduled_mode(schedule, sys.model.contact_frames, t, period)
+    schedule = _schedule(inst, sys, trot, period)
+    plan = mode = None  # the contact plan, and its mode: foot -> 1 while held (of the clock under a schedule)
+    if schedule is not None:  # the clock sets the contact set (flags in the state follow it, Schedule.jump)
+        plan = schedule
+        mode = schedule.mode(sys.model.contact_frames, t)
         loop = sys.scheduled_loop(mode)
     elif sys.is_rigid_body:
-        mode = {f: ca.SX(1.0 if f in loop.contacts else 0.0) for f in sys.model.contact_frames}
+        plan = (Events if sys.events else Fixed)(tuple(loop.contacts))
+        mode = plan.mode(sys.model.contact_frames)
     env: dict[str, object] = {**sys.env(), **consts, "t": tc, "s": s}  # t: the clock, within one period
     sp = p.setpoint
     table = None  # (times, samples, interpolation) of a tabulated setpoint
@@ -242,11 +131,11 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     x_star = x_star_raw(tc)
     x_star_dot = ca.jacobian(x_star_raw(t), t)
     x_star_dot = ca.substitute(x_star_dot, t, tc)
-    setpoint = ca.Function(f"setpoint_{_ident(inst.name)}", [t], [x_star])
+    setpoint = ca.Function(f"setpoint_{function_name(inst.name)}", [t], [x_star])
     if table is not None and len(table[0]) > TABLE_KNOTS:  # a lookup, not a tree of thousands of branches
-        setpoint = _table_setpoint(f"setpoint_{_ident(inst.name)}", *table, period)
+        setpoint = _table_setpoint(f"setpoint_{function_name(inst.name)}", *table, period)
     if sys.is_rigid_body and sys.events and schedule is not None:
-        setpoint = _scheduled_flags(setpoint, sys, schedule, period)
+        setpoint = schedule.with_flags(setpoint, sys)
     for i, n in enumerate(sys.state_names):
         env[f"{n}_star"] = x_star[i]
         env[f"{n}_star_dot"] = x_star_dot[i]
@@ -254,14 +143,10 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
                          fixed=p.class_ is PrimitiveClass.FIXED, xdot=loop.xdot, contacts=loop.contacts, mode=mode)
     if trot is not None:
         ctx.info["trot"] = {k: v for k, v in trot.items() if k != "gains"}
-    if schedule is not None:
-        ctx.info["contact_schedule"] = [[float(u), list(f)] for u, f in schedule]
-    if sys.is_rigid_body:  # rigid bodies: the feet the primitive's dynamics hold
-        ctx.info["contacts"] = list(loop.contacts)
     u_raw = LAWS[p.controller.type](p.controller, ctx)
     sat_u = saturate(sys.u, sys.u_lo, sys.u_hi)
     args = [x, t, s, x_sw]
-    ident = _ident(inst.name)
+    ident = function_name(inst.name)
     f_u = ca.Function("f_u", args + [sys.u], [ca.substitute(loop.xdot, sys.u, sat_u) if sys.nu else loop.xdot])
     # safety functions may name inputs (the saturated control)
     henv = {**env, **loop.env, **{n: sat_u[i] for i, n in enumerate(sys.input_names)}}
@@ -298,7 +183,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
             hs.append(hv)
             names.append(name or f"h{j}")
     h_u = ca.Function("h_u", args + [sys.u], [ca.vertcat(*hs) if hs else ca.SX(0, 1)])
-    jump = _jump(inst, sys, t, schedule, period)
+    jump = plan_jump(plan, sys, t)
     f_cl, control, h, loop_fn = _close_loop(ident, args, u_raw, f_u, h_u, sys)
     if any(w is not None for w in windows):
         h_raw = ca.Function("h_raw", args + [sys.u], [ca.vertcat(*hs_raw)])
@@ -328,14 +213,15 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     W[sys.event_clocks, :] = 0.0  # times since contact events: no distance to x*
     W[:, sys.event_clocks] = 0.0
     radius = float(roa.radius) if roa.radius is not None else 0.0  # 0 until a verifier sizes E
-    ctx.info["roa_W"] = W.tolist()
-    roa_margin = _roa_margin(sys, setpoint, W, radius, ident)
+    info = {**ctx.info, **(plan.record() if plan is not None else {}), "roa_W": W.tolist()}  # the report's record
+    roa_margin = roa_margin_function(sys, setpoint, W, radius, ident)
     grid = p.grid
     return CompiledPrimitive(
         name=inst.name, cls=p.class_, system=sys, period=period, domain=domain, next=p.next, horizon=p.horizon,
         grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names, radius=radius,
-        f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info, jump=jump,
-        loop=loop_fn, loop_raw=loop_raw, windows=windows, boundaries=_boundaries(windows, schedule, period, domain),
+        f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, W=W, info=info,
+        contacts=plan, jump=jump, loop=loop_fn, loop_raw=loop_raw, windows=windows,
+        boundaries=_boundaries(windows, schedule.phases if schedule else None, period, domain),
         hybrid=sys.events or schedule is not None, sampled=ctx.sampled, loop_u=loop_u,
     )
 
@@ -396,10 +282,11 @@ def _trot_setup(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, 
     return out
 
 
-def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, trot: dict | None):
-    """(until, feet) over the clock: the spec's contact schedule, or the one the trot's timing implies."""
+def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, trot: dict | None, period: float | None) -> Schedule | None:
+    """The spec's contact schedule, or the one the trot's timing implies; None without either."""
+    frames = tuple(sys.model.contact_frames) if sys.is_rigid_body else ()
     if trot is not None:
-        return [(u, tuple(f)) for u, f in trot["gains"].schedule(tuple(sys.model.contact_frames))]
+        return Schedule(tuple((u, tuple(f)) for u, f in trot["gains"].schedule(frames)), period, frames)
     sched = inst.spec.contact_schedule
     if sched is None:
         return None
@@ -414,89 +301,7 @@ def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, trot: dict | None):
             raise SpecError("unknown contact frame", location=inst.locate(("contact_schedule", k, "feet")),
                             key=f"primitive '{inst.name}': contact_schedule.{k}.feet",
                             expected="one of " + ", ".join(feet), found=repr(bad[0]), code="MPG106")
-    return [(float(ph.until), tuple(ph.feet)) for ph in sched]
-
-
-SNAP = 1e-9
-"""Clock times within SNAP before a switching time count as at it: a step that ends on a switch
-(up to rounding) runs the jump into the new mode, and the next step starts in it."""
-JUST_BEFORE = 1e-7
-"""How far before a step's end the jump reads the mode the step ran in (steps are >= 1e-6 s)."""
-
-
-def _wrap_clock(t, period):
-    return t - period * ca.floor(t / period) if period is not None else t
-
-
-def scheduled_mode(schedule, feet, t, period: float | None, before: bool = False) -> dict:
-    """foot -> 1 while the schedule holds it at clock t (the primitive's raw clock), else 0; after
-    the last phase, the last phase. With `before`, the mode just before t."""
-    tc = _wrap_clock(t - JUST_BEFORE if before else t + SNAP, period)
-    mode = {}
-    for f in feet:
-        val = ca.SX(1.0 if f in schedule[-1][1] else 0.0)
-        for until, held in reversed(schedule[:-1]):
-            val = ca.if_else(tc < until, 1.0 if f in held else 0.0, val)
-        mode[f] = val
-    return mode
-
-
-def _jump(inst: PrimitiveInstance, sys: CompiledSystem, t: ca.SX, schedule, period: float | None) -> ca.Function:
-    """The discrete update after each step, (x, u, t, s) -> x: given the step's input and the clock t
-    and time since switch-in s after it (s dates contact events, compile/events.py).
-
-    Under a contact schedule, feet that join the mode at the step's end are put on the ground by
-    their legs and touch down with a plastic impact; contact flags in the state follow the schedule.
-    """
-    u = ca.SX.sym("u", sys.nu)
-    x = sys.x
-    s = ca.SX.sym("s")
-    if schedule is None:
-        return ca.Function("jump", [x, u, t, s], [sys.project(x, u, s)])
-    from .rigidbody.hybrid import masked_impact, touchdown_projection
-
-    feet = sys.model.contact_frames
-    mode = scheduled_mode(schedule, feet, t, period)
-    c = ca.vertcat(*[mode[f] for f in feet])
-    nq, nv = sys.model.nq, sys.model.nv
-    before = scheduled_mode(schedule, feet, t, period, before=True)  # the mode the step ran in
-    joins = [ca.logic_and(mode[f] > 0.5, before[f] < 0.5) for f in feet]
-    q, v = sys.project(x)[:nq], x[nq:nq + nv]
-    q_new = touchdown_projection(sys, q, joins)
-    v_new = ca.if_else(sum(joins) > 0, masked_impact(sys, q_new, v, c), v)
-    # with contact flags in the state, they follow the schedule; event clocks are left as they are
-    tail = ca.vertcat(c, x[nq + nv + len(feet):]) if sys.events else x[nq + nv:]
-    return ca.Function("jump", [x, u, t, s], [ca.vertcat(q_new, v_new, tail)])
-
-
-def _scheduled_flags(setpoint: ca.Function, sys: CompiledSystem, schedule, period) -> ca.Function:
-    """x*(t) with its contact flags set to the mode the schedule holds at t, whatever the table says."""
-    feet = sys.model.contact_frames
-    ts = ca.SX.sym("t")
-    mode = scheduled_mode(schedule, feet, ts, period)
-    flags = ca.Function("flags", [ts], [ca.vertcat(*[mode[f] for f in feet])])
-    t = ca.MX.sym("t")
-    x = setpoint(t)
-    i = sys.model.nq + sys.model.nv
-    return ca.Function(setpoint.name(), [t], [ca.vertcat(x[:i], flags(t), x[i + len(feet):])])
-
-
-def held_feet(prim: "CompiledPrimitive"):
-    """clock -> the feet a primitive's contact schedule holds, read as scheduled_mode reads it; None
-    without a schedule."""
-    sched = prim.info.get("contact_schedule")
-    if not sched or not getattr(prim.system, "is_rigid_body", False):
-        return None
-    T = float(prim.period) if prim.period is not None else np.inf
-
-    def held(t: float) -> tuple[str, ...]:
-        tc = (t + SNAP) % T
-        for until, feet in sched:
-            if tc < until:
-                return tuple(feet)
-        return tuple(sched[-1][1])
-
-    return held
+    return Schedule(tuple((float(ph.until), tuple(ph.feet)) for ph in sched), period, frames)
 
 
 def spec_file(inst: PrimitiveInstance, raw: str, where, key: str):
@@ -623,31 +428,5 @@ def _table_setpoint(name: str, ts: np.ndarray, ys: np.ndarray, interpolation: st
     lookup = ca.interpolant(name + "_lookup", "linear", [np.asarray(ts, float)],
                             np.asarray(ys, float).ravel(order="C"))
     t = ca.MX.sym("t")
-    tc = t - period * ca.floor(t / period) if period is not None else t
+    tc = wrap_clock(t, period)
     return ca.Function(name, [t], [lookup(ca.fmin(ca.fmax(tc, float(ts[0])), float(ts[-1])))])
-
-
-def _roa_margin(sys: CompiledSystem, setpoint: ca.Function, W: np.ndarray, radius: float, ident: str) -> ca.Function:
-    """(x, t) -> r - ||x - x*(t)||_W, positive inside E; wrapped states measured the short way round."""
-    if not setpoint.is_a("SXFunction"):  # a table lookup: an MX Function
-        x, t = ca.MX.sym("x", sys.nx), ca.MX.sym("t")
-        dx = sys.wrapped_error(x - setpoint(t))
-        margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
-        return ca.Function(f"roa_{ident}", [x, t], [margin], ["x", "t"], ["margin"])
-    t = ca.SX.sym("t")
-    dx = sys.wrapped_error(sys.x - setpoint(t))
-    margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
-    return ca.Function(f"roa_{ident}", [sys.x, t], [margin], ["x", "t"], ["margin"])
-
-
-def _ident(name: str) -> str:
-    """A valid CasADi Function name part for a node name such as 'Swing(-1.5)' or '_B'.
-
-    CasADi accepts only ASCII letters, digits and single underscores, starting with a letter
-    (its callers prefix one). Names that had to be changed get a short hash, so that distinct
-    nodes (Swing(-1), Swing(1)) keep distinct Function names.
-    """
-    base = re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_") or "p"
-    if base != name:
-        base += "_" + hashlib.sha1(name.encode("utf-8", "surrogatepass")).hexdigest()[:8]
-    return base

@@ -134,7 +134,7 @@ def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print, done
     import json
 
     from ..compile.primitive import compile_primitive, spec_file
-    from ..oracle.integrator import switched_flow
+    from ..oracle.flow import switched_flow
     from ..spec.primitive import Setpoint
 
     inst = next((i for i in spec.primitives if i.name == entry.primitive), None)

@@ -270,7 +270,7 @@ def unevaluated(prim: CompiledPrimitive, t0: float, t1: float, count: np.ndarray
     Windows anchored on a contact event are left out: whether and when the event happened is known
     from the rollout's states only (an `after` window is never open when it did not happen, and a
     `before` one is over after the first step when it happened there), and the edges of an open
-    one are step ends (integrator._step_length)."""
+    one are step ends (flow.step_length)."""
     for i, w in enumerate(prim.windows):
         if count[i] > 0 or t1 <= 0 or isinstance(w, EventWindow):
             continue

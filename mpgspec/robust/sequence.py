@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
+from ..oracle.flow import rk4
 from ..oracle.integrator import compile_cached
 from ..spec.models import PrimitiveClass
 
@@ -33,11 +34,7 @@ def _step(prim: CompiledPrimitive, plant_fn: ca.Function, Bd: np.ndarray, dt: fl
         u = prim.control(xx, tt, ss, xsw)[1]
         return plant_fn(xx, u + ca.mtimes(ca.DM(Bd), d) if prim.system.nu else u, th)
 
-    k1 = f(x, t, s)
-    k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2)
-    k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2)
-    k4 = f(x + dt * k3, t + dt, s + dt)
-    xn = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    xn, _ = rk4(f, x, (t, s), dt)
     z = ca.vertcat(x, t, s, xsw)
     return ca.Function(f"dstep_{prim.digest()[:16]}", [z, th, d],
                        [ca.vertcat(xn, t + dt, s + dt, xsw), prim.h(xn, t + dt, s + dt, xsw),
