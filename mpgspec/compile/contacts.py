@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import casadi as ca
+import numpy as np
 
 SNAP = 1e-9
 """Clock times within SNAP before a switching time count as at it: a step that ends on a switch
@@ -26,6 +27,12 @@ JUST_BEFORE = 1e-7
 def wrap_clock(t, period: float | None):
     """The clock t wrapped into one period [0, T) (CasADi expressions and numbers); t without a period."""
     return t - period * ca.floor(t / period) if period is not None else t
+
+
+def grid_clock(t: float, period: float | None) -> float:
+    """A clock wrapped into one period to look it up on a switch grid: a clock within 1e-9 periods
+    below T counts as 0 (numbers only)."""
+    return t - period * np.floor(t / period + 1e-9) if period else t
 
 
 def scheduled_mode(schedule, feet, t, period: float | None, before: bool = False) -> dict:

@@ -127,33 +127,44 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     hs = ca.fmin(h_of(x, t, s, ur0, lam0, c0), h_of(x_end, t + te, s + te, ur1, lam1, c1))
     if len(prim.h_names):
         hs = ca.if_else(act, hs, INACTIVE)
-    if law is not None:  # solved at the start of every m-th step, from the previous solve's warm start
-        m, cnt, w = law.steps(dt), hold[0], hold[1 + nu:]
-        c_next = ca.if_else(cnt + 1 > m - 0.5, 0, cnt + 1)
-        if m == 1:
-            u_next, w_next = law.solve(xn, t + dt, s + dt, xsw, w)
-        else:
-            a = [*law.solve.mx_in(), ca.MX.sym("u", nu)]
-            sample = ca.Function.if_else("sample", ca.Function("solve", a, law.solve.call(a[:5])),
-                                         ca.Function("keep", a, [a[5], a[4]]))
-            u_next, w_next = sample(c_next < 0.5, xn, t + dt, s + dt, xsw, w, held)
-        hold_next = ca.vertcat(c_next, u_next, w_next)
-    else:
-        hold_next = ca.MX(0, 1)
+    hold_next = _hold_next(law, hold, xn, t + dt, s + dt, xsw, held, dt) if law is not None else ca.MX(0, 1)
     out = ca.vertcat(hs, prim.roa_margin(xn, t + dt))
     step = ca.Function("robust_rigid_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th, hold_next), out])
-    x0, t0, s0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("s0")
-    th0, d0 = ca.MX.sym("th0", nth), ca.MX.sym("d0", nd)
-    if law is not None:
-        u_0, w0 = law.solve(x0, t0, s0, x0, ca.DM.zeros(nw))
-        hold0 = ca.vertcat(0, u_0, w0)
-    else:
-        hold0 = ca.MX(0, 1)
-    # the first sample: h at the step's start, windowed at that instant, on z0 = [x0; t0; s0; x0; theta0; hold0]
+    # the first sample: h at the step's start, windowed at that instant
     h_start = h_of(x, t, s, ur0, lam0, c0)
     if len(prim.h_names):
         h_start = ca.if_else(active(prim, wrap(prim, t), x, s, x, 0.0), h_start, INACTIVE)
-    out0 = ca.Function("o", [z, d], [h_start])(ca.vertcat(x0, t0, s0, x0, th0, hold0), d0 if nd else ca.MX(0, 1))
-    first = ca.Function("robust_rigid_first", [x0, t0, s0, th0, d0], [ca.vertcat(out0, prim.roa_margin(x0, t0)),
-                                                                 hold0])
+    first = _first(prim, ca.Function("o", [z, d], [h_start]), nth, nd)
     return step, first, nth, nd, nhold
+
+
+def _hold_next(law, hold, xn, t, s, xsw, held, dt: float):
+    """The hold's entries after a step ending at clock t (s since switch-in) in state xn: the law is
+    solved at the start of every m-th step, from the previous solve's warm start."""
+    nu = held.shape[0]
+    m, cnt, w = law.steps(dt), hold[0], hold[1 + nu:]
+    c_next = ca.if_else(cnt + 1 > m - 0.5, 0, cnt + 1)
+    if m == 1:
+        u_next, w_next = law.solve(xn, t, s, xsw, w)
+    else:
+        a = [*law.solve.mx_in(), ca.MX.sym("u", nu)]
+        sample = ca.Function.if_else("sample", ca.Function("solve", a, law.solve.call(a[:5])),
+                                     ca.Function("keep", a, [a[5], a[4]]))
+        u_next, w_next = sample(c_next < 0.5, xn, t, s, xsw, w, held)
+    return ca.vertcat(c_next, u_next, w_next)
+
+
+def _first(prim: CompiledPrimitive, h_start: ca.Function, nth: int, nd: int) -> ca.Function:
+    """(x0, t0, s0, theta0, d0) -> ([h; RoA margin] at switch-in, the hold's entries then), h_start
+    (z, d) -> h evaluated on z0 = [x0; t0; s0; x0; theta0; hold0]; a sampled law is solved at once."""
+    law, nx = prim.sampled, prim.system.nx
+    x0, t0, s0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("s0")
+    th0, d0 = ca.MX.sym("th0", nth), ca.MX.sym("d0", nd)
+    if law is not None:
+        u_0, w0 = law.solve(x0, t0, s0, x0, ca.DM.zeros(law.nw))
+        hold0 = ca.vertcat(0, u_0, w0)
+    else:
+        hold0 = ca.MX(0, 1)
+    out0 = h_start(ca.vertcat(x0, t0, s0, x0, th0, hold0), d0 if nd else ca.MX(0, 1))
+    return ca.Function("robust_rigid_first", [x0, t0, s0, th0, d0], [ca.vertcat(out0, prim.roa_margin(x0, t0)),
+                                                                 hold0])
