@@ -49,19 +49,12 @@ def scheduled_mode(schedule, feet, t, period: float | None, before: bool = False
 
 
 @dataclass(frozen=True)
-class Fixed:
-    """The dynamics hold `feet` throughout."""
+class _HeldSet:
+    """A contact set not set by the clock: `feet` at switch-in."""
 
     feet: tuple[str, ...]
 
-    varies = False  # the contact set never changes during the primitive
-
-    @property
-    def boundaries(self) -> tuple[float, ...]:
-        return ()
-
-    def held(self, t: float) -> tuple[str, ...]:
-        return self.feet
+    boundaries = ()  # no clock time switches the contact set
 
     def mode(self, frames, t=None) -> dict:
         """foot -> 1 (held) or 0, constant."""
@@ -76,16 +69,20 @@ class Fixed:
 
 
 @dataclass(frozen=True)
-class Events:
+class Fixed(_HeldSet):
+    """The dynamics hold `feet` throughout."""
+
+    varies = False  # the contact set never changes during the primitive
+
+    def held(self, t: float) -> tuple[str, ...]:
+        return self.feet
+
+
+@dataclass(frozen=True)
+class Events(_HeldSet):
     """Contact events decide: the contact flags in the state, from `feet` at switch-in."""
 
-    feet: tuple[str, ...]
-
     varies = True
-    boundaries = Fixed.boundaries
-    mode = Fixed.mode  # the mode at switch-in; the flow then reads the flags
-    jump = Fixed.jump  # the system's update decides the events
-    record = Fixed.record
 
     def held(self, t: float) -> None:
         """None: the state's flags say which feet are held, not the clock."""

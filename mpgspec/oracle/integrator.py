@@ -3,7 +3,9 @@
 A chunk advances the augmented state z = [x; t; s; x_sw] by K steps with CasADi's mapaccum and
 returns, for each step's start state, the safety functions h, the RoA margin and the raw input.
 The chunk is jit-compiled once with the machine's C compiler; batches of start points are
-evaluated by mapping the compiled chunk, so one Python call advances many rollouts.
+evaluated by mapping the compiled chunk, so one Python call advances many rollouts. The step
+itself (RK4, the jump, the step-end rule, the boundaries, the windows) is oracle/flow.py's; this
+module adds the error estimates, the rates of h and the compiled chunks.
 
 A primitive whose law is sampled (compile/hold.py: an optimisation-based law with a control rate)
 is rolled out under a zero-order hold: the law is solved at the start of every m-th step (m =

@@ -25,9 +25,10 @@ import numpy as np
 from ..check.assertions import AssertionResult, evaluate_assertions
 from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
-from .cells import Scenarios, check_target, scenarios
+from .cells import check_target
 from .rigid import RigidRobustRollout
 from .rollout import RobustRollout, plant
+from .scenarios import Scenarios, scenarios
 from .sequence import sequence_under_uncertainty
 
 LABEL = "empirical"
