@@ -14,7 +14,7 @@ import numpy as np
 
 from mpgspec.certify.hybrid_orbit import HybridFlow, monodromy, orbit
 from mpgspec.certify.problem import PeriodicProblem, RoAResult
-from mpgspec.compile.primitive import held_feet
+from mpgspec.compile.contacts import held_feet
 from mpgspec.compile.rigidbody.symmetry import NEUTRAL
 
 from .roa_common import bisect, unit_sphere
@@ -75,7 +75,7 @@ def _size(flow: HybridFlow, problem: PeriodicProblem, Xs: np.ndarray, W: np.ndar
     w, U = np.linalg.eigh(0.5 * (W + W.T))
     keep = w > 1e-12 * max(w.max(), 1e-300)
     Wi = (U[:, keep] / np.sqrt(w[keep])) @ U[:, keep].T  # pseudo-inverse root: unweighted states are not moved
-    held = held_feet(prim)
+    held = held_feet(prim.contacts)
     log = []
 
     def starts(r):

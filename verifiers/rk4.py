@@ -24,7 +24,7 @@ SIZES = (1, 4, 16, 64, 256)
 
 def margin_gain(prim: CompiledPrimitive) -> float:
     """Bound on |d margin / dx|: the square root of W's largest eigenvalue (margin = r - ||dx||_W)."""
-    W = np.asarray(prim.info.get("roa_W", np.eye(prim.system.nx)), float)
+    W = np.asarray(prim.W, float)
     return float(np.sqrt(max(np.linalg.eigvalsh(W).max(), 0.0))) if W.size else 0.0
 
 

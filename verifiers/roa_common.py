@@ -12,6 +12,8 @@ import casadi as ca
 import numpy as np
 import scipy.linalg as sla
 
+from mpgspec.oracle.flow import rk4 as rk4_step
+
 
 def validate_gram(Q: np.ndarray, tol: float) -> tuple[bool, float]:
     """A Gram matrix passes when its symmetric part has min eigenvalue >= -tol."""
@@ -72,11 +74,7 @@ def rk4_flow(f: ca.Function, h: ca.Function | None, dt: float, steps: int, n: in
     """
     nx = f.size1_in(0)
     x, t, m = ca.SX.sym("x", nx), ca.SX.sym("t"), ca.SX.sym("m")
-    k1 = f(x, t)
-    k2 = f(x + dt / 2 * k1, t + dt / 2)
-    k3 = f(x + dt / 2 * k2, t + dt / 2)
-    k4 = f(x + dt * k3, t + dt)
-    xn = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    xn, _ = rk4_step(f, x, (t,), dt)
     mn = ca.fmin(m, ca.mmin(h(xn, t + dt))) if h is not None else m
     step = ca.Function("rk4_step", [ca.vertcat(x, t, m)], [ca.vertcat(xn, t + dt, mn)])
     return step.fold(steps).map(n)

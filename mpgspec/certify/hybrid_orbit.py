@@ -14,7 +14,9 @@ import casadi as ca
 import numpy as np
 
 from ..compile.rigidbody.symmetry import reduced_monodromy
-from ..oracle.integrator import LEFT, compile_cached, rk4_jump
+from ..compile.contacts import Schedule
+from ..oracle.flow import LEFT, rk4_jump
+from ..oracle.integrator import compile_cached
 
 FD = 1e-6
 S_LONG = 1e6  # time since switch-in: long after any motion profile
@@ -36,7 +38,7 @@ class HybridFlow:
         f = lambda xx, tt: prim.f_cl(xx, tt, S_LONG, xs0)  # noqa: E731
         k = lambda xx, tt: prim.control(xx, tt, S_LONG, xs0)[1]  # noqa: E731
         h = self.dt
-        xn = rk4_jump(f, k, prim.jump, x, t, h, LEFT if prim.info.get("contact_schedule") else 0.0)
+        xn = rk4_jump(f, k, prim.jump, x, t, h, LEFT if isinstance(prim.contacts, Schedule) else 0.0)
         hv = prim.h(xn, t + h, S_LONG, xs0)
         mn = ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
         body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn)])

@@ -118,7 +118,7 @@ def use_level_set(prim: CompiledPrimitive, evidence: dict, r: float) -> tuple[Co
     ls = level_set_of(evidence)
     if ls is None or not r > 0:
         return None, {"E": "ball", "reason": "no level set {V <= rho} in the verifier's evidence"}
-    W = np.asarray(prim.info.get("roa_W", np.eye(prim.system.nx)), float)
+    W = np.asarray(prim.W, float)
     margin = level_set_margin(prim, ls, r)
     check = validate(prim, margin, ls, W, r)
     if not check["ok"]:

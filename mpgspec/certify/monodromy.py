@@ -11,6 +11,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ..oracle.flow import rk4
 from .problem import PeriodicProblem
 
 
@@ -22,12 +23,7 @@ def monodromy(problem: PeriodicProblem, t0: float = 0.0, steps: int = 2000) -> d
     J = ca.jacobian(fx, x)
     F = ca.Function("F", [x, Phi, t], [fx, ca.mtimes(J, Phi)])
     h = T / steps
-    k1 = F(x, Phi, t)
-    k2 = F(x + h / 2 * k1[0], Phi + h / 2 * k1[1], t + h / 2)
-    k3 = F(x + h / 2 * k2[0], Phi + h / 2 * k2[1], t + h / 2)
-    k4 = F(x + h * k3[0], Phi + h * k3[1], t + h)
-    xn = x + h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
-    Pn = Phi + h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
+    (xn, Pn), _ = rk4(lambda xP, tt: F(*xP, tt), (x, Phi), (t,), h)
     e = xn - problem.x_star(t + h)
     dn = ca.fmax(d, ca.sqrt(ca.mtimes([e.T, ca.DM(problem.W), e])))
     z = ca.vertcat(x, ca.vec(Phi), t, d)

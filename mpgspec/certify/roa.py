@@ -48,7 +48,7 @@ def _estimate(method: str, prim: CompiledPrimitive, options: dict) -> RoAResult:
     verifiers = roa_methods()
     if method not in verifiers:
         raise KeyError(f"no RoA verifier {method!r}; installed: {', '.join(sorted(verifiers))}")
-    W = np.asarray(prim.info.get("roa_W", np.eye(prim.system.nx)))
+    W = np.asarray(prim.W)
     return verifiers[method].estimate(from_primitive(prim, weights=W), dict(options))
 
 
@@ -166,7 +166,7 @@ def _regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], records: di
         if ls is None:
             continue
         prim = prims[inst.name]
-        region = {"E": "ball", "level_set": ls.to_dict(), "ball": {"radius": rec.radius, "W": prim.info.get("roa_W")}}
+        region = {"E": "ball", "level_set": ls.to_dict(), "ball": {"radius": rec.radius, "W": prim.W.tolist()}}
         if inst.spec.roa.options.get("region") == "level_set":
             new, info = use_level_set(prim, rec.evidence, rec.radius)
             region.update(info)

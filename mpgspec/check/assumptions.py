@@ -26,7 +26,8 @@ from ..certify.hybrid_orbit import HybridFlow, orbit
 from ..certify.hybrid_orbit import monodromy as hybrid_monodromy
 from ..certify.monodromy import monodromy
 from ..certify.problem import from_primitive
-from ..compile.primitive import INACTIVE, CompiledPrimitive, held_feet
+from ..compile.contacts import held_feet
+from ..compile.primitive import INACTIVE, CompiledPrimitive
 from ..compile.rigidbody.symmetry import NEUTRAL
 from ..spec.models import PrimitiveClass
 
@@ -67,13 +68,13 @@ HYBRID_DT = 0.001
 
 
 def _hybrid(p: CompiledPrimitive) -> bool:
-    return p.cls is PrimitiveClass.PERIODIC and held_feet(p) is not None and p.jump is not None
+    return p.cls is PrimitiveClass.PERIODIC and held_feet(p.contacts) is not None and p.jump is not None
 
 
 def _hybrid_orbit(p: CompiledPrimitive) -> dict:
     """Orbit defect and reduced multipliers of a gait's discrete flow (computed once per primitive)."""
     if "hybrid_orbit" not in p.cache:
-        W = np.asarray(p.info.get("roa_W", np.eye(p.system.nx)), float)
+        W = np.asarray(p.W, float)
         flow = HybridFlow(p, HYBRID_DT)
         Xs, defect, least_h = orbit(flow, W)
         neutral = list(NEUTRAL) if p.system.model.n_base else []
@@ -90,9 +91,9 @@ def _event_transient(p: CompiledPrimitive) -> bool:
 def _transient_defect(p: CompiledPrimitive) -> tuple[float, float]:
     """(largest ||x(t) - x*(t)||_W, its t) along the domain for the discrete flow with contact
     events from x*(t_0), switched in at t_0: the flow a transient's x*(t) must be (Definition 1)."""
-    from ..oracle.integrator import switched_flow
+    from ..oracle.flow import switched_flow
 
-    W = np.asarray(p.info.get("roa_W", np.eye(p.system.nx)), float)
+    W = np.asarray(p.W, float)
     t0, tf = p.domain
     n = int(round((tf - t0) / HYBRID_DT))
     X = switched_flow(p, p.x_star(t0), t0, HYBRID_DT, n)
@@ -157,10 +158,10 @@ def _contact_projection(p: CompiledPrimitive, W: np.ndarray):
     sys = p.system
     if not sys.is_rigid_body or not sys.model.contact_frames:
         return None
-    held = held_feet(p)
+    held = held_feet(p.contacts)
 
     def project(x, xs, t=0.0):
-        feet = held(t) if held is not None else sys.contact_mode(xs, p.info.get("contacts"))
+        feet = held(t) if held is not None else sys.contact_mode(xs, p.contacts.feet)
         return sys.project_to_contacts(x, feet, W), feet
 
     return project
@@ -176,9 +177,7 @@ def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: 
     the primitive's radius of E.
     """
     rng = np.random.default_rng(seed)
-    nx = p.system.nx
-    W = p.info.get("roa_W")
-    W = np.eye(nx) if W is None else np.asarray(W)
+    W = np.asarray(p.W)
     w, V = np.linalg.eigh(W)
     keep = w > 1e-12
     L = V[:, keep] / np.sqrt(w[keep])  # maps unit vectors of the weighted norm to state offsets

@@ -6,11 +6,7 @@ oracle composes them; nothing here integrates.
 """
 from __future__ import annotations
 
-import dataclasses
-import hashlib
-import pickle
-import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
@@ -18,9 +14,10 @@ import numpy as np
 from ..errors import SpecError, SpecErrors
 from ..spec.loader import PrimitiveInstance
 from ..spec.models import PrimitiveClass
-from .events import EventWindow, event_window
+from .closed_loop import CompiledPrimitive, function_name, roa_margin_function
+from .contacts import ContactPlan, Events, Fixed, Schedule, plan_jump, wrap_clock
+from .events import event_window
 from .exprs import ExprCompiler
-from .hold import SampledLaw
 from .laws.base import ControlContext
 from .laws.kind import Setup
 from .laws.registry import controller_kind
@@ -29,114 +26,6 @@ from .system import CompiledSystem, OpenLoop, shadowing_error, taken_names
 
 INACTIVE = 1e9
 """Value of a safety function outside its active window: never binding."""
-
-
-@dataclass
-class CompiledPrimitive:
-    """A motion primitive as CasADi Functions plus the numbers the graph builder needs."""
-
-    name: str
-    cls: PrimitiveClass
-    system: CompiledSystem
-    period: float | None
-    domain: tuple[float, float] | None
-    next: str | None
-    horizon: float | None
-    grid_A: int
-    grid_B: int
-    h_names: list[str]
-    radius: float
-    f_cl: ca.Function  # (x, t, s, x_sw) -> xdot under the saturated control law
-    control: ca.Function  # (x, t, s, x_sw) -> (u_raw, u_sat)
-    h: ca.Function  # (x, t, s, x_sw) -> h values; >= 0 is safe
-    roa_margin: ca.Function  # (x, t) -> r - ||x - x*(t)||_W ; > 0 is inside E
-    setpoint: ca.Function  # t -> x*(t)
-    info: dict = field(default_factory=dict)
-    jump: ca.Function | None = None  # (x, u, t, s) -> x: the discrete part of a step (quaternion, contacts)
-    loop: ca.Function | None = None  # (x, t, s, x_sw) -> (xdot, h, u_raw, u) with one control evaluation
-    loop_raw: ca.Function | None = None  # the same with every safety function active (no `when` windows)
-    windows: list[tuple[float, float] | EventWindow | None] = field(default_factory=list)  # per safety function:
-    # a clock window [t0, t1) or one anchored on a contact event (compile/events.py); None: always active
-    boundaries: tuple[float, ...] = ()  # clock times where C or the contact schedule switches
-    hybrid: bool = False  # the state jumps (contact events or a contact schedule), not only renormalised
-    sampled: SampledLaw | None = None  # a law the oracle solves at a control rate and holds in between
-    loop_u: ca.Function | None = None  # (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): the open loop under a
-    # given input, every safety function active (as loop_raw); set with `sampled`
-    cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
-
-    def __reduce__(self):
-        """Pickles through CasADi's serialisation (compiled chunks are dropped and rebuilt from the
-        on-disk cache where they are needed), so a closed loop can be shipped to worker processes."""
-        state = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "cache"}
-        with ca.global_pickle_context():
-            blob = pickle.dumps(state)
-        return _restore, (blob,)
-
-    @property
-    def needs(self) -> set[str]:
-        """Capabilities a backend must have to run this closed loop."""
-        return {"hybrid"} if self.hybrid else set()
-
-    def horizons(self, T: float, t0s) -> np.ndarray:
-        """How long the oracle runs from each switch-in clock t0: the primitive's own horizon, else
-        the project's T, and never past the end t_f of a transient's domain."""
-        t0s = np.atleast_1d(np.asarray(t0s, float))
-        h = np.full(t0s.shape, float(self.horizon or T))
-        if self.cls is PrimitiveClass.TRANSIENT:
-            h = np.minimum(h, self.domain[1] - t0s)
-        return np.maximum(h, 0.0)
-
-    def digest(self) -> str:
-        """Content hash of everything that decides an oracle verdict of this closed loop."""
-        if "digest" not in self.cache:
-            parts = [f.serialize() for f in (self.loop_raw or self.loop, self.f_cl, self.roa_margin, self.setpoint,
-                                              self.jump, self.loop_u) if f is not None]
-            if self.sampled is not None:
-                parts += [self.sampled.solve.serialize(), repr(self.sampled.period)]
-            nums = repr((self.name, self.cls.value, self.period, self.domain, self.next, self.horizon, self.h_names,
-                         self.radius, self.windows, self.boundaries, self.hybrid, self.info.get("roa_W"),
-                         self.system.u_lo.tolist(), self.system.u_hi.tolist()))
-            self.cache["digest"] = hashlib.sha256("\n".join([*parts, nums]).encode()).hexdigest()
-        return self.cache["digest"]
-
-    @property
-    def t_range(self) -> tuple[float, float]:
-        """Clock interval sampled by the grids (Algorithm 1)."""
-        if self.cls is PrimitiveClass.PERIODIC:
-            return (0.0, float(self.period))
-        if self.cls is PrimitiveClass.TRANSIENT:
-            return self.domain
-        return (0.0, 0.0)
-
-    def clock_grid(self, n: int, role: str = "B") -> np.ndarray:
-        """Grid over the clock: one point (fixed), n over one period, n over the domain.
-
-        As a source (role 'A') a transient's grid ends at t_f, where it hands over to `next`;
-        as a target (role 'B') it stops short of t_f, where no time would be left to converge.
-        """
-        a, b = self.t_range
-        if self.cls is PrimitiveClass.FIXED:
-            return np.zeros(1)
-        if self.cls is PrimitiveClass.PERIODIC:
-            return a + (b - a) * np.arange(n) / n
-        if n == 1:
-            return np.array([b if role == "A" else a])
-        return np.linspace(a, b, n) if role == "A" else np.linspace(a, b, n + 1)[:-1]
-
-    def x_star(self, t) -> np.ndarray:
-        return np.array(self.setpoint(t)).ravel()
-
-    def with_radius(self, radius: float) -> "CompiledPrimitive":
-        """The same primitive with E resized; only the RoA margin is rebuilt."""
-        W = np.asarray(self.info["roa_W"])
-        margin = _roa_margin(self.system, self.setpoint, W, radius, _ident(self.name))
-        return dataclasses.replace(self, radius=radius, roa_margin=margin, cache={})
-
-
-def _restore(blob: bytes) -> "CompiledPrimitive":
-    with ca.global_unpickle_context():
-        state = pickle.loads(blob)
-    return CompiledPrimitive(**state)
 
 
 def _constants(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, loop_env: dict) -> dict[str, float]:
@@ -190,8 +79,12 @@ class _Mode:
     the clock under a contact schedule; None for systems without feet)."""
 
     loop: OpenLoop
-    schedule: list | None
+    plan: ContactPlan | None  # None for systems without feet
     mode: dict | None
+
+    @property
+    def schedule(self) -> Schedule | None:
+        return self.plan if isinstance(self.plan, Schedule) else None
 
 
 def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledPrimitive:
@@ -204,11 +97,11 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     clock = _clock(inst, sys, ec, consts)
     setup = kind.run_setup(inst, sys, ec, consts)
     cm = _contact_mode(inst, sys, loop, setup, clock)
-    ident = _ident(inst.name)
+    ident = function_name(inst.name)
     setpoint, x_star, x_star_dot = compile_setpoint(inst, sys, ec, consts, cm.loop.contacts, clock.t, clock.tc,
                                                     clock.period, ident)
     if sys.is_rigid_body and sys.events and cm.schedule is not None:
-        setpoint = _scheduled_flags(setpoint, sys, cm.schedule, clock.period)
+        setpoint = cm.schedule.with_flags(setpoint, sys)
     env: dict[str, object] = {**sys.env(), **consts, "t": clock.tc, "s": clock.s}  # t: the clock, within one period
     for i, n in enumerate(sys.state_names):
         env[f"{n}_star"] = x_star[i]
@@ -217,10 +110,8 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
                          fixed=p.class_ is PrimitiveClass.FIXED, xdot=cm.loop.xdot, contacts=cm.loop.contacts,
                          mode=cm.mode)
     ctx.info.update(setup.info)
-    if cm.schedule is not None:
-        ctx.info["contact_schedule"] = [[float(u), list(f)] for u, f in cm.schedule]
-    if sys.is_rigid_body:  # rigid bodies: the feet the primitive's dynamics hold
-        ctx.info["contacts"] = list(cm.loop.contacts)
+    if cm.plan is not None:  # the report's record of the feet the primitive's dynamics hold
+        ctx.info.update(cm.plan.record())
     u_raw = kind.build_law(p.controller, ctx)
     return _assemble(inst, sys, ec, clock, cm, ctx, u_raw, setpoint, ident)
 
@@ -238,22 +129,24 @@ def _clock(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, const
                             key=f"primitive '{inst.name}': domain", expected="tf > t0", found=f"{list(domain)}",
                             code="MPG104")
     t = ca.SX.sym("t")
-    tc = t - period * ca.floor(t / period) if period is not None else t
+    tc = wrap_clock(t, period)
     return _Clock(t, ca.SX.sym("s"), ca.SX.sym("x_sw", sys.nx), tc, period, domain)
 
 
 def _contact_mode(inst: PrimitiveInstance, sys: CompiledSystem, loop: OpenLoop, setup: Setup, clock: _Clock) -> _Mode:
     """Under a contact schedule (the spec's, or the one the controller kind's setup sets) the clock
-    sets the contact set, and flags in the state follow it (see _jump); rigid bodies without one
+    sets the contact set, and flags in the state follow it (Schedule.jump); rigid bodies without one
     hold the primitive's contacts."""
-    schedule = _schedule(inst, sys, setup.schedule)
-    mode = None
+    schedule = _schedule(inst, sys, setup.schedule, clock.period)
+    plan = mode = None
     if schedule is not None:
-        mode = scheduled_mode(schedule, sys.model.contact_frames, clock.t, clock.period)
+        plan = schedule
+        mode = schedule.mode(sys.model.contact_frames, clock.t)
         loop = sys.scheduled_loop(mode)
     elif sys.is_rigid_body:
-        mode = {f: ca.SX(1.0 if f in loop.contacts else 0.0) for f in sys.model.contact_frames}
-    return _Mode(loop, schedule, mode)
+        plan = (Events if sys.events else Fixed)(tuple(loop.contacts))
+        mode = plan.mode(sys.model.contact_frames)
+    return _Mode(loop, plan, mode)
 
 
 def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, clock: _Clock, cm: _Mode,
@@ -269,21 +162,21 @@ def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, cl
     windowed = any(w is not None for w in windows)
     h_u = ca.Function("h_u", args + [sys.u], [ca.vertcat(*hs) if hs else ca.SX(0, 1)])
     h_all = ca.Function("h_raw", args + [sys.u], [ca.vertcat(*hs_raw)]) if windowed else h_u
-    jump = _jump(inst, sys, clock.t, cm.schedule, clock.period)
+    jump = plan_jump(cm.plan, sys, clock.t)
     f_cl, control, h, loop_fn = _close_loop(ident, args, u_raw, f_u, h_u, sys)
     loop_raw = _close_loop(ident + "_raw", args, u_raw, f_u, h_all, sys)[3] if windowed else loop_fn
     loop_u = _open_loop(ident, args, f_u, h_all, sys) if ctx.sampled is not None else None
     W = _roa_metric(inst, sys)
     radius = float(p.roa.radius) if p.roa.radius is not None else 0.0  # 0 until a verifier sizes E
-    ctx.info["roa_W"] = W.tolist()
-    roa_margin = _roa_margin(sys, setpoint, W, radius, ident)
+    info = {**ctx.info, "roa_W": W.tolist()}  # the report's record
+    roa_margin = roa_margin_function(sys, setpoint, W, radius, ident)
     grid = p.grid
     return CompiledPrimitive(
         name=inst.name, cls=p.class_, system=sys, period=clock.period, domain=clock.domain, next=p.next,
         horizon=p.horizon, grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names,
-        radius=radius, f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, info=ctx.info,
-        jump=jump, loop=loop_fn, loop_raw=loop_raw, windows=windows,
-        boundaries=_boundaries(windows, cm.schedule, clock.period, clock.domain),
+        radius=radius, f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, W=W, info=info,
+        contacts=cm.plan, jump=jump, loop=loop_fn, loop_raw=loop_raw, windows=windows,
+        boundaries=_boundaries(windows, cm.schedule.phases if cm.schedule else None, clock.period, clock.domain),
         hybrid=sys.events or cm.schedule is not None, sampled=ctx.sampled, loop_u=loop_u,
     )
 
@@ -372,10 +265,12 @@ def _boundaries(windows, schedule, period, domain) -> tuple[float, ...]:
     return tuple(sorted(times))
 
 
-def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, planned: list | None):
-    """(until, feet) over the clock: the one the controller kind's setup plans, else the spec's."""
+def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, planned: list | None,
+              period: float | None) -> Schedule | None:
+    """The contact schedule the controller kind's setup plans, else the spec's; None without either."""
+    frames = tuple(sys.model.contact_frames) if sys.is_rigid_body else ()
     if planned is not None:
-        return planned
+        return Schedule(tuple((float(u), tuple(f)) for u, f in planned), period, frames)
     sched = inst.spec.contact_schedule
     if sched is None:
         return None
@@ -390,89 +285,7 @@ def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, planned: list | None
             raise SpecError("unknown contact frame", location=inst.locate(("contact_schedule", k, "feet")),
                             key=f"primitive '{inst.name}': contact_schedule.{k}.feet",
                             expected="one of " + ", ".join(feet), found=repr(bad[0]), code="MPG106")
-    return [(float(ph.until), tuple(ph.feet)) for ph in sched]
-
-
-SNAP = 1e-9
-"""Clock times within SNAP before a switching time count as at it: a step that ends on a switch
-(up to rounding) runs the jump into the new mode, and the next step starts in it."""
-JUST_BEFORE = 1e-7
-"""How far before a step's end the jump reads the mode the step ran in (steps are >= 1e-6 s)."""
-
-
-def _wrap_clock(t, period):
-    return t - period * ca.floor(t / period) if period is not None else t
-
-
-def scheduled_mode(schedule, feet, t, period: float | None, before: bool = False) -> dict:
-    """foot -> 1 while the schedule holds it at clock t (the primitive's raw clock), else 0; after
-    the last phase, the last phase. With `before`, the mode just before t."""
-    tc = _wrap_clock(t - JUST_BEFORE if before else t + SNAP, period)
-    mode = {}
-    for f in feet:
-        val = ca.SX(1.0 if f in schedule[-1][1] else 0.0)
-        for until, held in reversed(schedule[:-1]):
-            val = ca.if_else(tc < until, 1.0 if f in held else 0.0, val)
-        mode[f] = val
-    return mode
-
-
-def _jump(inst: PrimitiveInstance, sys: CompiledSystem, t: ca.SX, schedule, period: float | None) -> ca.Function:
-    """The discrete update after each step, (x, u, t, s) -> x: given the step's input and the clock t
-    and time since switch-in s after it (s dates contact events, compile/events.py).
-
-    Under a contact schedule, feet that join the mode at the step's end are put on the ground by
-    their legs and touch down with a plastic impact; contact flags in the state follow the schedule.
-    """
-    u = ca.SX.sym("u", sys.nu)
-    x = sys.x
-    s = ca.SX.sym("s")
-    if schedule is None:
-        return ca.Function("jump", [x, u, t, s], [sys.project(x, u, s)])
-    from .rigidbody.hybrid import masked_impact, touchdown_projection
-
-    feet = sys.model.contact_frames
-    mode = scheduled_mode(schedule, feet, t, period)
-    c = ca.vertcat(*[mode[f] for f in feet])
-    nq, nv = sys.model.nq, sys.model.nv
-    before = scheduled_mode(schedule, feet, t, period, before=True)  # the mode the step ran in
-    joins = [ca.logic_and(mode[f] > 0.5, before[f] < 0.5) for f in feet]
-    q, v = sys.project(x)[:nq], x[nq:nq + nv]
-    q_new = touchdown_projection(sys, q, joins)
-    v_new = ca.if_else(sum(joins) > 0, masked_impact(sys, q_new, v, c), v)
-    # with contact flags in the state, they follow the schedule; event clocks are left as they are
-    tail = ca.vertcat(c, x[nq + nv + len(feet):]) if sys.events else x[nq + nv:]
-    return ca.Function("jump", [x, u, t, s], [ca.vertcat(q_new, v_new, tail)])
-
-
-def _scheduled_flags(setpoint: ca.Function, sys: CompiledSystem, schedule, period) -> ca.Function:
-    """x*(t) with its contact flags set to the mode the schedule holds at t, whatever the table says."""
-    feet = sys.model.contact_frames
-    ts = ca.SX.sym("t")
-    mode = scheduled_mode(schedule, feet, ts, period)
-    flags = ca.Function("flags", [ts], [ca.vertcat(*[mode[f] for f in feet])])
-    t = ca.MX.sym("t")
-    x = setpoint(t)
-    i = sys.model.nq + sys.model.nv
-    return ca.Function(setpoint.name(), [t], [ca.vertcat(x[:i], flags(t), x[i + len(feet):])])
-
-
-def held_feet(prim: "CompiledPrimitive"):
-    """clock -> the feet a primitive's contact schedule holds, read as scheduled_mode reads it; None
-    without a schedule."""
-    sched = prim.info.get("contact_schedule")
-    if not sched or not getattr(prim.system, "is_rigid_body", False):
-        return None
-    T = float(prim.period) if prim.period is not None else np.inf
-
-    def held(t: float) -> tuple[str, ...]:
-        tc = (t + SNAP) % T
-        for until, feet in sched:
-            if tc < until:
-                return tuple(feet)
-        return tuple(sched[-1][1])
-
-    return held
+    return Schedule(tuple((float(ph.until), tuple(ph.feet)) for ph in sched), period, frames)
 
 
 def saturate(u, lo: np.ndarray, hi: np.ndarray):
@@ -518,29 +331,3 @@ def _open_loop(ident: str, args: list, f_u: ca.Function, h_u: ca.Function, sys: 
     ur = a[4]
     return ca.Function(f"loop_u_{ident}", a, [f_u(*a), h_u(*a), ur, saturate(ur, sys.u_lo, sys.u_hi)],
                        ["x", "t", "s", "x_sw", "u_held"], ["xdot", "h", "u_raw", "u"])
-
-
-def _roa_margin(sys: CompiledSystem, setpoint: ca.Function, W: np.ndarray, radius: float, ident: str) -> ca.Function:
-    """(x, t) -> r - ||x - x*(t)||_W, positive inside E; wrapped states measured the short way round."""
-    if not setpoint.is_a("SXFunction"):  # a table lookup: an MX Function
-        x, t = ca.MX.sym("x", sys.nx), ca.MX.sym("t")
-        dx = sys.wrapped_error(x - setpoint(t))
-        margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
-        return ca.Function(f"roa_{ident}", [x, t], [margin], ["x", "t"], ["margin"])
-    t = ca.SX.sym("t")
-    dx = sys.wrapped_error(sys.x - setpoint(t))
-    margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
-    return ca.Function(f"roa_{ident}", [sys.x, t], [margin], ["x", "t"], ["margin"])
-
-
-def _ident(name: str) -> str:
-    """A valid CasADi Function name part for a node name such as 'Swing(-1.5)' or '_B'.
-
-    CasADi accepts only ASCII letters, digits and single underscores, starting with a letter
-    (its callers prefix one). Names that had to be changed get a short hash, so that distinct
-    nodes (Swing(-1), Swing(1)) keep distinct Function names.
-    """
-    base = re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_") or "p"
-    if base != name:
-        base += "_" + hashlib.sha1(name.encode("utf-8", "surrogatepass")).hexdigest()[:8]
-    return base

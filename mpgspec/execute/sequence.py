@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from ..compile.contacts import grid_clock
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from ..graph.transition import MotionPrimitiveGraph
 from ..oracle.integrator import build_chunk, initial_state
@@ -139,122 +140,178 @@ def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiv
 def _simulate(run: SequenceRun, prims: dict[str, CompiledPrimitive], graph: MotionPrimitiveGraph | None,
               table: dict | None, seq: Sequence, settings: OracleSettings, mode: str, max_points: int,
               snaps: list[tuple]) -> None:
-    dt, tol = settings.dt, settings.h_tolerance
-    cur = seq.start
-    clock = _start_clock(prims[cur])
-    x = prims[cur].x_star(clock)
-    z = initial_state(prims[cur], x, clock)
-    converged = False
-    goal, cmd_i = cur, 0
-    nsteps = int(round(seq.duration / dt))
-    stride = max(1, nsteps // max_points)
-    k = 0
-    run.switches.append({"t": 0.0, "to": cur, "clock": clock, "reason": "start"})
-    run.final_primitive = cur
-    if not np.isfinite(x).all():
-        run.safe = False
-        run.failed = f"the setpoint of {cur} is not finite at its start clock {clock:g}"
+    sim = _Simulation(run, prims, graph, table, seq, settings, mode, max_points, snaps)
+    if not sim.start():
         return
-    snaps.append((0.0, cur, "start", np.array(x, float)))
+    while sim.k < sim.nsteps:
+        if not sim.advance():
+            break
+    run.final_primitive = sim.cur
 
-    seen = False  # a violation recorded since the last switch
 
-    def switch(to: str, t_B: float | None, why: str, x_now: np.ndarray, t_now: float):
-        nonlocal cur, z, converged, seen
-        seen = False
-        t_B = _start_clock(prims[to]) if t_B is None else t_B
-        run.switches.append({"t": t_now, "from": cur, "to": to, "clock": float(t_B), "reason": why})
-        snaps.append((t_now, to, "switch", np.array(x_now, float)))
-        cur, converged = to, False
+class _Simulation:
+    """The state of one run between chunks: the active primitive, the augmented state z, the goal,
+    the next command and the step count k."""
+
+    def __init__(self, run: SequenceRun, prims: dict[str, CompiledPrimitive], graph: MotionPrimitiveGraph | None,
+                 table: dict | None, seq: Sequence, settings: OracleSettings, mode: str, max_points: int,
+                 snaps: list[tuple]):
+        self.run, self.prims, self.graph, self.table, self.seq = run, prims, graph, table, seq
+        self.settings, self.mode, self.snaps = settings, mode, snaps
+        self.dt, self.tol = settings.dt, settings.h_tolerance
+        self.cur = seq.start
+        self.converged = False
+        self.goal, self.cmd_i = self.cur, 0
+        self.nsteps = int(round(seq.duration / self.dt))
+        self.stride = max(1, self.nsteps // max_points)
+        self.k = 0
+        self.seen = False  # a violation recorded since the last switch
+        self.z = None
+
+    def start(self) -> bool:
+        """Switch the start primitive in at its start clock from its setpoint; False if that is not finite."""
+        run, cur = self.run, self.cur
+        clock = _start_clock(self.prims[cur])
+        x = self.prims[cur].x_star(clock)
+        self.z = initial_state(self.prims[cur], x, clock)
+        run.switches.append({"t": 0.0, "to": cur, "clock": clock, "reason": "start"})
         run.final_primitive = cur
-        z = initial_state(prims[to], x_now, t_B)
+        if not np.isfinite(x).all():
+            run.safe = False
+            run.failed = f"the setpoint of {cur} is not finite at its start clock {clock:g}"
+            return False
+        self.snaps.append((0.0, cur, "start", np.array(x, float)))
+        return True
 
-    while k < nsteps:
-        p = prims[cur]
-        ch = build_chunk(p, dt, 64, settings.jit, settings.jit_flags, with_state=True, boundaries=False)
+    def switch(self, to: str, t_B: float | None, why: str, x_now: np.ndarray, t_now: float) -> None:
+        self.seen = False
+        t_B = _start_clock(self.prims[to]) if t_B is None else t_B
+        self.run.switches.append({"t": t_now, "from": self.cur, "to": to, "clock": float(t_B), "reason": why})
+        self.snaps.append((t_now, to, "switch", np.array(x_now, float)))
+        self.cur, self.converged = to, False
+        self.run.final_primitive = self.cur
+        self.z = initial_state(self.prims[to], x_now, t_B)
+
+    def advance(self) -> bool:
+        """Run one chunk of the active primitive and act on its first event; False when the run ends."""
+        p, settings, run = self.prims[self.cur], self.settings, self.run
+        ch = build_chunk(p, self.dt, 64, settings.jit, settings.jit_flags, with_state=True, boundaries=False)
         try:
-            zf, out = ch.run(z[:, None])
+            zf, out = ch.run(self.z[:, None])
         except RuntimeError as err:  # the run cannot go on; what it did so far is kept
             run.safe = False
-            run.failed = f"{cur} at t = {k * dt:.3f} s: {err}"
-            break
-        r, nx = ch.rows, p.system.nx
-        nh = r.nh
+            run.failed = f"{self.cur} at t = {self.k * self.dt:.3f} s: {err}"
+            return False
+        r = ch.rows
         H, M, X = out[r.h, 0], out[r.margin, 0], out[r.x, 0]
-        event = None
-        for i in range(ch.K):
-            if k + i >= nsteps:
-                event = (i, "end", None)
-                break
-            t_now = (k + i) * dt
-            xi = X[:, i]
-            clk = z[nx] + i * dt
-            if not np.isfinite(xi).all():
-                run.safe = False
-                run.failed = f"non-finite state at t = {t_now:.3f} s in {cur}"
-                event = (i, "end", None)
-                break
-            hv = H[:, i]
-            if nh and ((hv < -tol) | ~np.isfinite(hv)).any():
-                run.safe = False
-                if not run.violations:
-                    snaps.append((t_now, cur, "first_violation", np.array(xi, float)))
-                if len(run.violations) < 50 or not seen:  # the first of every switch is kept
-                    seen = True
-                    j = int(np.argmin(np.where(np.isfinite(hv), hv, -np.inf)))
-                    v = float(hv[j]) if np.isfinite(hv[j]) else None
-                    run.violations.append({"t": t_now, "primitive": cur, "h": p.h_names[j], "value": v})
-            if (k + i) % stride == 0:
-                run.t.append(t_now)
-                run.x.append([float(v) for v in xi])
-                act = hv[hv < INACTIVE / 2]
-                low = float(act.min()) if act.size else None
-                run.min_h.append(low if low is not None and np.isfinite(low) else None)
-                run.active.append(cur)
-            if M[i] > 0:
-                converged = True
-            while cmd_i < len(seq.commands) and seq.commands[cmd_i].t <= t_now + 1e-12:
-                goal = seq.commands[cmd_i].goal
-                cmd_i += 1
-                if mode == "naive" and goal != cur:
-                    event = (i, "naive", goal)
-            if event:
-                break
-            if p.cls is PrimitiveClass.TRANSIENT and clk >= p.domain[1] - 1e-9:
-                tr = graph.edge(cur, p.next) if graph is not None else None
-                t_B = tr.switch_clock(p.domain[1]) if tr is not None else None
-                if mode == "graph" and t_B is None:  # the primitive ends regardless; nothing vouches for it
-                    run.safe = False
-                    run.failed = run.failed or f"unverified hand-over {cur} -> {p.next} at t = {t_now:.3f} s"
-                event = (i, "transient_end", (p.next, t_B if mode == "graph" else None))
-                break
-            if mode == "graph" and goal != cur and converged and p.cls is not PrimitiveClass.TRANSIENT:
-                nxt = table[cur].get(goal)
-                tr = graph.edge(cur, nxt) if nxt and nxt != cur else None
-                if tr is not None:
-                    c = clk - p.period * np.floor(clk / p.period + 1e-9) if p.period else clk
-                    if p.cls is PrimitiveClass.FIXED:
-                        c = 0.0
-                    j = int(np.argmin(np.abs(tr.t_A - c)))
-                    if abs(tr.t_A[j] - c) <= dt / 2 + 1e-12 and tr.best_t_B[j] is not None:
-                        event = (i, "graph", (nxt, tr.best_t_B[j]))
-                        break
+        event = self._scan(p, ch.K, r.nh, H, M, X)
         if event is None:
-            z = zf[:, 0]
-            k += ch.K
-            continue
+            self.z = zf[:, 0]
+            self.k += ch.K
+            return True
+        return self._act(event, X)
+
+    def _scan(self, p: CompiledPrimitive, K: int, nh: int, H, M, X):
+        """The chunk's first event (step, kind, argument), monitoring and storing each sample before it."""
+        nx = p.system.nx
+        for i in range(K):
+            if self.k + i >= self.nsteps:
+                return (i, "end", None)
+            t_now = (self.k + i) * self.dt
+            xi = X[:, i]
+            clk = self.z[nx] + i * self.dt
+            if not np.isfinite(xi).all():
+                self.run.safe = False
+                self.run.failed = f"non-finite state at t = {t_now:.3f} s in {self.cur}"
+                return (i, "end", None)
+            hv = H[:, i]
+            self._monitor(p, nh, hv, xi, t_now)
+            if (self.k + i) % self.stride == 0:
+                self._store(hv, xi, t_now)
+            if M[i] > 0:
+                self.converged = True
+            event = self._commands(i, t_now)
+            if event:
+                return event
+            if p.cls is PrimitiveClass.TRANSIENT and clk >= p.domain[1] - 1e-9:
+                return self._hand_over(p, i, t_now)
+            if self.mode == "graph" and self.goal != self.cur and self.converged \
+                    and p.cls is not PrimitiveClass.TRANSIENT:
+                event = self._graph_switch(p, i, clk)
+                if event:
+                    return event
+        return None
+
+    def _monitor(self, p: CompiledPrimitive, nh: int, hv, xi, t_now: float) -> None:
+        """Record a violated safety function (the first of the run as a pose; at most 50, and the
+        first after every switch)."""
+        run = self.run
+        if nh and ((hv < -self.tol) | ~np.isfinite(hv)).any():
+            run.safe = False
+            if not run.violations:
+                self.snaps.append((t_now, self.cur, "first_violation", np.array(xi, float)))
+            if len(run.violations) < 50 or not self.seen:  # the first of every switch is kept
+                self.seen = True
+                j = int(np.argmin(np.where(np.isfinite(hv), hv, -np.inf)))
+                v = float(hv[j]) if np.isfinite(hv[j]) else None
+                run.violations.append({"t": t_now, "primitive": self.cur, "h": p.h_names[j], "value": v})
+
+    def _store(self, hv, xi, t_now: float) -> None:
+        run = self.run
+        run.t.append(t_now)
+        run.x.append([float(v) for v in xi])
+        act = hv[hv < INACTIVE / 2]
+        low = float(act.min()) if act.size else None
+        run.min_h.append(low if low is not None and np.isfinite(low) else None)
+        run.active.append(self.cur)
+
+    def _commands(self, i: int, t_now: float):
+        """Take the commands due by t_now; in naive mode, a new goal is switched to at once."""
+        event = None
+        seq = self.seq
+        while self.cmd_i < len(seq.commands) and seq.commands[self.cmd_i].t <= t_now + 1e-12:
+            self.goal = seq.commands[self.cmd_i].goal
+            self.cmd_i += 1
+            if self.mode == "naive" and self.goal != self.cur:
+                event = (i, "naive", self.goal)
+        return event
+
+    def _hand_over(self, p: CompiledPrimitive, i: int, t_now: float):
+        """A transient at the end of its domain hands over to `next` (in graph mode, at the verified t_B)."""
+        graph, run = self.graph, self.run
+        tr = graph.edge(self.cur, p.next) if graph is not None else None
+        t_B = tr.switch_clock(p.domain[1]) if tr is not None else None
+        if self.mode == "graph" and t_B is None:  # the primitive ends regardless; nothing vouches for it
+            run.safe = False
+            run.failed = run.failed or f"unverified hand-over {self.cur} -> {p.next} at t = {t_now:.3f} s"
+        return (i, "transient_end", (p.next, t_B if self.mode == "graph" else None))
+
+    def _graph_switch(self, p: CompiledPrimitive, i: int, clk: float):
+        """Towards the goal by the lookup table, at a grid time t_A the oracle verified (within dt / 2)."""
+        nxt = self.table[self.cur].get(self.goal)
+        tr = self.graph.edge(self.cur, nxt) if nxt and nxt != self.cur else None
+        if tr is None:
+            return None
+        c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clk, p.period)
+        j = int(np.argmin(np.abs(tr.t_A - c)))
+        if abs(tr.t_A[j] - c) <= self.dt / 2 + 1e-12 and tr.best_t_B[j] is not None:
+            return (i, "graph", (nxt, tr.best_t_B[j]))
+        return None
+
+    def _act(self, event, X) -> bool:
+        """Switch (or end) at the event's step; False when the run ends."""
         i, kind, arg = event
-        t_now = (k + i) * dt
-        k += i
+        t_now = (self.k + i) * self.dt
+        self.k += i
         xi = X[:, i]
         if kind == "end":
             if np.isfinite(xi).all():
-                snaps.append((t_now, cur, "end", np.array(xi, float)))
-            break
+                self.snaps.append((t_now, self.cur, "end", np.array(xi, float)))
+            return False
         if kind == "naive":
-            switch(arg, None, "commanded", xi, t_now)
+            self.switch(arg, None, "commanded", xi, t_now)
         elif kind == "transient_end":
-            switch(arg[0], arg[1], "end of domain", xi, t_now)
+            self.switch(arg[0], arg[1], "end of domain", xi, t_now)
         else:
-            switch(arg[0], arg[1], f"towards {goal}", xi, t_now)
-    run.final_primitive = cur
+            self.switch(arg[0], arg[1], f"towards {self.goal}", xi, t_now)
+        return True

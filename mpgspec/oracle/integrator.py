@@ -3,7 +3,9 @@
 A chunk advances the augmented state z = [x; t; s; x_sw] by K steps with CasADi's mapaccum and
 returns, for each step's start state, the safety functions h, the RoA margin and the raw input.
 The chunk is jit-compiled once with the machine's C compiler; batches of start points are
-evaluated by mapping the compiled chunk, so one Python call advances many rollouts.
+evaluated by mapping the compiled chunk, so one Python call advances many rollouts. The step
+itself (RK4, the jump, the step-end rule, the boundaries, the windows) is oracle/flow.py's; this
+module adds the error estimates, the rates of h and the compiled chunks.
 
 A primitive whose law is sampled (compile/hold.py: an optimisation-based law with a control rate)
 is rolled out under a zero-order hold: the law is solved at the start of every m-th step (m =
@@ -24,8 +26,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..compile.events import EventWindow
-from ..compile.primitive import INACTIVE, SNAP, CompiledPrimitive
+from ..compile.primitive import INACTIVE, CompiledPrimitive
+from .flow import active, jump_of, rk4, step_end, step_length, wrap
 
 
 INLINE_NODES = 4000
@@ -38,13 +40,6 @@ def _sym(f: ca.Function, prim: CompiledPrimitive | None = None):
     sampled laws."""
     table = prim is not None and (not prim.roa_margin.is_a("SXFunction") or prim.sampled is not None)
     return ca.SX.sym if f.is_a("SXFunction") and f.n_nodes() <= INLINE_NODES and not table else ca.MX.sym
-
-
-def _jump_fn(prim: CompiledPrimitive) -> ca.Function:
-    if prim.jump is not None:
-        return prim.jump
-    u, t, s = ca.SX.sym("u", prim.system.nu), ca.SX.sym("t"), ca.SX.sym("s")
-    return ca.Function("jump", [prim.system.x, u, t, s], [prim.system.project(prim.system.x, u, s)])
 
 
 @dataclass(frozen=True)
@@ -197,34 +192,6 @@ def _with_cse(f: ca.Function) -> ca.Function:
     return ca.Function(f.name(), a, f.call(a), f.name_in(), f.name_out(), {"cse": True})
 
 
-LEFT = 1e-8
-"""The last RK4 stage and the end sample of a step are taken this long before the step's end, so a
-step that ends on a contact switch runs wholly in its own mode (modes switch 1e-9 s early, SNAP);
-the jump then applies the new mode at the end."""
-
-def rk4_jump(f, k, jump, x, t, h: float, left: float = 0.0, s: float = np.inf):
-    """x after one oracle step of h from clock t, without the error bookkeeping: RK4 on
-    xdot = f(x, t) with the last stage `left` before the step's end (see LEFT), then the jump with
-    the input k(x, t) of the step's start (s: time since switch-in, inf for a settled orbit)."""
-    x_end, _ = _rk4(lambda xx, tt, _s, _xs: f(xx, tt), x, t, 0.0, None, h, h - min(left, h / 2))
-    return jump(x_end, k(x, t), t + h, s + h)
-
-
-def switched_flow(prim: CompiledPrimitive, x0: np.ndarray, t0: float, dt: float, n: int) -> np.ndarray:
-    """States (nx, n + 1) of a primitive's discrete flow switched in at clock t0 from x0: n oracle
-    steps of dt (RK4, the step-end rule, the jump with contact events at each step's end), each
-    evaluated through the compiled loop without the error bookkeeping."""
-    x = ca.DM(np.asarray(x0, float))
-    X = np.zeros((x.shape[0], n + 1))
-    X[:, 0] = np.asarray(x0, float)
-    for i in range(n):
-        t = t0 + i * dt
-        x = rk4_jump(lambda xx, tt: prim.f_cl(xx, tt, tt - t0, x0), lambda xx, tt: prim.control(xx, tt, tt - t0, x0)[1],
-                     prim.jump, x, t, dt, LEFT, s=t - t0)
-        X[:, i + 1] = np.array(x, float).ravel()
-    return X
-
-
 FD_STEP = 1e-6
 """Time step of the one-sided differences that give the rates of h along the flow in large loops."""
 
@@ -309,51 +276,6 @@ def _ends_differences(loop: ca.Function) -> tuple[ca.Function, ca.Function]:
     return start, end
 
 
-def _wrap(prim: CompiledPrimitive, t):
-    return t - prim.period * ca.floor(t / prim.period) if prim.period is not None else t
-
-
-def _step_length(prim: CompiledPrimitive, dt: float, tc, x=None, s=None):
-    """dt, shortened so that the step ends on the next switching time of the clock and, once a
-    contact event has happened, on the next edge of a window anchored on it (T_E + eps): x is the
-    state at the step's start (its event clocks), s the time since switch-in."""
-    anchored = [w for w in prim.windows if isinstance(w, EventWindow) and w.edges]
-    if anchored and x is None:
-        raise ValueError("windows anchored on contact events need the state to place the step's end")
-    step = ca.DM(dt)
-    for w in anchored:
-        step = ca.fmin(step, w.gap(x[w.clock], s))
-    B = prim.boundaries
-    if not B:
-        return step
-    eps = SNAP  # a clock this close below a switching time is at it (as for the contact mode)
-    if prim.period is not None:  # the next b + k T ahead of tc (tc may sit within eps below T)
-        P = prim.period
-        nxt = [ca.if_else(b > tc + eps, b, ca.if_else(b + P > tc + eps, b + P, b + 2 * P)) for b in (*B, P)]
-    else:
-        nxt = [ca.if_else(b > tc + eps, b, ca.inf) for b in B]
-    gap = nxt[0]
-    for v in nxt[1:]:
-        gap = ca.fmin(gap, v)
-    return ca.fmin(step, gap - tc)
-
-
-def _active(prim: CompiledPrimitive, tc, x=None, s=None, x_next=None, h=0.0):
-    """1 for every safety function active over a step, else 0: a clock window must contain the
-    step's middle tc; a window anchored on a contact event must hold over the whole step of h from
-    the state x at time s since switch-in to x_next after its jump (events.EventWindow.over_step:
-    the step in which the event happens is judged by the functions that do not depend on it)."""
-    def on(w):
-        if w is None:
-            return 1
-        if isinstance(w, EventWindow):
-            tau = x[w.clock]  # without the jump, the event clock only advances
-            return w.over_step(tau, s, tau + h if x_next is None else x_next[w.clock], h)
-        return ca.logic_and(tc >= w[0], tc < w[1])
-
-    return ca.vertcat(*[on(w) for w in prim.windows]) if prim.windows else ca.DM(0, 1)
-
-
 def hold_size(prim: CompiledPrimitive, doubling: bool = False) -> int:
     """Entries of the augmented state after [x; t; s; x_sw] (and x_c) that a sampled law needs: the
     steps left before its next solve, then the held input and the warm start of the judged rollout
@@ -399,41 +321,25 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
                  with_state: bool, boundaries: bool) -> Chunk:
     nx, nh = prim.system.nx, len(prim.h_names)
     start, end, f = _ends(prim, prim.sampled is not None)
-    jump = _jump_fn(prim)
+    jump = jump_of(prim)
     nz = 2 * nx + 2 + hold_size(prim)
     z = _sym(prim.f_cl, prim)("z", nz)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2]
     U, hold_next = _hold(prim, dt, z[2 * nx + 2:], [(x, t, s, xs)])  # U: [u] of a sampled law, else []
-    tc = _wrap(prim, t)
-    h = _step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
+    tc = wrap(prim, t)
+    h = step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
     k1, h0, d0, u_raw, u = start(x, t, s, xs, *U)
-    te = _step_end(prim, h)
-    x_end, k4 = _rk4(lambda *a: f(*a, *U), x, t, s, xs, h, te, k1)
+    te = step_end(prim, h)
+    x_end, k4 = rk4(lambda xx, tt, ss: f(xx, tt, ss, xs, *U), x, (t, s), h, te, k1)
     _k5, h1, d1, dh, e = end(x_end, t + te, s + te, xs, *U, k4, h)
     x_next = jump(x_end, u, t + h, s + h)
-    act = _active(prim, _wrap(prim, t + h / 2), x, s, x_next, h)  # a step lies inside or outside each window
+    act = active(prim, wrap(prim, t + h / 2), x, s, x_next, h)  # a step lies inside or outside each window
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), dh, prim.roa_margin(x, t),
                      ca.norm_2(e), s, h, u_raw, u, *([x] if with_state else []))
     body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out])
     fn = _accumulate("chunk_", prim, dt, K, with_state, boundaries, body, nz)
     return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
                  Rows(nh, prim.system.nu, nx if with_state else 0))
-
-
-def _rk4(f, x, t, s, xs, h, te, k1=None):
-    """(x after one RK4 step of h with its last stage at te, that stage's k4); k1 given when
-    already evaluated."""
-    k1 = f(x, t, s, xs) if k1 is None else k1
-    k2 = f(x + h / 2 * k1, t + h / 2, s + h / 2, xs)
-    k3 = f(x + h / 2 * k2, t + h / 2, s + h / 2, xs)
-    k4 = f(x + h * k3, t + te, s + te, xs)
-    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), k4
-
-
-def _step_end(prim: CompiledPrimitive, h):
-    """Where a step's last stage and end sample sit: under a contact schedule the end is seen from
-    inside the step (LEFT before it), so a mode switching there is not yet on."""
-    return h - ca.fmin(LEFT, h / 2) if prim.info.get("contact_schedule") else h
 
 
 def _sample_bound(h0, h1, d0, d1, h):
@@ -470,27 +376,27 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
     held = prim.sampled is not None
     start, _end, f = _ends(prim, held)
     loop = _loop(prim, held)
-    jump = _jump_fn(prim)
+    jump = jump_of(prim)
     nz = 3 * nx + 2 + hold_size(prim, doubling=True)
     z = _sym(prim.f_cl, prim)("z", nz)
     x, t, s, xs, xc = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2], z[2 * nx + 2:3 * nx + 2]
     # a sampled law: each rollout solves it at its own start state and holds it over the whole step
     U, hold_next = _hold(prim, dt, z[3 * nx + 2:], [(x, t, s, xs), (xc, t, s, xs)])
     Uj, Uc = U[:1], U[1:]
-    fj, fc = (lambda *a: f(*a, *Uj)), (lambda *a: f(*a, *Uc))
-    tc = _wrap(prim, t)
-    h = _step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
-    te = _step_end(prim, h)
+    fj, fc = (lambda xx, tt, ss: f(xx, tt, ss, xs, *Uj)), (lambda xx, tt, ss: f(xx, tt, ss, xs, *Uc))
+    tc = wrap(prim, t)
+    h = step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
+    te = step_end(prim, h)
     k1, h0, d0, u_raw, u = start(x, t, s, xs, *Uj)
     kc1, h0c, _uc_raw, uc = loop(xc, t, s, xs, *Uc)
     hh = h / 2
-    x_mid, _ = _rk4(fj, x, t, s, xs, hh, hh, k1)
-    x_end, _ = _rk4(fj, x_mid, t + hh, s + hh, xs, hh, te - hh)
-    xc_end, _ = _rk4(fc, xc, t, s, xs, h, te, kc1)
+    x_mid, _ = rk4(fj, x, (t, s), hh, hh, k1)
+    x_end, _ = rk4(fj, x_mid, (t + hh, s + hh), hh, te - hh)
+    xc_end, _ = rk4(fc, xc, (t, s), h, te, kc1)
     h1, d1 = _at_end(prim, start)(x_end, t + te, s + te, xs, *Uj)  # h and its rate at the step's end
     h1c = loop(xc_end, t + te, s + te, xs, *Uc)[1]
     x_next, xc_next = jump(x_end, u, t + h, s + h), jump(xc_end, uc, t + h, s + h)
-    act = _active(prim, _wrap(prim, t + h / 2), x, s, x_next, h)
+    act = active(prim, wrap(prim, t + h / 2), x, s, x_next, h)
     m_f, m_c = prim.roa_margin(x, t), prim.roa_margin(xc, t)
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), ca.fabs(h1 - h1c), m_f,
                      ca.fabs(m_f - m_c), s, h, u_raw, u, *([x] if with_state else []), ca.fabs(h0 - h0c))
@@ -550,10 +456,10 @@ def build_first(prim: CompiledPrimitive, dt: float, jit: bool = True) -> ca.Func
         start, _end, _f = _ends(prim)
         z = _sym(prim.f_cl, prim)("z", 2 * nx + 2)
         x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:]
-        tc = _wrap(prim, t)
-        h = _step_length(prim, dt, tc, x, s)
+        tc = wrap(prim, t)
+        h = step_length(prim, dt, tc, x, s)
         _k1, h0, _d0, u_raw, u = start(x, t, s, xs)
-        act = _active(prim, _wrap(prim, t + h / 2), x, s, h=h)
+        act = active(prim, wrap(prim, t + h / 2), x, s, h=h)
         hm = ca.if_else(act, h0, INACTIVE) if prim.h_names else h0
         fn = ca.Function("first_" + hashlib.sha1(f"{prim.name}{dt}".encode()).hexdigest()[:10], [z],
                          [hm, prim.roa_margin(x, t), u_raw, u])

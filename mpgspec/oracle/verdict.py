@@ -86,14 +86,47 @@ class Decision:
     k: np.ndarray
 
 
+@dataclass
+class _Errors:
+    """Error-aware tests of one block, (m, K) per sample k (and per step k for doubt_t): a certain
+    violation of C, a doubt at a sample, a doubt over a step; the least values (nh, m, K) minus
+    their error estimates at the samples (low_s) and over the steps (low_t); the estimates of h's
+    error at the steps' ends (eh_e) and their running sum (cdh), of the margin's error at the samples
+    (en_s) and its running sum (cen). Without safety functions the h-parts are None."""
+
+    viol: np.ndarray
+    doubt_s: np.ndarray
+    doubt_t: np.ndarray
+    low_s: np.ndarray | None = None
+    low_t: np.ndarray | None = None
+    eh_e: np.ndarray | None = None
+    cdh: np.ndarray | None = None
+    en_s: np.ndarray | None = None
+    cen: np.ndarray | None = None
+
+
 def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np.ndarray, hi: np.ndarray) -> Decision:
     """Decide what can be decided in this block and fold its judged part into the carry."""
     nh, m, K = b.lb.shape if b.lb.ndim == 3 else (0, *b.margin.shape)
-    ar = np.arange(K)
+    e = _errors(b, c, tol, nh, m)
+    valid = b.s <= T[:, None] + 1e-9
+    valid_t = b.s + b.dt <= T[:, None] + 1e-9
+    kind, first, k, kc, horizon, big = _decide(b, c, e, valid, valid_t, c_margin)
+    # judged part: samples up to the decision, steps before it (and the doubtful step itself)
+    n_s = np.where(first < big, k + 1, valid.sum(axis=1))
+    n_t = np.where(first < big, (first + 1) // 2, valid_t.sum(axis=1))
+    _fold(b, c, e, n_s, n_t, lo, hi)
+    return Decision(kind != "", kind, np.where(horizon, np.maximum(n_s - 1, 0), kc))
+
+
+def _errors(b: Block, c: Carry, tol: float, nh: int, m: int) -> _Errors:
+    """The block's error estimates (running on from the carry's, or absolute under step doubling)
+    and the tests of C they give."""
+    K = b.margin.shape[1]
     absolute = b.ds is not None  # step doubling: the estimates are absolute, not per step
     if nh:
         if absolute:
-            eh_s, eh_e = b.ds, b.dh
+            eh_s, eh_e, cdh = b.ds, b.dh, None
         else:
             cdh = np.cumsum(b.dh, axis=2)
             eh_s = c.eh[:, :, None] + cdh - b.dh  # error estimate at sample k
@@ -101,26 +134,31 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
         # inactive functions hold INACTIVE (1e9): never binding, and left out of the reported least values
         low_s = b.h - eh_s
         low_t = b.lb - eh_e
-        viol = ((b.h + eh_s) < -tol).any(axis=0)
-        doubt_s = (low_s < -tol).any(axis=0)
-        doubt_t = (low_t < -tol).any(axis=0)
+        e = _Errors(((b.h + eh_s) < -tol).any(axis=0), (low_s < -tol).any(axis=0), (low_t < -tol).any(axis=0),
+                    low_s, low_t, eh_e, cdh)
     else:
-        viol = doubt_s = doubt_t = np.zeros((m, K), bool)
+        e = _Errors(*(np.zeros((m, K), bool),) * 3)
     if absolute:
-        en_s = b.err
+        e.en_s = b.err
     else:
-        cen = np.cumsum(b.err, axis=1)
+        e.cen = np.cumsum(b.err, axis=1)
         with np.errstate(invalid="ignore"):
-            en_s = c.en[:, None] + cen - b.err
-    valid = b.s <= T[:, None] + 1e-9
-    valid_t = b.s + b.dt <= T[:, None] + 1e-9
-    bad = ~b.finite
-    c_event = (viol | doubt_s | bad) & valid
-    enter = (b.margin - c_margin * en_s > 0) & valid
+            e.en_s = c.en[:, None] + e.cen - b.err
+    return e
+
+
+def _decide(b: Block, c: Carry, e: _Errors, valid: np.ndarray, valid_t: np.ndarray, c_margin: float):
+    """(kind, first event's position, its sample k, k within the block, reached the horizon, the
+    position standing for none) of each rollout, in time order: C at a sample, then E, then the
+    step after it; a doubtful step waits for the sample at its end (Carry.pending)."""
+    m, K = b.margin.shape
+    viol, bad = e.viol, ~b.finite
+    c_event = (viol | e.doubt_s | bad) & valid
+    enter = (b.margin - c_margin * e.en_s > 0) & valid
     big = 2 * K + 2
     pos_c = np.where(c_event.any(axis=1), 2 * c_event.argmax(axis=1), big)
     pos_e = np.where(enter.any(axis=1), 2 * enter.argmax(axis=1), big)
-    st = doubt_t & valid_t
+    st = e.doubt_t & valid_t
     pos_t = np.where(st.any(axis=1), 2 * st.argmax(axis=1) + 1, big)
     # a doubtful step is decided by the sample at its end: a certain violation there is unsafe
     pos_t = np.where(c.pending, 0, pos_t)
@@ -137,7 +175,7 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
     is_c = ((pos_c == first) | end_bad) & (first < big)
     kind[is_c & bad[rows, kc]] = "non_finite"
     # a violation after a sample that may have been inside E does not show the switch unsafe
-    maybe = c.maybe_e[:, None] | np.logical_or.accumulate((b.margin + c_margin * en_s > 0) & valid, axis=1)
+    maybe = c.maybe_e[:, None] | np.logical_or.accumulate((b.margin + c_margin * e.en_s > 0) & valid, axis=1)
     maybe_v = maybe.copy()
     maybe_v[c.nsteps == 0, 0] = False  # at the switch-in instant, E cannot have been entered before C was left
     kind[is_c & ~bad[rows, kc] & viol[rows, kc] & ~maybe_v[rows, kc]] = "left_C"
@@ -150,14 +188,19 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
     kind[horizon] = np.where(maybe[:, -1][horizon], "doubt_E", "horizon")
     c.pending = wait
     c.maybe_e = maybe[:, -1]
-    first = np.where(wait, big, first)
-    done = kind != ""
-    # judged part: samples up to the decision, steps before it (and the doubtful step itself)
-    n_s = np.where(first < big, k + 1, valid.sum(axis=1))
-    n_t = np.where(first < big, (first + 1) // 2, valid_t.sum(axis=1))
+    return kind, np.where(wait, big, first), k, kc, horizon, big
+
+
+def _fold(b: Block, c: Carry, e: _Errors, n_s: np.ndarray, n_t: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Fold the first n_s samples and n_t steps of each rollout into the carry: least values, counts,
+    error estimates, the best RoA margin and the input's peaks and saturation."""
+    m, K = b.margin.shape
+    ar, rows = np.arange(K), np.arange(m)
+    absolute = b.ds is not None
     js = ar[None, :] < n_s[:, None]
     jt = ar[None, :] < n_t[:, None]
-    if nh:
+    if e.low_s is not None:
+        low_s, low_t = e.low_s, e.low_t
         full_s, full_t = bool(js.all()), bool(jt.all())  # the common case: no rollout decided in this block
         with np.errstate(invalid="ignore"):
             hs = b.h if full_s else np.where(js[None], b.h, np.inf)
@@ -168,13 +211,13 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
         c.count += (hs < INACTIVE / 2).sum(axis=2) + (lt < INACTIVE / 2).sum(axis=2)
         if absolute:
             last = np.clip(n_t - 1, 0, K - 1)
-            c.eh = np.where(n_t > 0, eh_e[:, rows, last], c.eh)
+            c.eh = np.where(n_t > 0, e.eh_e[:, rows, last], c.eh)
         else:
-            c.eh = c.eh + (cdh[:, :, -1] if full_t else np.where(jt[None], b.dh, 0.0).sum(axis=2))
+            c.eh = c.eh + (e.cdh[:, :, -1] if full_t else np.where(jt[None], b.dh, 0.0).sum(axis=2))
     if absolute:  # the margin's error at the last judged sample
-        c.en = np.where(n_s > 0, en_s[rows, np.clip(n_s - 1, 0, K - 1)], c.en)
+        c.en = np.where(n_s > 0, e.en_s[rows, np.clip(n_s - 1, 0, K - 1)], c.en)
     else:
-        c.en = c.en + (cen[:, -1] if bool(jt.all()) else np.where(jt, b.err, 0.0).sum(axis=1))
+        c.en = c.en + (e.cen[:, -1] if bool(jt.all()) else np.where(jt, b.err, 0.0).sum(axis=1))
     c.nsteps = c.nsteps + n_t
     with np.errstate(invalid="ignore"):
         c.best_m = np.maximum(c.best_m, np.where(js & ~np.isnan(b.margin), b.margin, -np.inf).max(axis=1))
@@ -182,7 +225,6 @@ def judge(b: Block, c: Carry, T: np.ndarray, tol: float, c_margin: float, lo: np
             c.peak = np.maximum(c.peak, np.where(js[None] & np.isfinite(b.u), np.abs(b.u), 0.0).max(axis=2))
             c.peak_raw = np.maximum(c.peak_raw, np.where(js[None] & np.isfinite(b.u_raw), np.abs(b.u_raw), 0.0).max(axis=2))
             c.sat |= (((b.u_raw < lo[:, None, None]) | (b.u_raw > hi[:, None, None])) & js[None]).any(axis=(0, 2))
-    return Decision(done, kind, np.where(horizon, np.maximum(n_s - 1, 0), kc))
 
 
 DOUBT = "a safety margin is within the numerical error bound"
@@ -270,7 +312,7 @@ def unevaluated(prim: CompiledPrimitive, t0: float, t1: float, count: np.ndarray
     Windows anchored on a contact event are left out: whether and when the event happened is known
     from the rollout's states only (an `after` window is never open when it did not happen, and a
     `before` one is over after the first step when it happened there), and the edges of an open
-    one are step ends (integrator._step_length)."""
+    one are step ends (flow.step_length)."""
     for i, w in enumerate(prim.windows):
         if count[i] > 0 or t1 <= 0 or isinstance(w, EventWindow):
             continue

@@ -17,32 +17,23 @@ scenario tried, it is not proven to withstand the whole set.
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..check.assertions import AssertionResult, evaluate_assertions
-from ..compile.events import NEVER
 from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
+from .cells import check_target
 from .rigid import RigidRobustRollout
-from .rollout import RobustRollout, judge, judge_flow, plant
-from .starts import Start, boundary_starts
+from .rollout import RobustRollout, plant
+from .scenarios import Scenarios, scenarios
 from .sequence import sequence_under_uncertainty
 
 LABEL = "empirical"
 RECORD = 8
 """Layout of the memoised robust record (part of its key)."""
-ROLLOUTS = 4096
-"""At most this many rollouts are run (and their samples held) at once."""
-NODE_STARTS = 2
-"""A target's own flow is checked from x_B*(t_B) at this many of its cells' switch-in clocks (the
-first and the last)."""
-SETTLED = NEVER / 2
-"""Time since switch-in at the start of a target's own-flow check: long settled, yet below the clock
-of an event that has not happened (NEVER), which stays at rest."""
 SAMPLED = "empirical (sampled)"
 NOTE = ("falsification, not proof: a robust edge withstood every scenario tried (parameter-box corners, seeded "
         "samples and an adversarial disturbance search); no certificate backs it")
@@ -70,120 +61,6 @@ class RobustResult:
                 "timing": self.timing}
 
 
-def _scenarios(unc, sys, rng: np.random.Generator, nominal: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                                           list[str]]:
-    """(theta (S, P), start error (S, nx), disturbance sign (S,), kind) of every scenario of a cell."""
-    names = list(unc.parameters)
-    lo = [unc.parameters[n].range[0] for n in names]
-    hi = [unc.parameters[n].range[1] for n in names]
-    nom = [nominal[n] for n in names]
-    states = [sys.state_names.index(s) for s in unc.initial_state]
-    eb = [float(unc.initial_state[s]) for s in unc.initial_state]
-    lo, hi = np.array(lo + [-b for b in eb], float), np.array(hi + eb, float)
-    centre = np.array(nom + [0.0] * len(eb), float)
-    dim = len(lo)
-    pts, kinds = [centre], ["nominal"]
-    if dim:
-        if 2 ** dim <= unc.corners:
-            corners = np.array(list(itertools.product((0, 1), repeat=dim)), float)
-        else:
-            corners = rng.integers(0, 2, (unc.corners, dim)).astype(float)
-        pts += list(lo + corners * (hi - lo))
-        kinds += ["corner"] * len(corners)
-        pts += list(lo + rng.random((unc.samples, dim)) * (hi - lo))
-        kinds += ["sample"] * unc.samples
-    pts = np.array(pts, float).reshape(-1, dim)
-    signs = [0.0, 1.0, -1.0] if unc.disturbance is not None else [0.0]
-    th, err, sg, kd = [], [], [], []
-    for sgn in signs:
-        for p, k in zip(pts, kinds):
-            th.append(p[: len(names)])
-            e = np.zeros(sys.nx)
-            e[states] = p[len(names):]
-            err.append(e)
-            sg.append(sgn)
-            kd.append(k if sgn == 0 else f"{k}, constant disturbance {'+' if sgn > 0 else '-'}bound")
-    return np.array(th).reshape(-1, len(names)), np.array(err), np.array(sg), kd
-
-
-def _start_record(prim, t_A: float, start: Start, state_names: list[str]) -> dict:
-    """Which start of a cell its worst case came from: a sample of E_A's boundary (its index, weighted
-    distance, E_A's radius and the offset from x_A*(t_A) by state) or x_A*(t_A) itself (sample None)."""
-    dx = start.x - prim.x_star(t_A)
-    return {"sample": start.sample, "weighted_distance": float(start.distance), "radius": float(prim.radius),
-            "offset": {n: float(v) for n, v in zip(state_names, dx) if v != 0.0}}
-
-
-def _binding(prim, Y: np.ndarray, margin: float, entry: int | None, tol: float, dt: float) -> dict:
-    """What decided a worst case: the safety function with the least value before entry (or over the
-    rollout, when it broke one), with that value and its time after the switch; or, when the flow
-    stayed safe without entering E_B, the best RoA margin it reached."""
-    H = Y[:-1, : (entry + 1 if entry is not None else Y.shape[1])]
-    H = H[:, ~np.isnan(H).all(axis=0)] if H.size else H  # samples after a decided rollout are NaN
-    if H.size:
-        Hf = np.where(np.isfinite(H), H, -np.inf)
-        j, k = np.unravel_index(int(np.argmin(Hf)), Hf.shape)
-        if entry is not None or Hf[j, k] < -tol:
-            return {"h": prim.h_names[j], "value": float(Hf[j, k]), "t": float(k * dt)}
-    return {"h": None, "roa_margin": float(margin)}
-
-
-def _node_check(B, rr, tbs: list[float], TH, ERR, D1, KIND, settings, tol, names, dist_names) -> dict:
-    """Definition 1's premise under uncertainty: B's own flow from x_B*(t_B), at the clocks `tbs`
-    its robust cells switch in at, stays in C_B for every scenario over the horizon (or the rest of a
-    transient's domain), whether or not it settles in E_B. A robust cell checks the flow only up to
-    E_B; Theorem 1 also needs B to keep it safe from there."""
-    S = len(TH)
-    hz = B.horizons(settings.horizon, tbs)
-    ns = np.repeat(np.minimum(np.ceil(hz / settings.dt - 1e-9).astype(int), rr.N), S)
-    X0 = np.concatenate([B.x_star(tb)[None, :] + ERR for tb in tbs])
-    T0 = np.repeat(np.asarray(tbs, float), S)
-    D = np.tile(D1, (len(tbs), 1, 1))
-    # s since switch-in: long ago (a flow settled in B), so events the setpoint's clocks record count
-    Y, last = rr.run(X0, T0, np.tile(TH, (len(tbs), 1)), D, ns, tol, until_entry=False, s0=SETTLED)
-    res = [judge_flow(Y[r, :-1], int(min(ns[r], last[r])), tol) for r in range(len(X0))]
-    r = min(range(len(X0)), key=lambda q: (res[q][0], res[q][1]))
-    ok, low, k, j = res[r]
-    binding = {"h": B.h_names[j], "value": float(low), "t": float(k * settings.dt)} if j is not None else None
-    return {"node": B.name, "t_B": [float(t) for t in tbs], "scenarios": len(X0),
-            "robust_safe": bool(all(x[0] for x in res)), "worst_margin": float(low),
-            "worst_case": {"t_B": float(T0[r]), "kind": KIND[r % S], "parameters": dict(zip(names, map(float, TH[r % S]))),
-                           "disturbance": {u: [float(v) for v in D[r][i]] for i, u in enumerate(dist_names)},
-                           "binding": binding}}
-
-
-def _gradient_candidates(rr, worst: list, live: list[int], bound: np.ndarray) -> list:
-    """Per live cell two bang-bang disturbances: against the gradient of the binding h sample before
-    entry and of the RoA margin at entry (the sign of each piece's derivative, through CasADi)."""
-    targets = []
-    for c in live:
-        w = worst[c]
-        Hs = w["Y"][:-1, : w["entry"] + 1]
-        jh, kh = np.unravel_index(int(np.argmin(Hs)), Hs.shape) if Hs.size else (0, 0)
-        targets += [(c, int(jh), int(kh)), (c, rr.nh, int(w["entry"]))]
-    gr = rr.gradients(np.array([worst[c]["x0"] for c, _, _ in targets]),
-                      np.array([worst[c]["t0"] for c, _, _ in targets]),
-                      np.array([worst[c]["theta"] for c, _, _ in targets]),
-                      np.array([worst[c]["D"] for c, _, _ in targets]),
-                      [r for _, r, _ in targets], [k for _, _, k in targets])
-    return [(c, np.where(gd != 0, -np.sign(gd) * bound[:, None], worst[c]["D"])) for (c, _, _), gd in zip(targets, gr)]
-
-
-def _flipped(D: np.ndarray, bound: np.ndarray, a: int, k: int) -> np.ndarray:
-    """D with piece k of axis a reversed (set to +bound where it was 0): one move of the coordinate
-    search for a bang-bang disturbance when no gradient is available."""
-    Dn = np.array(D, float)
-    Dn[a, k] = -Dn[a, k] if Dn[a, k] != 0 else bound[a]
-    return Dn
-
-
-def _rows(tr: Transition, m: int) -> list[int]:
-    avail = np.flatnonzero(tr.available)
-    if len(avail) <= m:
-        return [int(i) for i in avail]
-    return sorted({int(avail[int(round(k))]) for k in np.linspace(0, len(avail) - 1, m)})
-
-
 def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
     """Build the robust graph of a compiled project and its nominal graph; None without `uncertainty`.
 
@@ -207,9 +84,43 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                             {"robust_s": time.perf_counter() - t0, "robust_cache_hit": 1.0}, known["sequence"],
                             known["nodes"])
     sys = next(iter(prims.values())).system
+    sc, rollout = _setup(spec, sys, unc, settings)
+    among = set(unc.nodes) if unc.nodes is not None else set(prims)
+    edges, nodes, n_roll, build_s = [], [], 0, 0.0
+    by_target = _by_target(g, among)
+    for bi, (b, items) in enumerate(by_target.items()):
+        if progress:
+            progress(spec.name, "robust graph", bi, len(by_target))
+        e, node, n, s = check_target(prims, prims[b], items, unc, settings, sc, rollout)
+        edges += e
+        nodes.append(node)
+        n_roll, build_s = n_roll + n, build_s + s
+    rg = _robust_graph(g, edges, unc.nodes)
+    scen = _scenario_record(unc, sc, among, edges, sys)
+    t1 = time.perf_counter()
+    seq = None
+    if spec.project.sequence is not None and unc.runs > 0:
+        if progress:
+            progress(spec.name, "sequence under uncertainty", 0, 3)
+        seq = sequence_under_uncertainty(spec, prims, settings, {"graph": (g, lookup_table(g)),
+                                                                 "robust_graph": (rg, lookup_table(rg))},
+                                         unc.runs, unc.seed)
+    timing = {"robust_s": time.perf_counter() - t0, "robust_build_s": build_s, "robust_rollouts": n_roll,
+              "robust_sequence_s": time.perf_counter() - t1}
+    edges.sort(key=lambda e: (e["from"], e["to"]))
+    if memo is not None:
+        memo.put(key, {"edges": edges, "nodes": nodes, "scenarios": scen, "sequence": seq, "rollouts": n_roll})
+    return RobustResult(rg, edges, _assertions(unc, rg), scen, timing, seq, nodes)
+
+
+def _setup(spec, sys, unc, settings) -> tuple[Scenarios, object]:
+    """The scenarios of every cell, and rollout(B, horizon): B's robust rollout on the perturbed plant
+    (the rigid body's uncertain plant with a push on its base, or the analytic plant with input
+    disturbances)."""
     names = list(unc.parameters)
     dist = unc.disturbance
     force = dist.force if dist is not None else None
+    K = dist.segments if dist is not None else 1
     if sys.is_rigid_body:
         nominal_values = {"mass_scale": 1.0, "friction": float(sys.friction)}
         frame = force.frame if force is not None else sys.base_frames()[0]
@@ -229,126 +140,28 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
 
         def rollout(B, horizon):
             return RobustRollout(B, P, dist_idx, K, settings, horizon)
-    K = dist.segments if dist is not None else 1
-    roa_starts = unc.start_in_roa
     rng = np.random.default_rng(unc.seed)
-    TH, ERR, SG, KIND = _scenarios(unc, sys, rng, nominal_values)
-    S = len(TH)
-    tol = settings.h_tolerance
-    among = set(unc.nodes) if unc.nodes is not None else set(prims)
-    nominal = {(a, b): tr for (a, b), tr in g.transitions.items()
-               if tr.cls is not TransitionClass.NONE and a in among and b in among}
-    edges, nodes, n_roll, build_s = [], [], 0, 0.0
+    TH, ERR, SG, KIND = scenarios(unc, sys, rng, nominal_values)
+    return Scenarios(names, TH, ERR, SG, KIND, bound, K, dist_names, list(sys.state_names)), rollout
+
+
+def _by_target(g: MotionPrimitiveGraph, among: set) -> dict[str, list]:
+    """Target -> [(source, transition)] of the nominal edges among `among`."""
     by_target: dict[str, list] = {}
-    for (a, b), tr in nominal.items():
-        by_target.setdefault(b, []).append((a, tr))
-    for bi, (b, items) in enumerate(by_target.items()):
-        if progress:
-            progress(spec.name, "robust graph", bi, len(by_target))
-        B = prims[b]
-        cells = []
-        for a, tr in items:
-            for i in _rows(tr, unc.cells):
-                tb = tr.best_t_B[i]
-                j = int(np.argmin(np.abs(tr.t_B - tb)))
-                t_A = float(tr.t_A[i])
-                starts = [Start(prims[a].x_star(t_A))]
-                if roa_starts is not None:
-                    starts += boundary_starts(prims[a], t_A, roa_starts.samples, roa_starts.seed)
-                cells.append((a, tr, i, j, starts, float(tb)))
-        hz = B.horizons(settings.horizon, [c[5] for c in cells])
-        tb0 = time.perf_counter()
-        rr = rollout(B, float(hz.max()))
-        build_s += time.perf_counter() - tb0
-        nsteps = np.minimum(np.ceil(hz / settings.dt - 1e-9).astype(int), rr.N)
-        C = len(cells)
-        D1 = (SG[:, None, None] * bound[None, :, None]) * np.ones((1, len(bound), K))
-        worst = [None] * C  # per cell: its worst scenario so far, over every start
-        pairs = [(c, s) for c in range(C) for s in cells[c][4]]
-        per = max(1, ROLLOUTS // S)
-        for q0 in range(0, len(pairs), per):
-            chunk = pairs[q0:q0 + per]
-            cs = np.repeat([c for c, _ in chunk], S)
-            X0 = np.concatenate([s.x[None, :] + ERR for _, s in chunk])
-            T0 = np.array([cells[c][5] for c in cs])
-            THb, D = np.tile(TH, (len(chunk), 1)), np.tile(D1, (len(chunk), 1, 1))
-            Y, last = rr.run(X0, T0, THb, D, nsteps[cs], tol)
-            n_roll += len(X0)
-            for q, (c, s) in enumerate(chunk):
-                rs = range(q * S, (q + 1) * S)
-                res = {r: judge(Y[r, :-1], Y[r, -1], int(min(nsteps[c], last[r])), tol) for r in rs}
-                r = min(rs, key=lambda r: (res[r][0], res[r][1]))
-                ok = all(res[p][0] for p in rs)
-                w = worst[c]
-                if w is None or (res[r][0], res[r][1]) < (w["safe"], w["margin"]):
-                    worst[c] = {"margin": res[r][1], "safe": res[r][0], "entry": res[r][2], "x0": X0[r],
-                                "t0": T0[r], "theta": THb[r], "D": D[r], "kind": KIND[r % S], "err": ERR[r % S],
-                                "start": s, "all_safe": ok and (w is None or w["all_safe"]), "Y": Y[r].copy()}
-                else:
-                    w["all_safe"] = w["all_safe"] and ok
-        for _ in range(unc.search if dist is not None else 0):
-            live = [c for c in range(C) if worst[c]["all_safe"]]
-            if not live:
-                break
-            if rr.grad is None:  # no gradient through the law (a sampled ID-QP, a rigid body): flip one piece
-                cand = [(c, _flipped(worst[c]["D"], bound, a, k)) for c in live
-                        for a in range(len(bound)) if bound[a] != 0 for k in range(K)]
-            else:
-                cand = _gradient_candidates(rr, worst, live, bound)
-            if not cand:
-                break
-            Xc = np.array([worst[c]["x0"] for c, _ in cand])
-            Yc, lc = rr.run(Xc, np.array([worst[c]["t0"] for c, _ in cand]),
-                        np.array([worst[c]["theta"] for c, _ in cand]).reshape(len(cand), -1),
-                        np.array([Dn for _, Dn in cand]), np.array([nsteps[c] for c, _ in cand]), tol)
-            n_roll += len(cand)
-            moved = False
-            for q, (c, Dn) in enumerate(cand):
-                ok, m, k_e = judge(Yc[q, :-1], Yc[q, -1], int(min(nsteps[c], lc[q])), tol)
-                w = worst[c]
-                if (ok, m) < (w["safe"], w["margin"]):
-                    w.update(margin=m, safe=ok, entry=k_e, D=Dn, Y=Yc[q], kind="adversarial bang-bang disturbance"
-                             + ("" if rr.grad is not None else " (coordinate search)"))
-                    w["all_safe"] = w["all_safe"] and ok
-                    moved = True
-            if not moved and rr.grad is None:  # the coordinate search sits at a local worst
-                break
-        tbs = sorted({round(c[5], 9) for c in cells})
-        tbs = [tbs[int(round(k))] for k in np.linspace(0, len(tbs) - 1, min(NODE_STARTS, len(tbs)))]
-        node = _node_check(B, rr, sorted(set(tbs)), TH, ERR, D1, KIND, settings, tol, names, dist_names)
-        n_roll += node["scenarios"]
-        nodes.append(node)
-        per_edge: dict[str, list] = {}
-        for c, (a, tr, i, j, starts, tb) in enumerate(cells):
-            w = worst[c]
-            wc = {"kind": w["kind"], "parameters": dict(zip(names, map(float, w["theta"]))),
-                  "initial_error": {s: float(w["err"][sys.state_names.index(s)]) for s in unc.initial_state},
-                  "disturbance": {u: [float(v) for v in w["D"][k]] for k, u in enumerate(dist_names)},
-                  "binding": _binding(B, w["Y"], w["margin"], w["entry"], tol, settings.dt)}
-            if roa_starts is not None:
-                wc["start"] = _start_record(prims[a], float(tr.t_A[i]), w["start"], sys.state_names)
-            per_edge.setdefault(a, []).append({"t_A": float(tr.t_A[i]), "t_B": tb, "robust_safe": bool(w["all_safe"]) and node["robust_safe"],
-                                               "worst_margin": w["margin"], "worst_case": wc, "_ij": (i, j),
-                                               "starts_kept": len(starts) - 1})
-        for a, tr in items:
-            checked = per_edge.get(a, [])
-            margins = [c["worst_margin"] for c in checked]
-            worst = min(checked, key=lambda c: c["worst_margin"]) if checked else None
-            edges.append({"from": a, "to": b, "nominal_class": int(tr.cls), "rows_available": int(tr.available.sum()),
-                          "target_flow_safe": node["robust_safe"],
-                          "cells_checked": len(checked), "worst_margin": min(margins) if margins else None,
-                          "worst_case": None if worst is None else {"t_A": worst["t_A"], "t_B": worst["t_B"],
-                                                                   **worst["worst_case"]},
-                          "cells": {"row": [int(c["_ij"][0]) for c in checked],  # t_A rows, at the nominal best t_B
-                                    "robust_safe": [int(c["robust_safe"]) for c in checked], "worst_margin": margins}})
-            if roa_starts is not None:
-                kept = [c["starts_kept"] for c in checked]
-                edges[-1]["cells"]["starts_kept"] = kept
-                edges[-1]["start_in_roa"] = {"radius": float(prims[a].radius), "drawn": roa_starts.samples * len(kept),
-                                             "kept": int(sum(kept))}
-    rg = _robust_graph(g, edges, unc.nodes)
-    scen = {"per_cell": S, "corners": KIND.count("corner"), "samples": unc.samples, "search_rounds": unc.search,
-            "disturbance_segments": K, "parameters": {n: list(unc.parameters[n].range) for n in names},
+    for (a, b), tr in g.transitions.items():
+        if tr.cls is not TransitionClass.NONE and a in among and b in among:
+            by_target.setdefault(b, []).append((a, tr))
+    return by_target
+
+
+def _scenario_record(unc, sc: Scenarios, among: set, edges: list[dict], sys) -> dict:
+    """The report's account of the scenarios every cell ran."""
+    dist, roa_starts = unc.disturbance, unc.start_in_roa
+    force = dist.force if dist is not None else None
+    bound = sc.bound
+    scen = {"per_cell": sc.S, "corners": sc.KIND.count("corner"), "samples": unc.samples,
+            "search_rounds": unc.search, "disturbance_segments": sc.K,
+            "parameters": {n: list(unc.parameters[n].range) for n in sc.names},
             "initial_state": dict(unc.initial_state),
             "disturbance": None if dist is None else {"inputs": list(dist.inputs), "bound": bound.tolist()}
             if force is None else {"force": {"frame": force.frame, "bound": bound.tolist(),
@@ -360,20 +173,7 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                                 "drawn": sum(e["start_in_roa"]["drawn"] for e in edges),
                                 "kept": sum(e["start_in_roa"]["kept"] for e in edges),
                                 "projected": bool(sys.is_rigid_body)}
-    t1 = time.perf_counter()
-    seq = None
-    if spec.project.sequence is not None and unc.runs > 0:
-        if progress:
-            progress(spec.name, "sequence under uncertainty", 0, 3)
-        seq = sequence_under_uncertainty(spec, prims, settings, {"graph": (g, lookup_table(g)),
-                                                                 "robust_graph": (rg, lookup_table(rg))},
-                                         unc.runs, unc.seed)
-    timing = {"robust_s": time.perf_counter() - t0, "robust_build_s": build_s, "robust_rollouts": n_roll,
-              "robust_sequence_s": time.perf_counter() - t1}
-    edges.sort(key=lambda e: (e["from"], e["to"]))
-    if memo is not None:
-        memo.put(key, {"edges": edges, "nodes": nodes, "scenarios": scen, "sequence": seq, "rollouts": n_roll})
-    return RobustResult(rg, edges, _assertions(unc, rg), scen, timing, seq, nodes)
+    return scen
 
 
 def _assertions(unc, rg: MotionPrimitiveGraph) -> list[AssertionResult]:

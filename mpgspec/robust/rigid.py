@@ -15,25 +15,24 @@ from __future__ import annotations
 
 import casadi as ca
 
+from ..compile.contacts import Schedule
 from ..compile.primitive import INACTIVE, CompiledPrimitive, saturate
 from ..compile.rigidbody.system import no_slip
-from ..oracle.integrator import LEFT, _active, _jump_fn, _wrap
+from ..oracle.flow import LEFT, active, jump_of, rk4, wrap
 from .rollout import RobustRollout
 
 
 def plant_feet(prim: CompiledPrimitive) -> list[str]:
     """The feet whose ground forces the robust plant returns, in its order."""
-    sys = prim.system
-    if prim.info.get("contact_schedule") or sys.events:
-        return list(sys.model.contact_frames)
-    return list(prim.info.get("contacts", sys.model.contact_frames))
+    frames = prim.system.model.contact_frames
+    return list(frames) if prim.contacts.varies else list(prim.contacts.feet)
 
 
 def robust_plant(prim: CompiledPrimitive, frame: str) -> ca.Function:
     """(x, u, k, F, t) -> (xdot, lam, c) of the primitive's dynamics perturbed (uncertain_plant)."""
-    sched = prim.info.get("contact_schedule")
-    return prim.system.uncertain_plant(tuple(prim.info.get("contacts", ())), frame,
-                                       [(u, tuple(f)) for u, f in sched] if sched else None, prim.period)
+    plan = prim.contacts
+    phases = list(plan.phases) if isinstance(plan, Schedule) else None
+    return prim.system.uncertain_plant(plan.feet, frame, phases, prim.period)
 
 
 def robust_jump(prim: CompiledPrimitive, frame: str) -> ca.Function:
@@ -42,10 +41,10 @@ def robust_jump(prim: CompiledPrimitive, frame: str) -> ca.Function:
     sys = prim.system
     x, u, t, s = sys.x, ca.SX.sym("u", sys.nu), ca.SX.sym("t"), ca.SX.sym("s")
     k, F = ca.SX.sym("k"), ca.SX.sym("F", 3)
-    if sys.events and not prim.info.get("contact_schedule"):
+    if sys.events and not isinstance(prim.contacts, Schedule):
         xn = sys.project(x, u, s, k, sys.push_wrench(frame, x[:sys.model.nq], F))
     else:
-        xn = _jump_fn(prim)(x, u, t, s)
+        xn = jump_of(prim)(x, u, t, s)
     return ca.Function("robust_jump", [x, u, t, s, k, F], [xn])
 
 
@@ -90,7 +89,7 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     mu = th[names.index("friction")] if "friction" in names else sys.friction
     F = d if nd else ca.DM.zeros(3)
     rows = no_slip_rows(prim)
-    gated = bool(prim.info.get("contact_schedule")) or sys.events  # contact conditions bind while held
+    gated = prim.contacts.varies  # contact conditions bind while held
     jump = robust_jump(prim, frame)
     held = hold[1:1 + nu] if law is not None else None
 
@@ -120,44 +119,52 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     ur0, u0 = control(x, t, s, held)
     k1, lam0, c0 = plant_fn(x, u0, k, F, t)
     te = dt - min(LEFT, dt / 2)  # the step's end seen from inside it, as switched_flow sees it
-    k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2)
-    k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2)
-    k4 = f(x + dt * k3, t + te, s + te)
-    x_end = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    x_end, _ = rk4(f, x, (t, s), dt, te, k1)
     ur1, u1 = control(x_end, t + te, s + te, held)
     _, lam1, c1 = plant_fn(x_end, u1, k, F, t + te)
     xn = jump(x_end, u0, t + dt, s + dt, k, F)
-    act = _active(prim, _wrap(prim, t + dt / 2), x, s, xn, dt)
+    act = active(prim, wrap(prim, t + dt / 2), x, s, xn, dt)
     hs = ca.fmin(h_of(x, t, s, ur0, lam0, c0), h_of(x_end, t + te, s + te, ur1, lam1, c1))
     if len(prim.h_names):
         hs = ca.if_else(act, hs, INACTIVE)
-    if law is not None:  # solved at the start of every m-th step, from the previous solve's warm start
-        m, cnt, w = law.steps(dt), hold[0], hold[1 + nu:]
-        c_next = ca.if_else(cnt + 1 > m - 0.5, 0, cnt + 1)
-        if m == 1:
-            u_next, w_next = law.solve(xn, t + dt, s + dt, xsw, w)
-        else:
-            a = [*law.solve.mx_in(), ca.MX.sym("u", nu)]
-            sample = ca.Function.if_else("sample", ca.Function("solve", a, law.solve.call(a[:5])),
-                                         ca.Function("keep", a, [a[5], a[4]]))
-            u_next, w_next = sample(c_next < 0.5, xn, t + dt, s + dt, xsw, w, held)
-        hold_next = ca.vertcat(c_next, u_next, w_next)
-    else:
-        hold_next = ca.MX(0, 1)
+    hold_next = _hold_next(law, hold, xn, t + dt, s + dt, xsw, held, dt) if law is not None else ca.MX(0, 1)
     out = ca.vertcat(hs, prim.roa_margin(xn, t + dt))
     step = ca.Function("robust_rigid_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th, hold_next), out])
+    # the first sample: h at the step's start, windowed at that instant
+    h_start = h_of(x, t, s, ur0, lam0, c0)
+    if len(prim.h_names):
+        h_start = ca.if_else(active(prim, wrap(prim, t), x, s, x, 0.0), h_start, INACTIVE)
+    first = _first(prim, ca.Function("o", [z, d], [h_start]), nth, nd)
+    return step, first, nth, nd, nhold
+
+
+def _hold_next(law, hold, xn, t, s, xsw, held, dt: float):
+    """The hold's entries after a step ending at clock t (s since switch-in) in state xn: the law is
+    solved at the start of every m-th step, from the previous solve's warm start."""
+    nu = held.shape[0]
+    m, cnt, w = law.steps(dt), hold[0], hold[1 + nu:]
+    c_next = ca.if_else(cnt + 1 > m - 0.5, 0, cnt + 1)
+    if m == 1:
+        u_next, w_next = law.solve(xn, t, s, xsw, w)
+    else:
+        a = [*law.solve.mx_in(), ca.MX.sym("u", nu)]
+        sample = ca.Function.if_else("sample", ca.Function("solve", a, law.solve.call(a[:5])),
+                                     ca.Function("keep", a, [a[5], a[4]]))
+        u_next, w_next = sample(c_next < 0.5, xn, t, s, xsw, w, held)
+    return ca.vertcat(c_next, u_next, w_next)
+
+
+def _first(prim: CompiledPrimitive, h_start: ca.Function, nth: int, nd: int) -> ca.Function:
+    """(x0, t0, s0, theta0, d0) -> ([h; RoA margin] at switch-in, the hold's entries then), h_start
+    (z, d) -> h evaluated on z0 = [x0; t0; s0; x0; theta0; hold0]; a sampled law is solved at once."""
+    law, nx = prim.sampled, prim.system.nx
     x0, t0, s0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("s0")
     th0, d0 = ca.MX.sym("th0", nth), ca.MX.sym("d0", nd)
     if law is not None:
-        u_0, w0 = law.solve(x0, t0, s0, x0, ca.DM.zeros(nw))
+        u_0, w0 = law.solve(x0, t0, s0, x0, ca.DM.zeros(law.nw))
         hold0 = ca.vertcat(0, u_0, w0)
     else:
         hold0 = ca.MX(0, 1)
-    # the first sample: h at the step's start, windowed at that instant, on z0 = [x0; t0; s0; x0; theta0; hold0]
-    h_start = h_of(x, t, s, ur0, lam0, c0)
-    if len(prim.h_names):
-        h_start = ca.if_else(_active(prim, _wrap(prim, t), x, s, x, 0.0), h_start, INACTIVE)
-    out0 = ca.Function("o", [z, d], [h_start])(ca.vertcat(x0, t0, s0, x0, th0, hold0), d0 if nd else ca.MX(0, 1))
-    first = ca.Function("robust_rigid_first", [x0, t0, s0, th0, d0], [ca.vertcat(out0, prim.roa_margin(x0, t0)),
+    out0 = h_start(ca.vertcat(x0, t0, s0, x0, th0, hold0), d0 if nd else ca.MX(0, 1))
+    return ca.Function("robust_rigid_first", [x0, t0, s0, th0, d0], [ca.vertcat(out0, prim.roa_margin(x0, t0)),
                                                                  hold0])
-    return step, first, nth, nd, nhold

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
 from ..compile.system import compile_analytic
+from ..oracle.flow import rk4
 from ..oracle.integrator import compile_cached
 from ..settings import OracleSettings
 
@@ -123,11 +124,7 @@ class RobustRollout:
             u = prim.control(xx, tt, ss, xsw)[1]
             return plant_fn(xx, u + ca.mtimes(ca.DM(Bd), d) if nu else u, th)
 
-        k1 = f(x, t, s)
-        k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2)
-        k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2)
-        k4 = f(x + dt * k3, t + dt, s + dt)
-        xn = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        xn, _ = rk4(f, x, (t, s), dt)
         out = ca.vertcat(prim.h(xn, t + dt, s + dt, xsw), prim.roa_margin(xn, t + dt))
         z = ca.vertcat(x, t, s, xsw, th)
         step = ca.Function("robust_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th), out])

@@ -15,7 +15,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ..compile.contacts import grid_clock
 from ..compile.primitive import CompiledPrimitive
+from ..oracle.flow import rk4
 from ..oracle.integrator import compile_cached
 from ..spec.models import PrimitiveClass
 
@@ -33,11 +35,7 @@ def _step(prim: CompiledPrimitive, plant_fn: ca.Function, Bd: np.ndarray, dt: fl
         u = prim.control(xx, tt, ss, xsw)[1]
         return plant_fn(xx, u + ca.mtimes(ca.DM(Bd), d) if prim.system.nu else u, th)
 
-    k1 = f(x, t, s)
-    k2 = f(x + dt / 2 * k1, t + dt / 2, s + dt / 2)
-    k3 = f(x + dt / 2 * k2, t + dt / 2, s + dt / 2)
-    k4 = f(x + dt * k3, t + dt, s + dt)
-    xn = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    xn, _ = rk4(f, x, (t, s), dt)
     z = ca.vertcat(x, t, s, xsw)
     return ca.Function(f"dstep_{prim.digest()[:16]}", [z, th, d],
                        [ca.vertcat(xn, t + dt, s + dt, xsw), prim.h(xn, t + dt, s + dt, xsw),
@@ -137,109 +135,140 @@ class DisturbedSequences:
     def run(self, graph, table, mode: str) -> dict:
         """Safe fraction, per-run outcome and the switches made per edge of one mode ('naive' or
         'graph' with the given graph)."""
-        prims, st, seq, n = self.prims, self.settings, self.seq, self.n
-        dt, tol = st.dt, st.h_tolerance
-        nx = next(iter(prims.values())).system.nx
-        cur = [seq.start] * n
-        c0 = _start_clock(prims[seq.start])
-        x0 = prims[seq.start].x_star(c0)[:, None] + self.err
-        Z = np.zeros((self.nz, n))
-        safe, conv = np.ones(n, bool), np.zeros(n, bool)
-        first = [None] * n
-
-        def fail(r, t, name, why=None):  # why: the violated h ({h, value}) or the error
-            if safe[r]:
-                first[r] = {"t": t, "primitive": name, **(why if isinstance(why, dict) else {"error": why} if why else {})}
-            safe[r] = False
-
-        def enter(rs: list[int], name: str, clocks: np.ndarray, X: np.ndarray, t: float):
-            d = self.dist[min(int(t / HOLD), len(self.dist) - 1)]
-            cols = np.array(rs)
-            fn = self.fns[name]
-            full = np.zeros((nx, n)), np.zeros(n)
-            full[0][:, cols], full[1][cols] = X, clocks
-            outs, failed = self._apply(lambda a, b, c, e: [fn.init(a, b[0], c, e)], cols,
-                                       [full[0], full[1][None, :], self.theta, d])
-            for q in failed:
-                fail(int(cols[q]), t, name, "the control law found no input at the switch")
-            if outs is not None:
-                Z[:fn.nz, cols] = outs[0]
-
-        enter(list(range(n)), seq.start, np.full(n, c0), x0, 0.0)
-        goal, cmd = [seq.start] * n, 0
-        cur_a = np.array(cur, dtype=object)
-        taken: dict[tuple[str, str], int] = {}  # switches per edge over all runs
-        trans = {n: p.cls is PrimitiveClass.TRANSIENT for n, p in prims.items()}
+        seq, dt = self.seq, self.settings.dt
+        runs = _Runs(self, mode, graph, table)
         for k in range(self.steps):
             t = (k + 1) * dt
-            d = self.dist[min(int(k * dt / HOLD), len(self.dist) - 1)]
-            M = np.full(n, -np.inf)
-            for name in set(cur_a[safe]):
-                cols = np.flatnonzero((cur_a == name) & safe)
-                fn = self.fns[name]
-                outs, failed = self._apply(fn, cols, [Z[:fn.nz], self.theta, d])
-                for q in failed:
-                    fail(int(cols[q]), t, name, "the control law found no input")
-                if outs is None:
-                    continue
-                zf, hc, m = outs
-                ok = np.ones(len(cols), bool)
-                ok[failed] = False
-                Z[:fn.nz, cols[ok]], M[cols[ok]] = zf[:, ok], m.ravel()[ok]
-                bad = ~np.isfinite(zf[:nx]).all(axis=0) | (hc < -tol).any(axis=0) | ~np.isfinite(hc).all(axis=0)
-                for q in np.flatnonzero(bad & ok):
-                    hq = np.where(np.isfinite(hc[:, q]), hc[:, q], -np.inf)
-                    j = int(np.argmin(hq)) if len(hq) else None
-                    fail(int(cols[q]), t, name, None if j is None or hq[j] >= -tol else
-                         {"h": self.prims[name].h_names[j], "value": float(hq[j])})
-            conv |= M > 0
-            new_goal = None
-            while cmd < len(seq.commands) and seq.commands[cmd].t <= t - dt + 1e-12:
-                new_goal = seq.commands[cmd].goal
-                cmd += 1
-            if new_goal is not None:
-                goal = [new_goal] * n
-            clocks = Z[nx]
-            moves: dict[str, list[tuple[int, float]]] = {}
-            for r in np.flatnonzero(safe):
-                p = prims[cur[r]]
-                if not (new_goal is not None and mode == "naive" or trans[cur[r]] and clocks[r] >= p.domain[1] - 1e-9
-                        or mode != "naive" and conv[r] and goal[r] != cur[r] and not trans[cur[r]]):
-                    continue
-                clk = clocks[r]
-                to = None
-                if mode == "naive" and new_goal is not None and new_goal != cur[r]:
-                    to = (new_goal, _start_clock(prims[new_goal]))
-                elif trans[cur[r]] and clk >= p.domain[1] - 1e-9:
-                    tr = graph.edge(cur[r], p.next) if graph is not None else None
-                    tb = tr.switch_clock(p.domain[1]) if tr is not None else None
-                    if mode != "naive" and tb is None:
-                        first[r] = {"t": t, "primitive": cur[r], "unverified_hand_over": p.next}
-                        safe[r] = False
-                    to = (p.next, tb if tb is not None and mode != "naive" else _start_clock(prims[p.next]))
-                elif mode != "naive" and goal[r] != cur[r] and conv[r] and not trans[cur[r]]:
-                    nxt = (table.get(cur[r]) or {}).get(goal[r])
-                    tr = graph.edge(cur[r], nxt) if nxt and nxt != cur[r] else None
-                    if tr is not None:
-                        c = clk - p.period * np.floor(clk / p.period + 1e-9) if p.period else clk
-                        c = 0.0 if p.cls is PrimitiveClass.FIXED else c
-                        j = int(np.argmin(np.abs(tr.t_A - c)))
-                        if abs(tr.t_A[j] - c) <= dt / 2 + 1e-12 and tr.best_t_B[j] is not None:
-                            to = (nxt, tr.best_t_B[j])
-                if to is not None:
-                    taken[(cur[r], to[0])] = taken.get((cur[r], to[0]), 0) + 1
-                    cur[r], conv[r] = to[0], False
-                    cur_a[r] = to[0]
-                    moves.setdefault(to[0], []).append((int(r), float(to[1])))
-            for name, items in moves.items():
-                rs = [r for r, _ in items if safe[r]]
-                if rs:
-                    enter(rs, name, np.array([c for r, c in items if safe[r]]), Z[:nx, rs], t)
+            runs.step(t, self.dist[min(int(k * dt / HOLD), len(self.dist) - 1)])
+            new_goal = runs.commands(t - dt)
+            runs.switch(t, new_goal)
+        cur, safe = runs.cur, runs.safe
         last = seq.commands[-1].goal if seq.commands else seq.start
-        return {"safe_fraction": float(safe.mean()), "safe_runs": int(safe.sum()), "runs": n,
-                "reached_goal": int(sum(1 for r in range(n) if safe[r] and cur[r] == last)),
-                "first_violation": [f for f in first if f is not None][:5], "final": cur,
-                "switches": [{"from": a, "to": b, "count": c} for (a, b), c in sorted(taken.items())]}
+        return {"safe_fraction": float(safe.mean()), "safe_runs": int(safe.sum()), "runs": self.n,
+                "reached_goal": int(sum(1 for r in range(self.n) if safe[r] and cur[r] == last)),
+                "first_violation": [f for f in runs.first if f is not None][:5], "final": cur,
+                "switches": [{"from": a, "to": b, "count": c} for (a, b), c in sorted(runs.taken.items())]}
+
+
+class _Runs:
+    """The n runs of one mode between steps: each run's primitive, augmented state, safety, whether
+    it entered its E, its first violation and its goal; the switches taken per edge."""
+
+    def __init__(self, ds: DisturbedSequences, mode: str, graph, table):
+        self.ds, self.mode, self.graph, self.table = ds, mode, graph, table
+        prims, seq, n = ds.prims, ds.seq, ds.n
+        self.nx = next(iter(prims.values())).system.nx
+        self.cur = [seq.start] * n
+        self.cur_a = np.array(self.cur, dtype=object)
+        self.Z = np.zeros((ds.nz, n))
+        self.safe, self.conv = np.ones(n, bool), np.zeros(n, bool)
+        self.first = [None] * n
+        self.goal, self.cmd = [seq.start] * n, 0
+        self.taken: dict[tuple[str, str], int] = {}  # switches per edge over all runs
+        self.trans = {name: p.cls is PrimitiveClass.TRANSIENT for name, p in prims.items()}
+        c0 = _start_clock(prims[seq.start])
+        x0 = prims[seq.start].x_star(c0)[:, None] + ds.err
+        self.enter(list(range(n)), seq.start, np.full(n, c0), x0, 0.0)
+
+    def fail(self, r: int, t: float, name: str, why=None) -> None:
+        """Run r is unsafe from t on; why: the violated h ({h, value}) or the error."""
+        if self.safe[r]:
+            self.first[r] = {"t": t, "primitive": name,
+                             **(why if isinstance(why, dict) else {"error": why} if why else {})}
+        self.safe[r] = False
+
+    def enter(self, rs: list[int], name: str, clocks: np.ndarray, X: np.ndarray, t: float) -> None:
+        """Switch primitive `name` in for the runs rs at the given clocks from the states X."""
+        ds = self.ds
+        d = ds.dist[min(int(t / HOLD), len(ds.dist) - 1)]
+        cols = np.array(rs)
+        fn = ds.fns[name]
+        full = np.zeros((self.nx, ds.n)), np.zeros(ds.n)
+        full[0][:, cols], full[1][cols] = X, clocks
+        outs, failed = ds._apply(lambda a, b, c, e: [fn.init(a, b[0], c, e)], cols,
+                                 [full[0], full[1][None, :], ds.theta, d])
+        for q in failed:
+            self.fail(int(cols[q]), t, name, "the control law found no input at the switch")
+        if outs is not None:
+            self.Z[:fn.nz, cols] = outs[0]
+
+    def step(self, t: float, d: np.ndarray) -> None:
+        """One step of every safe run under the disturbance d; marks violations and entries into E."""
+        ds, nx, tol = self.ds, self.nx, self.ds.settings.h_tolerance
+        M = np.full(ds.n, -np.inf)
+        for name in set(self.cur_a[self.safe]):
+            cols = np.flatnonzero((self.cur_a == name) & self.safe)
+            fn = ds.fns[name]
+            outs, failed = ds._apply(fn, cols, [self.Z[:fn.nz], ds.theta, d])
+            for q in failed:
+                self.fail(int(cols[q]), t, name, "the control law found no input")
+            if outs is None:
+                continue
+            zf, hc, m = outs
+            ok = np.ones(len(cols), bool)
+            ok[failed] = False
+            self.Z[:fn.nz, cols[ok]], M[cols[ok]] = zf[:, ok], m.ravel()[ok]
+            bad = ~np.isfinite(zf[:nx]).all(axis=0) | (hc < -tol).any(axis=0) | ~np.isfinite(hc).all(axis=0)
+            for q in np.flatnonzero(bad & ok):
+                hq = np.where(np.isfinite(hc[:, q]), hc[:, q], -np.inf)
+                j = int(np.argmin(hq)) if len(hq) else None
+                self.fail(int(cols[q]), t, name, None if j is None or hq[j] >= -tol else
+                          {"h": ds.prims[name].h_names[j], "value": float(hq[j])})
+        self.conv |= M > 0
+
+    def commands(self, t: float) -> str | None:
+        """The goal of the commands due by t (every run's new goal), or None."""
+        seq, new_goal = self.ds.seq, None
+        while self.cmd < len(seq.commands) and seq.commands[self.cmd].t <= t + 1e-12:
+            new_goal = seq.commands[self.cmd].goal
+            self.cmd += 1
+        if new_goal is not None:
+            self.goal = [new_goal] * self.ds.n
+        return new_goal
+
+    def switch(self, t: float, new_goal: str | None) -> None:
+        """Move every safe run that switches at t to its next primitive and switch those in."""
+        clocks = self.Z[self.nx]
+        moves: dict[str, list[tuple[int, float]]] = {}
+        for r in np.flatnonzero(self.safe):
+            to = self._destination(int(r), clocks[r], t, new_goal)
+            if to is not None:
+                cur = self.cur[r]
+                self.taken[(cur, to[0])] = self.taken.get((cur, to[0]), 0) + 1
+                self.cur[r], self.conv[r] = to[0], False
+                self.cur_a[r] = to[0]
+                moves.setdefault(to[0], []).append((int(r), float(to[1])))
+        for name, items in moves.items():
+            rs = [r for r, _ in items if self.safe[r]]
+            if rs:
+                self.enter(rs, name, np.array([c for r, c in items if self.safe[r]]), self.Z[:self.nx, rs], t)
+
+    def _destination(self, r: int, clk: float, t: float, new_goal: str | None):
+        """(primitive, clock) run r switches to at t, or None: a naive switch to a new goal, a
+        transient's hand-over at the end of its domain, or a verified switch towards the goal."""
+        prims, mode, graph, cur = self.ds.prims, self.mode, self.graph, self.cur[r]
+        p, trans = prims[cur], self.trans[cur]
+        if not (new_goal is not None and mode == "naive" or trans and clk >= p.domain[1] - 1e-9
+                or mode != "naive" and self.conv[r] and self.goal[r] != cur and not trans):
+            return None
+        if mode == "naive" and new_goal is not None and new_goal != cur:
+            return (new_goal, _start_clock(prims[new_goal]))
+        if trans and clk >= p.domain[1] - 1e-9:
+            tr = graph.edge(cur, p.next) if graph is not None else None
+            tb = tr.switch_clock(p.domain[1]) if tr is not None else None
+            if mode != "naive" and tb is None:
+                self.first[r] = {"t": t, "primitive": cur, "unverified_hand_over": p.next}
+                self.safe[r] = False
+            return (p.next, tb if tb is not None and mode != "naive" else _start_clock(prims[p.next]))
+        if mode != "naive" and self.goal[r] != cur and self.conv[r] and not trans:
+            nxt = (self.table.get(cur) or {}).get(self.goal[r])
+            tr = graph.edge(cur, nxt) if nxt and nxt != cur else None
+            if tr is not None:
+                c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clk, p.period)
+                j = int(np.argmin(np.abs(tr.t_A - c)))
+                if abs(tr.t_A[j] - c) <= self.ds.settings.dt / 2 + 1e-12 and tr.best_t_B[j] is not None:
+                    return (nxt, tr.best_t_B[j])
+        return None
 
 
 def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], list[str], int, np.ndarray]:

@@ -33,8 +33,7 @@ class Start:
 
 def metric(prim: CompiledPrimitive) -> np.ndarray:
     """W of the primitive's E."""
-    W = prim.info.get("roa_W")
-    return np.eye(prim.system.nx) if W is None else np.asarray(W, float)
+    return np.array(prim.W, float)
 
 
 def weighted_distance(prim: CompiledPrimitive, x: np.ndarray, xs: np.ndarray) -> float:

@@ -13,7 +13,7 @@ import pytest
 
 from mpgspec.api import compile_project, settings_for
 from mpgspec.execute.sequence import simulate_sequence
-from mpgspec.oracle.integrator import switched_flow
+from mpgspec.oracle.flow import switched_flow
 from mpgspec.robust.rigid import no_slip_rows, plant_feet, rigid_step, robust_plant
 from mpgspec.robust.sequence import sequence_under_uncertainty
 from mpgspec.spec.loader import load_project

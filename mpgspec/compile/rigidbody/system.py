@@ -240,7 +240,7 @@ class RigidBodyCompiledSystem(CompiledSystem):
         else:
             feet = m.contact_frames
             if schedule is not None:
-                from ..primitive import scheduled_mode
+                from ..contacts import scheduled_mode
 
                 mode = scheduled_mode(schedule, feet, t, period)
                 c = ca.vertcat(*[mode[f] for f in feet])

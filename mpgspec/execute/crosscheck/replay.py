@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...compile.contacts import Events
 from ...compile.events import NEVER, happened
 from ...compile.primitive import INACTIVE, CompiledPrimitive
 from ...spec.models import PrimitiveClass
@@ -46,13 +47,9 @@ def held_feet(p: CompiledPrimitive, clock: float) -> tuple[str, ...] | None:
     """Feet the primitive's dynamics hold at this clock (a contact schedule, else its contact set);
     None when contact events decide (a transient primitive of a system with contact events, whose
     feet leave or reach the ground by design)."""
-    sched = p.info.get("contact_schedule")
-    if sched:
-        c = clock % p.period if p.period else clock
-        return tuple(next((feet for until, feet in sched if c < until - 1e-9), sched[-1][1]))
-    if p.system.events and p.cls is PrimitiveClass.TRANSIENT:
-        return None
-    return tuple(p.info.get("contacts", p.system.model.contact_frames))
+    if isinstance(p.contacts, Events):
+        return None if p.cls is PrimitiveClass.TRANSIENT else p.contacts.feet
+    return p.contacts.held(clock)
 
 
 class _Events:

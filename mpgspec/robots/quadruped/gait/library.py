@@ -27,7 +27,7 @@ from ....compile.primitive import compile_primitive
 from ....compile.setpoint import spec_file
 from ....compile.system import compile_system
 from ....errors import SpecError
-from ....oracle.integrator import switched_flow
+from ....oracle.flow import switched_flow
 from ....report.write import write_atomic
 from ....spec.base import Strict
 from ....spec.loader import _read, load_project

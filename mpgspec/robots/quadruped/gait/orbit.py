@@ -19,12 +19,14 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ....compile.primitive import _jump, saturate, scheduled_mode
+from ....compile.contacts import Schedule
+from ....compile.primitive import saturate
 from ....compile.rigidbody.symmetry import (NEUTRAL, lift_function, lift_jacobian, reduce_function,
                                           reduced_monodromy)
+from ....oracle.flow import LEFT, rk4_jump
+from ....oracle.integrator import compile_cached
 from ..stance import nominal_geometry
 from ..trot import gains_of, trot_torque
-from ....oracle.integrator import LEFT, compile_cached, rk4_jump
 
 FD = 1e-6
 
@@ -66,9 +68,9 @@ class StrideMap:
             raise ValueError(f"the trot's switching times must be multiples of dt = {dt:g}")
         self.steps = n
         feet = tuple(sys.model.contact_frames)
-        schedule = [(u, tuple(f)) for u, f in g.schedule(feet)]
+        schedule = Schedule(tuple((u, tuple(f)) for u, f in g.schedule(feet)), g.period, feet)
         t = ca.SX.sym("t")
-        mode = scheduled_mode(schedule, feet, t, g.period)
+        mode = schedule.mode(feet, t)
         loop = sys.scheduled_loop(mode)
         inertia, offsets = nominal_geometry(sys, dict(controller.pose))
         u = saturate(trot_torque(sys, g, t, mode, inertia, offsets), sys.u_lo, sys.u_hi)
@@ -78,7 +80,7 @@ class StrideMap:
         lam = ca.vertcat(*[loop.env[f"{ft}_f{a}"] for ft in feet for a in "xyz"])
         fz = ca.vertcat(*[sys.extra_env[f"{ft}_z"] for ft in feet])
         self.aux = ca.Function("aux", [x, t, c], [u, ca.substitute(lam, sys.u, u), ca.vertcat(*mode.values()), fz])
-        jump = _jump(None, sys, ca.SX.sym("tj"), schedule, g.period)
+        jump = schedule.jump(sys, ca.SX.sym("tj"))
         z = ca.MX.sym("z", sys.nx + 2)  # [x; t; c]: the RK4 stages call f, so its code is generated once
         xm, tm, cm = z[:sys.nx], z[sys.nx], z[sys.nx + 1]
         xn = rk4_jump(lambda xx, tt: f(xx, tt, cm), lambda xx, tt: k_u(xx, tt, cm), jump, xm, tm, self.dt, LEFT)

@@ -1,0 +1,159 @@
+"""The closed loop of a motion primitive (Definition 1) as one typed object.
+
+CompiledPrimitive holds the named CasADi Functions of the loop under its law (f_cl, control, h,
+the RoA margin, the setpoint), its contact plan (compile/contacts.py), E's weight W, the safe
+set's windows and the clock's switching times; oracle/flow.py steps it. It pickles through
+CasADi's serialisation, so the compile cache and worker processes can store and ship it.
+"""
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import pickle
+import re
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from ..spec.models import PrimitiveClass
+from .contacts import ContactPlan
+from .events import EventWindow
+from .hold import SampledLaw
+from .system import CompiledSystem
+
+
+@dataclass
+class CompiledPrimitive:
+    """A motion primitive as CasADi Functions plus the numbers the graph builder needs."""
+
+    name: str
+    cls: PrimitiveClass
+    system: CompiledSystem
+    period: float | None
+    domain: tuple[float, float] | None
+    next: str | None
+    horizon: float | None
+    grid_A: int
+    grid_B: int
+    h_names: list[str]
+    radius: float
+    f_cl: ca.Function  # (x, t, s, x_sw) -> xdot under the saturated control law
+    control: ca.Function  # (x, t, s, x_sw) -> (u_raw, u_sat)
+    h: ca.Function  # (x, t, s, x_sw) -> h values; >= 0 is safe
+    roa_margin: ca.Function  # (x, t) -> r - ||x - x*(t)||_W ; > 0 is inside E
+    setpoint: ca.Function  # t -> x*(t)
+    W: np.ndarray  # the weight of E's norm ||x - x*(t)||_W (zero on event clocks)
+    info: dict = field(default_factory=dict)  # the record the report prints: the law's data, the contact
+    # plan and W as lists; code reads the typed fields
+    contacts: ContactPlan | None = None  # which feet the dynamics hold, and when; None without contacts
+    jump: ca.Function | None = None  # (x, u, t, s) -> x: the discrete part of a step (quaternion, contacts)
+    loop: ca.Function | None = None  # (x, t, s, x_sw) -> (xdot, h, u_raw, u) with one control evaluation
+    loop_raw: ca.Function | None = None  # the same with every safety function active (no `when` windows)
+    windows: list[tuple[float, float] | EventWindow | None] = field(default_factory=list)  # per safety function:
+    # a clock window [t0, t1) or one anchored on a contact event (compile/events.py); None: always active
+    boundaries: tuple[float, ...] = ()  # clock times where C or the contact schedule switches
+    hybrid: bool = False  # the state jumps (contact events or a contact schedule), not only renormalised
+    sampled: SampledLaw | None = None  # a law the oracle solves at a control rate and holds in between
+    loop_u: ca.Function | None = None  # (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): the open loop under a
+    # given input, every safety function active (as loop_raw); set with `sampled`
+    cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
+
+    def __reduce__(self):
+        """Pickles through CasADi's serialisation (compiled chunks are dropped and rebuilt from the
+        on-disk cache where they are needed), so a closed loop can be shipped to worker processes."""
+        state = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "cache"}
+        with ca.global_pickle_context():
+            blob = pickle.dumps(state)
+        return _restore, (blob,)
+
+    @property
+    def needs(self) -> set[str]:
+        """Capabilities a backend must have to run this closed loop."""
+        return {"hybrid"} if self.hybrid else set()
+
+    def horizons(self, T: float, t0s) -> np.ndarray:
+        """How long the oracle runs from each switch-in clock t0: the primitive's own horizon, else
+        the project's T, and never past the end t_f of a transient's domain."""
+        t0s = np.atleast_1d(np.asarray(t0s, float))
+        h = np.full(t0s.shape, float(self.horizon or T))
+        if self.cls is PrimitiveClass.TRANSIENT:
+            h = np.minimum(h, self.domain[1] - t0s)
+        return np.maximum(h, 0.0)
+
+    def digest(self) -> str:
+        """Content hash of everything that decides an oracle verdict of this closed loop."""
+        if "digest" not in self.cache:
+            parts = [f.serialize() for f in (self.loop_raw or self.loop, self.f_cl, self.roa_margin, self.setpoint,
+                                              self.jump, self.loop_u) if f is not None]
+            if self.sampled is not None:
+                parts += [self.sampled.solve.serialize(), repr(self.sampled.period)]
+            nums = repr((self.name, self.cls.value, self.period, self.domain, self.next, self.horizon, self.h_names,
+                         self.radius, self.windows, self.boundaries, self.hybrid, self.W.tolist(),
+                         self.system.u_lo.tolist(), self.system.u_hi.tolist()))
+            self.cache["digest"] = hashlib.sha256("\n".join([*parts, nums]).encode()).hexdigest()
+        return self.cache["digest"]
+
+    @property
+    def t_range(self) -> tuple[float, float]:
+        """Clock interval sampled by the grids (Algorithm 1)."""
+        if self.cls is PrimitiveClass.PERIODIC:
+            return (0.0, float(self.period))
+        if self.cls is PrimitiveClass.TRANSIENT:
+            return self.domain
+        return (0.0, 0.0)
+
+    def clock_grid(self, n: int, role: str = "B") -> np.ndarray:
+        """Grid over the clock: one point (fixed), n over one period, n over the domain.
+
+        As a source (role 'A') a transient's grid ends at t_f, where it hands over to `next`;
+        as a target (role 'B') it stops short of t_f, where no time would be left to converge.
+        """
+        a, b = self.t_range
+        if self.cls is PrimitiveClass.FIXED:
+            return np.zeros(1)
+        if self.cls is PrimitiveClass.PERIODIC:
+            return a + (b - a) * np.arange(n) / n
+        if n == 1:
+            return np.array([b if role == "A" else a])
+        return np.linspace(a, b, n) if role == "A" else np.linspace(a, b, n + 1)[:-1]
+
+    def x_star(self, t) -> np.ndarray:
+        return np.array(self.setpoint(t)).ravel()
+
+    def with_radius(self, radius: float) -> "CompiledPrimitive":
+        """The same primitive with E resized; only the RoA margin is rebuilt."""
+        margin = roa_margin_function(self.system, self.setpoint, self.W, radius, function_name(self.name))
+        return dataclasses.replace(self, radius=radius, roa_margin=margin, cache={})
+
+
+def _restore(blob: bytes) -> "CompiledPrimitive":
+    with ca.global_unpickle_context():
+        state = pickle.loads(blob)
+    return CompiledPrimitive(**state)
+
+
+def roa_margin_function(sys: CompiledSystem, setpoint: ca.Function, W: np.ndarray, radius: float, ident: str) -> ca.Function:
+    """(x, t) -> r - ||x - x*(t)||_W, positive inside E; wrapped states measured the short way round."""
+    if not setpoint.is_a("SXFunction"):  # a table lookup: an MX Function
+        x, t = ca.MX.sym("x", sys.nx), ca.MX.sym("t")
+        dx = sys.wrapped_error(x - setpoint(t))
+        margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
+        return ca.Function(f"roa_{ident}", [x, t], [margin], ["x", "t"], ["margin"])
+    t = ca.SX.sym("t")
+    dx = sys.wrapped_error(sys.x - setpoint(t))
+    margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
+    return ca.Function(f"roa_{ident}", [sys.x, t], [margin], ["x", "t"], ["margin"])
+
+
+def function_name(name: str) -> str:
+    """A valid CasADi Function name part for a node name such as 'Swing(-1.5)' or '_B'.
+
+    CasADi accepts only ASCII letters, digits and single underscores, starting with a letter
+    (its callers prefix one). Names that had to be changed get a short hash, so that distinct
+    nodes (Swing(-1), Swing(1)) keep distinct Function names.
+    """
+    base = re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_") or "p"
+    if base != name:
+        base += "_" + hashlib.sha1(name.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+    return base

@@ -1,0 +1,128 @@
+"""The discrete flow of a closed loop: one oracle step, written once for every consumer.
+
+A step of length h from clock t (time s since switch-in) is classical RK4 on xdot = f(x, t, s)
+(`rk4`), then the jump (`jump_of`: back onto the state manifold, contact events, touchdowns of a
+contact schedule) with the input of the step's start. Under a contact schedule the last stage
+and the end sample are taken just before the step's end (`step_end`, LEFT), so a mode switching
+there is not yet on. The step is shortened to end on the clock's next switching time
+(`step_length`), and a safety function counts for a step when its window holds over it
+(`active`). The oracle's chunks (oracle/integrator.py), the robust rollouts (robust/), the gait
+orbits and the verifiers all build their steps from these functions.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..compile.closed_loop import CompiledPrimitive
+from ..compile.contacts import SNAP, Schedule, plan_jump, wrap_clock
+from ..compile.events import EventWindow
+
+LEFT = 1e-8
+"""The last RK4 stage and the end sample of a step are taken this long before the step's end, so a
+step that ends on a contact switch runs wholly in its own mode (modes switch 1e-9 s early, SNAP);
+the jump then applies the new mode at the end."""
+
+
+def rk4(f, x, clocks: tuple, h, te=None, k1=None):
+    """(x after one classical RK4 step of h on xdot = f(x, *clocks), that step's k4).
+
+    Every clock advances with the step; the last stage sits at te (default h, see step_end); k1
+    is given when already evaluated. x may be a tuple of parts (f then returns one rate per part),
+    each advanced by the same weights.
+    """
+    te = h if te is None else te
+    k1 = f(x, *clocks) if k1 is None else k1
+    k2 = f(_along(x, h / 2, k1), *[c + h / 2 for c in clocks])
+    k3 = f(_along(x, h / 2, k2), *[c + h / 2 for c in clocks])
+    k4 = f(_along(x, h, k3), *[c + te for c in clocks])
+    if isinstance(x, tuple):
+        return tuple(xi + h / 6 * (a + 2 * b + 2 * c + d) for xi, a, b, c, d in zip(x, k1, k2, k3, k4)), k4
+    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4), k4
+
+
+def _along(x, a, k):
+    """x + a k, part by part for a tuple state."""
+    return tuple(xi + a * ki for xi, ki in zip(x, k)) if isinstance(x, tuple) else x + a * k
+
+
+def step_end(prim: CompiledPrimitive, h):
+    """Where a step's last stage and end sample sit: under a contact schedule the end is seen from
+    inside the step (LEFT before it), so a mode switching there is not yet on."""
+    return h - ca.fmin(LEFT, h / 2) if isinstance(prim.contacts, Schedule) else h
+
+
+def jump_of(prim: CompiledPrimitive) -> ca.Function:
+    """(x, u, t, s) -> x: the primitive's discrete update after a step (its own, else the system's)."""
+    if prim.jump is not None:
+        return prim.jump
+    return plan_jump(None, prim.system, ca.SX.sym("t"))
+
+
+def wrap(prim: CompiledPrimitive, t):
+    """The clock t wrapped into the primitive's period (unchanged without one)."""
+    return wrap_clock(t, prim.period)
+
+
+def rk4_jump(f, k, jump, x, t, h: float, left: float = 0.0, s: float = np.inf):
+    """x after one oracle step of h from clock t, without the error bookkeeping: RK4 on
+    xdot = f(x, t) with the last stage `left` before the step's end (see LEFT), then the jump with
+    the input k(x, t) of the step's start (s: time since switch-in, inf for a settled orbit)."""
+    x_end, _ = rk4(lambda xx, tt, _s: f(xx, tt), x, (t, 0.0), h, h - min(left, h / 2))
+    return jump(x_end, k(x, t), t + h, s + h)
+
+
+def switched_flow(prim: CompiledPrimitive, x0: np.ndarray, t0: float, dt: float, n: int) -> np.ndarray:
+    """States (nx, n + 1) of a primitive's discrete flow switched in at clock t0 from x0: n oracle
+    steps of dt (RK4, the step-end rule, the jump with contact events at each step's end), each
+    evaluated through the compiled loop without the error bookkeeping."""
+    x = ca.DM(np.asarray(x0, float))
+    X = np.zeros((x.shape[0], n + 1))
+    X[:, 0] = np.asarray(x0, float)
+    for i in range(n):
+        t = t0 + i * dt
+        x = rk4_jump(lambda xx, tt: prim.f_cl(xx, tt, tt - t0, x0), lambda xx, tt: prim.control(xx, tt, tt - t0, x0)[1],
+                     prim.jump, x, t, dt, LEFT, s=t - t0)
+        X[:, i + 1] = np.array(x, float).ravel()
+    return X
+
+
+def step_length(prim: CompiledPrimitive, dt: float, tc, x=None, s=None):
+    """dt, shortened so that the step ends on the next switching time of the clock and, once a
+    contact event has happened, on the next edge of a window anchored on it (T_E + eps): x is the
+    state at the step's start (its event clocks), s the time since switch-in."""
+    anchored = [w for w in prim.windows if isinstance(w, EventWindow) and w.edges]
+    if anchored and x is None:
+        raise ValueError("windows anchored on contact events need the state to place the step's end")
+    step = ca.DM(dt)
+    for w in anchored:
+        step = ca.fmin(step, w.gap(x[w.clock], s))
+    B = prim.boundaries
+    if not B:
+        return step
+    eps = SNAP  # a clock this close below a switching time is at it (as for the contact mode)
+    if prim.period is not None:  # the next b + k T ahead of tc (tc may sit within eps below T)
+        P = prim.period
+        nxt = [ca.if_else(b > tc + eps, b, ca.if_else(b + P > tc + eps, b + P, b + 2 * P)) for b in (*B, P)]
+    else:
+        nxt = [ca.if_else(b > tc + eps, b, ca.inf) for b in B]
+    gap = nxt[0]
+    for v in nxt[1:]:
+        gap = ca.fmin(gap, v)
+    return ca.fmin(step, gap - tc)
+
+
+def active(prim: CompiledPrimitive, tc, x=None, s=None, x_next=None, h=0.0):
+    """1 for every safety function active over a step, else 0: a clock window must contain the
+    step's middle tc; a window anchored on a contact event must hold over the whole step of h from
+    the state x at time s since switch-in to x_next after its jump (events.EventWindow.over_step:
+    the step in which the event happens is judged by the functions that do not depend on it)."""
+    def on(w):
+        if w is None:
+            return 1
+        if isinstance(w, EventWindow):
+            tau = x[w.clock]  # without the jump, the event clock only advances
+            return w.over_step(tau, s, tau + h if x_next is None else x_next[w.clock], h)
+        return ca.logic_and(tc >= w[0], tc < w[1])
+
+    return ca.vertcat(*[on(w) for w in prim.windows]) if prim.windows else ca.DM(0, 1)

@@ -1,0 +1,253 @@
+"""The switch cells of one target under the scenarios: run, worst case, adversarial search, records.
+
+For a target B and its nominal in-edges A -> B, each cell (a t_A row at its best t_B) is run from
+x_A*(t_A) (and from samples of E_A's boundary, with `start_in_roa`) for every scenario; the worst
+scenario of each cell is then pushed by `search` rounds of an adversarial bang-bang disturbance.
+B's own flow is checked under the same scenarios (_node_check). graph.py builds the robust graph
+from the records made here.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..compile.events import NEVER
+from ..graph.transition import Transition
+from .rollout import judge, judge_flow
+from .scenarios import Scenarios
+from .starts import Start, boundary_starts
+
+ROLLOUTS = 4096
+"""At most this many rollouts are run (and their samples held) at once."""
+NODE_STARTS = 2
+"""A target's own flow is checked from x_B*(t_B) at this many of its cells' switch-in clocks (the
+first and the last)."""
+SETTLED = NEVER / 2
+"""Time since switch-in at the start of a target's own-flow check: long settled, yet below the clock
+of an event that has not happened (NEVER), which stays at rest."""
+
+
+def check_target(prims: dict, B, items: list, unc, settings, sc: Scenarios, rollout) -> tuple[list, dict, int, float]:
+    """(edge records, B's own-flow record, rollouts run, seconds building the rollout) for target B
+    and its nominal in-edges `items` [(A, transition)]; rollout(B, horizon) builds B's robust rollout."""
+    cells = _cells(prims, items, unc)
+    hz = B.horizons(settings.horizon, [c[5] for c in cells])
+    tb0 = time.perf_counter()
+    rr = rollout(B, float(hz.max()))
+    build_s = time.perf_counter() - tb0
+    nsteps = np.minimum(np.ceil(hz / settings.dt - 1e-9).astype(int), rr.N)
+    tol = settings.h_tolerance
+    worst, n_roll = _worst_cases(rr, cells, sc, nsteps, tol)
+    n_roll += _search(rr, worst, sc, nsteps, tol, unc.search if unc.disturbance is not None else 0)
+    node = _node_check(B, rr, _node_clocks(cells), sc.TH, sc.ERR, sc.D1, sc.KIND, settings, tol, sc.names,
+                       sc.dist_names)
+    n_roll += node["scenarios"]
+    per_edge = _cell_records(prims, B, cells, worst, node, sc, unc, settings)
+    edges = [_edge_record(a, B.name, tr, per_edge.get(a, []), node, prims, unc) for a, tr in items]
+    return edges, node, n_roll, build_s
+
+
+def _cells(prims: dict, items: list, unc) -> list[tuple]:
+    """(A, transition, t_A row i, t_B column j, starts, t_B) of every cell checked."""
+    cells = []
+    for a, tr in items:
+        for i in _rows(tr, unc.cells):
+            tb = tr.best_t_B[i]
+            j = int(np.argmin(np.abs(tr.t_B - tb)))
+            t_A = float(tr.t_A[i])
+            starts = [Start(prims[a].x_star(t_A))]
+            if unc.start_in_roa is not None:
+                starts += boundary_starts(prims[a], t_A, unc.start_in_roa.samples, unc.start_in_roa.seed)
+            cells.append((a, tr, i, j, starts, float(tb)))
+    return cells
+
+
+def _worst_cases(rr, cells: list, sc: Scenarios, nsteps: np.ndarray, tol: float) -> tuple[list[dict], int]:
+    """Per cell its worst scenario over every start (least (safe, margin)), and the rollouts run;
+    `all_safe` says whether every scenario from every start was safe."""
+    S, C = sc.S, len(cells)
+    D1 = sc.D1
+    worst = [None] * C
+    n_roll = 0
+    pairs = [(c, s) for c in range(C) for s in cells[c][4]]
+    per = max(1, ROLLOUTS // S)
+    for q0 in range(0, len(pairs), per):
+        chunk = pairs[q0:q0 + per]
+        cs = np.repeat([c for c, _ in chunk], S)
+        X0 = np.concatenate([s.x[None, :] + sc.ERR for _, s in chunk])
+        T0 = np.array([cells[c][5] for c in cs])
+        THb, D = np.tile(sc.TH, (len(chunk), 1)), np.tile(D1, (len(chunk), 1, 1))
+        Y, last = rr.run(X0, T0, THb, D, nsteps[cs], tol)
+        n_roll += len(X0)
+        for q, (c, s) in enumerate(chunk):
+            rs = range(q * S, (q + 1) * S)
+            res = {r: judge(Y[r, :-1], Y[r, -1], int(min(nsteps[c], last[r])), tol) for r in rs}
+            r = min(rs, key=lambda r: (res[r][0], res[r][1]))
+            ok = all(res[p][0] for p in rs)
+            w = worst[c]
+            if w is None or (res[r][0], res[r][1]) < (w["safe"], w["margin"]):
+                worst[c] = {"margin": res[r][1], "safe": res[r][0], "entry": res[r][2], "x0": X0[r],
+                            "t0": T0[r], "theta": THb[r], "D": D[r], "kind": sc.KIND[r % S], "err": sc.ERR[r % S],
+                            "start": s, "all_safe": ok and (w is None or w["all_safe"]), "Y": Y[r].copy()}
+            else:
+                w["all_safe"] = w["all_safe"] and ok
+    return worst, n_roll
+
+
+def _search(rr, worst: list[dict], sc: Scenarios, nsteps: np.ndarray, tol: float, rounds: int) -> int:
+    """`rounds` of the adversarial bang-bang search from each still-safe cell's worst case (by the
+    gradient, else a coordinate search); updates `worst` and returns the rollouts run."""
+    n_roll = 0
+    for _ in range(rounds):
+        live = [c for c in range(len(worst)) if worst[c]["all_safe"]]
+        if not live:
+            break
+        if rr.grad is None:  # no gradient through the law (a sampled ID-QP, a rigid body): flip one piece
+            cand = [(c, _flipped(worst[c]["D"], sc.bound, a, k)) for c in live
+                    for a in range(len(sc.bound)) if sc.bound[a] != 0 for k in range(sc.K)]
+        else:
+            cand = _gradient_candidates(rr, worst, live, sc.bound)
+        if not cand:
+            break
+        Xc = np.array([worst[c]["x0"] for c, _ in cand])
+        Yc, lc = rr.run(Xc, np.array([worst[c]["t0"] for c, _ in cand]),
+                        np.array([worst[c]["theta"] for c, _ in cand]).reshape(len(cand), -1),
+                        np.array([Dn for _, Dn in cand]), np.array([nsteps[c] for c, _ in cand]), tol)
+        n_roll += len(cand)
+        moved = False
+        for q, (c, Dn) in enumerate(cand):
+            ok, m, k_e = judge(Yc[q, :-1], Yc[q, -1], int(min(nsteps[c], lc[q])), tol)
+            w = worst[c]
+            if (ok, m) < (w["safe"], w["margin"]):
+                w.update(margin=m, safe=ok, entry=k_e, D=Dn, Y=Yc[q], kind="adversarial bang-bang disturbance"
+                         + ("" if rr.grad is not None else " (coordinate search)"))
+                w["all_safe"] = w["all_safe"] and ok
+                moved = True
+        if not moved and rr.grad is None:  # the coordinate search sits at a local worst
+            break
+    return n_roll
+
+
+def _node_clocks(cells: list) -> list[float]:
+    """At most NODE_STARTS of the cells' switch-in clocks, spread from the first to the last."""
+    tbs = sorted({round(c[5], 9) for c in cells})
+    tbs = [tbs[int(round(k))] for k in np.linspace(0, len(tbs) - 1, min(NODE_STARTS, len(tbs)))]
+    return sorted(set(tbs))
+
+
+def _cell_records(prims: dict, B, cells: list, worst: list[dict], node: dict, sc: Scenarios, unc,
+                  settings) -> dict[str, list]:
+    """Source -> the record of each of its cells: robust-safe or not, worst margin and worst case."""
+    per_edge: dict[str, list] = {}
+    tol = settings.h_tolerance
+    for c, (a, tr, i, j, starts, tb) in enumerate(cells):
+        w = worst[c]
+        wc = {"kind": w["kind"], "parameters": dict(zip(sc.names, map(float, w["theta"]))),
+              "initial_error": {s: float(w["err"][sc.state_names.index(s)]) for s in unc.initial_state},
+              "disturbance": {u: [float(v) for v in w["D"][k]] for k, u in enumerate(sc.dist_names)},
+              "binding": _binding(B, w["Y"], w["margin"], w["entry"], tol, settings.dt)}
+        if unc.start_in_roa is not None:
+            wc["start"] = _start_record(prims[a], float(tr.t_A[i]), w["start"], sc.state_names)
+        per_edge.setdefault(a, []).append({"t_A": float(tr.t_A[i]), "t_B": tb,
+                                           "robust_safe": bool(w["all_safe"]) and node["robust_safe"],
+                                           "worst_margin": w["margin"], "worst_case": wc, "_ij": (i, j),
+                                           "starts_kept": len(starts) - 1})
+    return per_edge
+
+
+def _edge_record(a: str, b: str, tr: Transition, checked: list[dict], node: dict, prims: dict, unc) -> dict:
+    """The robust record of the nominal edge a -> b from its checked cells."""
+    margins = [c["worst_margin"] for c in checked]
+    worst = min(checked, key=lambda c: c["worst_margin"]) if checked else None
+    edge = {"from": a, "to": b, "nominal_class": int(tr.cls), "rows_available": int(tr.available.sum()),
+            "target_flow_safe": node["robust_safe"],
+            "cells_checked": len(checked), "worst_margin": min(margins) if margins else None,
+            "worst_case": None if worst is None else {"t_A": worst["t_A"], "t_B": worst["t_B"],
+                                                     **worst["worst_case"]},
+            "cells": {"row": [int(c["_ij"][0]) for c in checked],  # t_A rows, at the nominal best t_B
+                      "robust_safe": [int(c["robust_safe"]) for c in checked], "worst_margin": margins}}
+    if unc.start_in_roa is not None:
+        kept = [c["starts_kept"] for c in checked]
+        edge["cells"]["starts_kept"] = kept
+        edge["start_in_roa"] = {"radius": float(prims[a].radius), "drawn": unc.start_in_roa.samples * len(kept),
+                                "kept": int(sum(kept))}
+    return edge
+
+
+def _start_record(prim, t_A: float, start: Start, state_names: list[str]) -> dict:
+    """Which start of a cell its worst case came from: a sample of E_A's boundary (its index, weighted
+    distance, E_A's radius and the offset from x_A*(t_A) by state) or x_A*(t_A) itself (sample None)."""
+    dx = start.x - prim.x_star(t_A)
+    return {"sample": start.sample, "weighted_distance": float(start.distance), "radius": float(prim.radius),
+            "offset": {n: float(v) for n, v in zip(state_names, dx) if v != 0.0}}
+
+
+def _binding(prim, Y: np.ndarray, margin: float, entry: int | None, tol: float, dt: float) -> dict:
+    """What decided a worst case: the safety function with the least value before entry (or over the
+    rollout, when it broke one), with that value and its time after the switch; or, when the flow
+    stayed safe without entering E_B, the best RoA margin it reached."""
+    H = Y[:-1, : (entry + 1 if entry is not None else Y.shape[1])]
+    H = H[:, ~np.isnan(H).all(axis=0)] if H.size else H  # samples after a decided rollout are NaN
+    if H.size:
+        Hf = np.where(np.isfinite(H), H, -np.inf)
+        j, k = np.unravel_index(int(np.argmin(Hf)), Hf.shape)
+        if entry is not None or Hf[j, k] < -tol:
+            return {"h": prim.h_names[j], "value": float(Hf[j, k]), "t": float(k * dt)}
+    return {"h": None, "roa_margin": float(margin)}
+
+
+def _node_check(B, rr, tbs: list[float], TH, ERR, D1, KIND, settings, tol, names, dist_names) -> dict:
+    """Definition 1's premise under uncertainty: B's own flow from x_B*(t_B), at the clocks `tbs`
+    its robust cells switch in at, stays in C_B for every scenario over the horizon (or the rest of a
+    transient's domain), whether or not it settles in E_B. A robust cell checks the flow only up to
+    E_B; Theorem 1 also needs B to keep it safe from there."""
+    S = len(TH)
+    hz = B.horizons(settings.horizon, tbs)
+    ns = np.repeat(np.minimum(np.ceil(hz / settings.dt - 1e-9).astype(int), rr.N), S)
+    X0 = np.concatenate([B.x_star(tb)[None, :] + ERR for tb in tbs])
+    T0 = np.repeat(np.asarray(tbs, float), S)
+    D = np.tile(D1, (len(tbs), 1, 1))
+    # s since switch-in: long ago (a flow settled in B), so events the setpoint's clocks record count
+    Y, last = rr.run(X0, T0, np.tile(TH, (len(tbs), 1)), D, ns, tol, until_entry=False, s0=SETTLED)
+    res = [judge_flow(Y[r, :-1], int(min(ns[r], last[r])), tol) for r in range(len(X0))]
+    r = min(range(len(X0)), key=lambda q: (res[q][0], res[q][1]))
+    ok, low, k, j = res[r]
+    binding = {"h": B.h_names[j], "value": float(low), "t": float(k * settings.dt)} if j is not None else None
+    return {"node": B.name, "t_B": [float(t) for t in tbs], "scenarios": len(X0),
+            "robust_safe": bool(all(x[0] for x in res)), "worst_margin": float(low),
+            "worst_case": {"t_B": float(T0[r]), "kind": KIND[r % S], "parameters": dict(zip(names, map(float, TH[r % S]))),
+                           "disturbance": {u: [float(v) for v in D[r][i]] for i, u in enumerate(dist_names)},
+                           "binding": binding}}
+
+
+def _gradient_candidates(rr, worst: list, live: list[int], bound: np.ndarray) -> list:
+    """Per live cell two bang-bang disturbances: against the gradient of the binding h sample before
+    entry and of the RoA margin at entry (the sign of each piece's derivative, through CasADi)."""
+    targets = []
+    for c in live:
+        w = worst[c]
+        Hs = w["Y"][:-1, : w["entry"] + 1]
+        jh, kh = np.unravel_index(int(np.argmin(Hs)), Hs.shape) if Hs.size else (0, 0)
+        targets += [(c, int(jh), int(kh)), (c, rr.nh, int(w["entry"]))]
+    gr = rr.gradients(np.array([worst[c]["x0"] for c, _, _ in targets]),
+                      np.array([worst[c]["t0"] for c, _, _ in targets]),
+                      np.array([worst[c]["theta"] for c, _, _ in targets]),
+                      np.array([worst[c]["D"] for c, _, _ in targets]),
+                      [r for _, r, _ in targets], [k for _, _, k in targets])
+    return [(c, np.where(gd != 0, -np.sign(gd) * bound[:, None], worst[c]["D"])) for (c, _, _), gd in zip(targets, gr)]
+
+
+def _flipped(D: np.ndarray, bound: np.ndarray, a: int, k: int) -> np.ndarray:
+    """D with piece k of axis a reversed (set to +bound where it was 0): one move of the coordinate
+    search for a bang-bang disturbance when no gradient is available."""
+    Dn = np.array(D, float)
+    Dn[a, k] = -Dn[a, k] if Dn[a, k] != 0 else bound[a]
+    return Dn
+
+
+def _rows(tr: Transition, m: int) -> list[int]:
+    avail = np.flatnonzero(tr.available)
+    if len(avail) <= m:
+        return [int(i) for i in avail]
+    return sorted({int(avail[int(round(k))]) for k in np.linspace(0, len(avail) - 1, m)})
