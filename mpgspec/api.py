@@ -10,6 +10,7 @@
     api.load_report("reports/pendulum")           # the same from what `mpgspec verify` wrote
     api.write_reports(res, "reports")             # each project's report set, written as a unit
     api.plan("specs/pendulum", "Hang", "Balance") # from the verified report while it is current
+    api.gait("specs/a1/gaits.yaml", check=True)   # the gait tables against their regeneration
 
 The stages themselves (compile_stage, graph_stage, check_stage, build) live in mpgspec.pipeline;
 they are imported on first use, so that planning from a verified report stays quick.
@@ -27,12 +28,14 @@ from .progress import Progress
 __all__ = ["verify", "load_report", "ProjectResult", "VerifyResult", "run_project", "compile_stage", "graph_stage",
            "check_stage", "build", "settings_for", "compile_project", "load_project", "discover",
            "CompiledProject", "VerifiedGraph", "Checks", "plan", "simulate", "simulate_uncertain", "write_reports",
+           "cache", "schema", "executor", "gait", "GaitRun",
            "EXIT_OK", "EXIT_CHECK_FAILED", "EXIT_USAGE"]
 
 _LAZY = {
     **dict.fromkeys(("compile_stage", "graph_stage", "check_stage", "build", "compile_project", "CompiledProject",
                      "VerifiedGraph", "Checks"), "mpgspec.pipeline.stages"),
     "settings_for": "mpgspec.pipeline.settings",
+    **dict.fromkeys(("cache", "schema", "executor", "gait", "GaitRun"), "mpgspec.pipeline.tools"),
     "robust_stage": "mpgspec.robust.graph",
     **dict.fromkeys(("load_project", "discover", "ProjectSpec"), "mpgspec.spec.loader"),
 }

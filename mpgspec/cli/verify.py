@@ -110,8 +110,6 @@ def cmd_verify(args) -> int:
     overrides = {}
     if args.method:
         overrides["method"] = args.method
-    from ..oracle.executors import make_executor
-
     from ..progress import summary
 
     _check_jobs(args.jobs)
@@ -119,7 +117,7 @@ def cmd_verify(args) -> int:
     show = None if args.quiet else _progress(sys.stderr, args.format)
     try:
         with stdout_to_stderr():  # solver logs and prints of the pipeline go to stderr
-            executor = make_executor(args.jobs, args.dask or args.scheduler, cache=not args.no_cache)
+            executor = api.executor(args.jobs, args.dask or args.scheduler, cache=not args.no_cache)
             res = api.verify(args.paths, out_dir=None, overrides=overrides, progress=show, executor=executor,
                              allow_paths=args.allow_path or None)
             if not args.no_write:

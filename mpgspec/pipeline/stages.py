@@ -24,7 +24,7 @@ from ..oracle.oracle import CapabilityError, require_capabilities
 from ..oracle.registry import get_backend
 from ..plan.planner import lookup_table, shortest_plan
 from ..progress import Progress
-from ..robust.check import check_uncertainty, check_uncertainty_compiled
+from ..spec.uncertainty_refs import check_uncertainty, check_uncertainty_compiled
 from ..robust.graph import RobustResult, robust_stage
 from ..settings import OracleSettings
 from ..spec.loader import ProjectSpec

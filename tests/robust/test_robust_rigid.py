@@ -12,7 +12,7 @@ import pytest
 from mpgspec import api
 from mpgspec.compile.rigidbody.system import no_slip
 from mpgspec.errors import SpecErrors
-from mpgspec.robust.check import check_uncertainty, check_uncertainty_compiled
+from mpgspec.spec.uncertainty_refs import check_uncertainty, check_uncertainty_compiled
 from mpgspec.robust.graph import robust_stage
 from mpgspec.robust.rigid import RigidRobustRollout, no_slip_rows
 from mpgspec.robust.rollout import judge

@@ -4,8 +4,8 @@ from __future__ import annotations
 import difflib
 
 from ..errors import SpecError, SpecErrors
-from ..spec.loader import ProjectSpec
-from ..spec.project import node_refs
+from .loader import ProjectSpec
+from .project import node_refs
 
 
 def _hint(word: str, choices) -> str:
