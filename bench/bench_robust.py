@@ -39,7 +39,7 @@ from common import markdown_table, med_ratio, rounds, stamp, write_section  # no
 
 from mpgspec.api import compile_stage, settings_for  # noqa: E402
 from mpgspec.oracle.oracle import SafetyOracle  # noqa: E402
-from mpgspec.robust.graph import _scenarios  # noqa: E402
+from mpgspec.robust.scenarios import scenarios  # noqa: E402
 from mpgspec.robust.rigid import RigidRobustRollout  # noqa: E402
 from mpgspec.robust.sequence import DisturbedSequences, steppers  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402
@@ -69,7 +69,7 @@ def main(argv=None) -> int:
     prims = compile_stage(spec, st).prims  # with E sized by the project's verifiers (the walks' Floquet tubes)
     unc = spec.project.uncertainty
     sys_ = next(iter(prims.values())).system
-    TH, ERR, SG, _ = _scenarios(unc, sys_, np.random.default_rng(unc.seed), {"mass_scale": 1.0, "friction": 0.6})
+    TH, ERR, SG, _ = scenarios(unc, sys_, np.random.default_rng(unc.seed), {"mass_scale": 1.0, "friction": 0.6})
     bound = np.asarray(unc.disturbance.force.bound, float)
     K = unc.disturbance.segments
     D = (SG[:, None, None] * bound[None, :, None]) * np.ones((1, 3, K))

@@ -17,7 +17,7 @@ import pytest
 
 from mpgspec import api
 from mpgspec.compile.expr_casadi import to_casadi
-from mpgspec.compile.primitive import _ident
+from mpgspec.compile.closed_loop import function_name as _ident
 from mpgspec.spec.expr import MAX_DEPTH, evaluate, parse
 from mpgspec.spec.loader import load_project
 
