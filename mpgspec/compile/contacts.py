@@ -1,14 +1,15 @@
 """The contact plan of a primitive: which feet its dynamics hold, and when.
 
 One concept in three forms (ContactPlan):
-- Fixed: one set of feet throughout (OpenLoop.contacts);
+- Fixed: one set of feet throughout (the primitive's `contacts`, all contact frames by default);
 - Schedule: the clock sets the contact set, phase by phase (a spec's contact_schedule or the
   timing of a trot), wrapped into the period;
 - Events: the flags of the state decide (contact events, compile/events.py), starting from the
   primitive's set.
-Every consumer (the compiled loop, the oracle's step end, the robust plant, the simulator replay,
-the assumption checks) asks the plan instead of reading lists out of an untyped dict. The clock
-wrap and the rule for a clock sitting on a switching time (SNAP) are written here once.
+Every consumer (the compiled loop, the control laws through ControlContext.plan, the safe-set
+blocks, the oracle's step end, the robust plant, the simulator replay, the assumption checks) asks
+the plan instead of reading lists out of an untyped dict. The clock wrap (wrap_clock, clock_phase,
+grid_clock) and the rule for a clock sitting on a switching time (SNAP) are written here once.
 """
 from __future__ import annotations
 
@@ -104,7 +105,7 @@ class Events(_HeldSet):
 class Schedule:
     """The clock sets the contact set: phase k holds phases[k][1] until the clock reaches
     phases[k][0] (wrapped into `period`); after the last phase, the last phase. `feet` names the
-    scheduled loop's own set (OpenLoop.contacts)."""
+    scheduled loop's own set (every contact frame: the mode says which are held)."""
 
     phases: tuple[tuple[float, tuple[str, ...]], ...]
     period: float | None
