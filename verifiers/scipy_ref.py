@@ -21,6 +21,7 @@ import casadi as ca
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from mpgspec.compile.contacts import wrap_clock
 from mpgspec.compile.primitive import INACTIVE, CompiledPrimitive
 from mpgspec.oracle.evidence import OracleEvidence, Reason
 from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidence, judge
@@ -179,7 +180,7 @@ def _tolerance_error(x: np.ndarray) -> np.ndarray:
 
 def _active(p: CompiledPrimitive, t: np.ndarray) -> np.ndarray:
     """(nh, len(t)): is each safety function's window active at clock t (wrapped for periodic primitives)."""
-    tc = t - p.period * np.floor(t / p.period) if p.period is not None else t
+    tc = wrap_clock(t, p.period)
     rows = [np.ones_like(tc, bool) if w is None else (tc >= w[0]) & (tc < w[1]) for w in p.windows]
     return np.array(rows, bool).reshape(len(p.windows), tc.size)
 

@@ -1,18 +1,19 @@
 """The contact plan of a primitive: which feet its dynamics hold, and when.
 
 One concept in three forms (ContactPlan):
-- Fixed: one set of feet throughout (OpenLoop.contacts);
+- Fixed: one set of feet throughout (the primitive's `contacts`, all contact frames by default);
 - Schedule: the clock sets the contact set, phase by phase (a spec's contact_schedule or the
   timing of a trot), wrapped into the period;
 - Events: the flags of the state decide (contact events, compile/events.py), starting from the
   primitive's set.
-Every consumer (the compiled loop, the oracle's step end, the robust plant, the simulator replay,
-the assumption checks) asks the plan instead of reading lists out of an untyped dict. The clock
-wrap and the rule for a clock sitting on a switching time (SNAP) are written here once.
+Every consumer (the compiled loop, the control laws through ControlContext.plan, the safe-set
+blocks, the oracle's step end, the robust plant, the simulator replay, the assumption checks) asks
+the plan instead of reading lists out of an untyped dict. The clock wrap (wrap_clock, clock_phase,
+grid_clock) and the rule for a clock sitting on a switching time (SNAP) are written here once.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
@@ -25,8 +26,18 @@ JUST_BEFORE = 1e-7
 
 
 def wrap_clock(t, period: float | None):
-    """The clock t wrapped into one period [0, T) (CasADi expressions and numbers); t without a period."""
-    return t - period * ca.floor(t / period) if period is not None else t
+    """The clock t wrapped into one period [0, T) (CasADi expressions, numbers and numpy arrays);
+    t without a period."""
+    if period is None:
+        return t
+    floor = np.floor if isinstance(t, np.ndarray) else ca.floor
+    return t - period * floor(t / period)
+
+
+def clock_phase(t: float, period: float | None) -> float:
+    """A clock time taken within one period [0, T) exactly (the float remainder, numbers only; a
+    switching time and a window's edges are read this way); t without a period."""
+    return t % period if period else t
 
 
 def grid_clock(t: float, period: float | None) -> float:
@@ -55,6 +66,7 @@ class _HeldSet:
     feet: tuple[str, ...]
 
     boundaries = ()  # no clock time switches the contact set
+    by_clock = False  # the clock does not set the contact set
 
     def mode(self, frames, t=None) -> dict:
         """foot -> 1 (held) or 0, constant."""
@@ -93,13 +105,21 @@ class Events(_HeldSet):
 class Schedule:
     """The clock sets the contact set: phase k holds phases[k][1] until the clock reaches
     phases[k][0] (wrapped into `period`); after the last phase, the last phase. `feet` names the
-    scheduled loop's own set (OpenLoop.contacts)."""
+    scheduled loop's own set (every contact frame: the mode says which are held)."""
 
     phases: tuple[tuple[float, tuple[str, ...]], ...]
     period: float | None
     feet: tuple[str, ...] = ()
+    _modes: list = field(default_factory=list, init=False, repr=False, compare=False)
 
     varies = True
+    by_clock = True  # the clock sets the contact set
+
+    def __getstate__(self) -> dict:  # the modes built for clock symbols stay in this process
+        return {k: v for k, v in self.__dict__.items() if k != "_modes"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state, _modes=[])
 
     @property
     def boundaries(self) -> tuple[float, ...]:
@@ -108,16 +128,24 @@ class Schedule:
 
     def held(self, t: float) -> tuple[str, ...]:
         """The feet held at clock t, read as `mode` reads it (a clock within SNAP of a switch is at it)."""
-        T = float(self.period) if self.period is not None else float("inf")
-        tc = (t + SNAP) % T
+        tc = clock_phase(t + SNAP, float(self.period) if self.period is not None else float("inf"))
         for until, feet in self.phases:
             if tc < until:
                 return tuple(feet)
         return tuple(self.phases[-1][1])
 
     def mode(self, frames, t, before: bool = False) -> dict:
-        """foot -> 1 while held at clock t (an expression of t), else 0; `before`: just before t."""
-        return scheduled_mode(self.phases, frames, t, self.period, before)
+        """foot -> 1 while held at clock t (an expression of t), else 0; `before`: just before t.
+
+        Built once per clock symbol, so the loop, the law and the safe set of a primitive share
+        the same expressions (and the compiled functions stay the same whoever asks first)."""
+        frames = tuple(frames)
+        for tm, fm, bm, mode in self._modes:
+            if tm is t and fm == frames and bm == before:
+                return mode
+        mode = scheduled_mode(self.phases, frames, t, self.period, before)
+        self._modes.append((t, frames, before, mode))
+        return mode
 
     def jump(self, sys, t: ca.SX) -> ca.Function:
         """(x, u, t, s) -> x: feet that join the mode at the step's end are put on the ground by their

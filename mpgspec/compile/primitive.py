@@ -15,7 +15,7 @@ from ..errors import SpecError, SpecErrors
 from ..spec.loader import PrimitiveInstance
 from ..spec.models import PrimitiveClass
 from .closed_loop import CompiledPrimitive, function_name, roa_margin_function
-from .contacts import ContactPlan, Events, Fixed, Schedule, plan_jump, wrap_clock
+from .contacts import ContactPlan, Events, Fixed, Schedule, clock_phase, plan_jump, wrap_clock
 from .events import event_window
 from .exprs import ExprCompiler
 from .laws.base import ControlContext
@@ -75,12 +75,15 @@ class _Clock:
 
 @dataclass
 class _Mode:
-    """The open loop a primitive runs on and its contact mode (foot -> 1 while held, a function of
-    the clock under a contact schedule; None for systems without feet)."""
+    """The open loop a primitive runs on and its contact plan (None for systems without feet)."""
 
     loop: OpenLoop
-    plan: ContactPlan | None  # None for systems without feet
-    mode: dict | None
+    plan: ContactPlan | None
+
+    @property
+    def feet(self) -> tuple[str, ...]:
+        """The loop's contact set (every contact frame under a schedule; none without feet)."""
+        return self.plan.feet if self.plan is not None else ()
 
     @property
     def schedule(self) -> Schedule | None:
@@ -98,7 +101,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
     setup = kind.run_setup(inst, sys, ec, consts)
     cm = _contact_mode(inst, sys, loop, setup, clock)
     ident = function_name(inst.name)
-    setpoint, x_star, x_star_dot = compile_setpoint(inst, sys, ec, consts, cm.loop.contacts, clock.t, clock.tc,
+    setpoint, x_star, x_star_dot = compile_setpoint(inst, sys, ec, consts, cm.feet, clock.t, clock.tc,
                                                     clock.period, ident)
     if sys.is_rigid_body and sys.events and cm.schedule is not None:
         setpoint = cm.schedule.with_flags(setpoint, sys)
@@ -107,8 +110,7 @@ def compile_primitive(inst: PrimitiveInstance, sys: CompiledSystem) -> CompiledP
         env[f"{n}_star"] = x_star[i]
         env[f"{n}_star_dot"] = x_star_dot[i]
     ctx = ControlContext(sys, clock.t, clock.s, clock.x_sw, x_star, x_star_dot, setpoint, env, ec,
-                         fixed=p.class_ is PrimitiveClass.FIXED, xdot=cm.loop.xdot, contacts=cm.loop.contacts,
-                         mode=cm.mode)
+                         fixed=p.class_ is PrimitiveClass.FIXED, xdot=cm.loop.xdot, plan=cm.plan)
     ctx.info.update(setup.info)
     if cm.plan is not None:  # the report's record of the feet the primitive's dynamics hold
         ctx.info.update(cm.plan.record())
@@ -136,17 +138,15 @@ def _clock(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, const
 def _contact_mode(inst: PrimitiveInstance, sys: CompiledSystem, loop: OpenLoop, setup: Setup, clock: _Clock) -> _Mode:
     """Under a contact schedule (the spec's, or the one the controller kind's setup sets) the clock
     sets the contact set, and flags in the state follow it (Schedule.jump); rigid bodies without one
-    hold the primitive's contacts."""
-    schedule = _schedule(inst, sys, setup.schedule, clock.period)
-    plan = mode = None
+    hold the primitive's contacts (all contact frames when it names none)."""
+    schedule = _schedule(inst, sys, setup.contacts, clock.period)
     if schedule is not None:
-        plan = schedule
-        mode = schedule.mode(sys.model.contact_frames, clock.t)
-        loop = sys.scheduled_loop(mode)
-    elif sys.is_rigid_body:
-        plan = (Events if sys.events else Fixed)(tuple(loop.contacts))
-        mode = plan.mode(sys.model.contact_frames)
-    return _Mode(loop, plan, mode)
+        return _Mode(sys.scheduled_loop(schedule.mode(sys.model.contact_frames, clock.t)), schedule)
+    if sys.is_rigid_body:
+        contacts = inst.spec.contacts
+        feet = tuple(sys.model.contact_frames if contacts is None else contacts)
+        return _Mode(loop, (Events if sys.events else Fixed)(feet))
+    return _Mode(loop, None)
 
 
 def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, clock: _Clock, cm: _Mode,
@@ -176,7 +176,7 @@ def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, cl
         horizon=p.horizon, grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names,
         radius=radius, f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, W=W, info=info,
         contacts=cm.plan, jump=jump, loop=loop_fn, loop_raw=loop_raw, windows=windows,
-        boundaries=_boundaries(windows, cm.schedule.phases if cm.schedule else None, clock.period, clock.domain),
+        boundaries=_boundaries(windows, cm.plan, clock.period, clock.domain),
         hybrid=sys.events or cm.schedule is not None, sampled=ctx.sampled, loop_u=loop_u,
     )
 
@@ -189,7 +189,7 @@ def _safety_functions(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprComp
     for j, sf in enumerate(inst.safe_set):
         path = ("safe_set", j)
         if sf.use is not None:
-            items = _builtin_block(inst, sys, sf.use, path, cm)
+            items = _builtin_block(inst, sys, sf.use, path, cm, clock.t)
         elif sf.h is not None:
             items = [(sf.name, ec.sx(sf.h, path + ("h",), henv))]
         else:
@@ -212,13 +212,12 @@ def _safety_functions(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprComp
     return hs, hs_raw, names, windows
 
 
-def _builtin_block(inst: PrimitiveInstance, sys: CompiledSystem, use: str, path: tuple, cm: _Mode) -> list:
-    """The safety functions of a block the system provides; under a schedule contact conditions
-    bind by the mode."""
-    scheduled = cm.schedule is not None
+def _builtin_block(inst: PrimitiveInstance, sys: CompiledSystem, use: str, path: tuple, cm: _Mode,
+                   t: ca.SX) -> list:
+    """The safety functions of a block the system provides, over the primitive's loop and contact
+    plan (under a schedule contact conditions bind by the mode of the clock)."""
     try:
-        return sys.builtin_safe_set(use, cm.loop.contacts, mode=cm.mode if scheduled else None,
-                                    env=cm.loop.env if scheduled else None)
+        return sys.builtin_safe_set(use, cm.loop, cm.plan, t)
     except KeyError:
         raise SpecError("this safe-set block does not apply to the system", location=inst.locate(path + ("use",)),
                         key=f"primitive '{inst.name}': {'.'.join(map(str, path))}.use", expected="a block of the "
@@ -250,27 +249,28 @@ def _roa_metric(inst: PrimitiveInstance, sys: CompiledSystem) -> np.ndarray:
     return W
 
 
-def _boundaries(windows, schedule, period, domain) -> tuple[float, ...]:
+def _boundaries(windows, plan: ContactPlan | None, period, domain) -> tuple[float, ...]:
     """Clock times at which the safe set or the contact mode switches: the oracle steps onto each.
 
     For a periodic primitive they are taken within one period (the clock wraps); a transient's end
     t_f is one, so its rollouts stop exactly at t_f.
     """
     times = {v for w in windows if isinstance(w, tuple) for v in w}
-    times |= {float(until) for until, _ in (schedule or [])}
+    times |= set(plan.boundaries if plan is not None else ())
     if domain is not None:
         times.add(float(domain[1]))
     if period is not None:
-        times = {v % period for v in times}
+        times = {clock_phase(v, period) for v in times}
     return tuple(sorted(times))
 
 
-def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, planned: list | None,
+def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, planned: Schedule | None,
               period: float | None) -> Schedule | None:
-    """The contact schedule the controller kind's setup plans, else the spec's; None without either."""
+    """The contact schedule the controller kind's setup plans (run on the primitive's clock, so with
+    its period), else the spec's; None without either."""
     frames = tuple(sys.model.contact_frames) if sys.is_rigid_body else ()
     if planned is not None:
-        return Schedule(tuple((float(u), tuple(f)) for u, f in planned), period, frames)
+        return Schedule(tuple((float(u), tuple(f)) for u, f in planned.phases), period, frames)
     sched = inst.spec.contact_schedule
     if sched is None:
         return None

@@ -9,6 +9,7 @@ from scipy.interpolate import CubicSpline
 from ..errors import SpecError
 from ..spec.loader import PrimitiveInstance
 from ..spec.paths import MAX_FILE_BYTES, ReadProblem, clip, clip_repr, confine, read_text_bounded
+from .contacts import wrap_clock
 from .expr_casadi import interp_cubic, interp_linear
 from .exprs import ExprCompiler
 from .system import CompiledSystem
@@ -147,5 +148,5 @@ def _table_setpoint(name: str, ts: np.ndarray, ys: np.ndarray, interpolation: st
     lookup = ca.interpolant(name + "_lookup", "linear", [np.asarray(ts, float)],
                             np.asarray(ys, float).ravel(order="C"))
     t = ca.MX.sym("t")
-    tc = t - period * ca.floor(t / period) if period is not None else t
+    tc = wrap_clock(t, period)
     return ca.Function(name, [t], [lookup(ca.fmin(ca.fmax(tc, float(ts[0])), float(ts[-1])))])

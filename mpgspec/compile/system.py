@@ -21,11 +21,11 @@ _IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 @dataclass
 class OpenLoop:
-    """xdot(x, u) of one dynamics mode, with the extra symbols it defines (e.g. contact forces)."""
+    """xdot(x, u) of one dynamics mode, with the extra symbols it defines (e.g. contact forces); which
+    feet it holds is the primitive's contact plan (compile/contacts.py)."""
 
     xdot: ca.SX
     env: dict
-    contacts: tuple[str, ...] = ()
 
 
 @dataclass
@@ -88,8 +88,9 @@ class CompiledSystem:
         (identity here)."""
         return x
 
-    def builtin_safe_set(self, name: str, contacts: tuple[str, ...], mode: dict | None = None,
-                         env: dict | None = None) -> list[tuple[str, ca.SX]]:
+    def builtin_safe_set(self, name: str, loop: OpenLoop, plan=None,
+                         t: ca.SX | None = None) -> list[tuple[str, ca.SX]]:
+        """The safety functions of a block the system provides (none here)."""
         raise KeyError(name)
 
     def ground_setpoint(self, x_star: ca.SX, t: ca.SX) -> ca.SX | None:

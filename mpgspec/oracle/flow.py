@@ -126,3 +126,13 @@ def active(prim: CompiledPrimitive, tc, x=None, s=None, x_next=None, h=0.0):
         return ca.logic_and(tc >= w[0], tc < w[1])
 
     return ca.vertcat(*[on(w) for w in prim.windows]) if prim.windows else ca.DM(0, 1)
+
+
+def solve_or_keep(law, nu: int) -> ca.Function:
+    """(due, x, t, s, x_sw, w, u) -> (u, w) of a law solved at a control rate (hold.SampledLaw):
+    solved from the warm start w when `due`, else the held input u and w kept. The oracle's
+    chunks and the robust rollouts count the steps to the next solve each in their own way (the
+    oracle solves at a step's start, the robust step at its end for the next one)."""
+    a = [*law.solve.mx_in(), ca.MX.sym("u", nu)]
+    return ca.Function.if_else("sample", ca.Function("solve", a, law.solve.call(a[:5])),
+                               ca.Function("keep", a, [a[5], a[4]]))

@@ -27,7 +27,7 @@ import casadi as ca
 import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
-from .flow import active, jump_of, rk4, step_end, step_length, wrap
+from .flow import active, jump_of, rk4, solve_or_keep, step_end, step_length, wrap
 
 
 INLINE_NODES = 4000
@@ -303,10 +303,7 @@ def _hold(prim: CompiledPrimitive, dt: float, block, rollouts: list) -> tuple[li
     m, per = law.steps(dt), nu + law.nw
     c = block[0]
     if m > 1:
-        a = [*law.solve.mx_in(), ca.MX.sym("u", nu)]
-        solve = ca.Function("solve", a, law.solve.call(a[:5]))
-        keep = ca.Function("keep", a, [a[5], a[4]])
-        sample = ca.Function.if_else("sample", solve, keep)
+        sample = solve_or_keep(law, nu)
     us, after = [], []
     for i, (x, t, s, xs) in enumerate(rollouts):
         u, w = block[1 + i * per:1 + i * per + nu], block[1 + i * per + nu:1 + (i + 1) * per]

@@ -15,10 +15,9 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ..compile.contacts import Schedule
 from ..compile.primitive import INACTIVE, CompiledPrimitive, saturate
 from ..compile.rigidbody.system import no_slip
-from ..oracle.flow import LEFT, active, jump_of, rk4, wrap
+from ..oracle.flow import LEFT, active, jump_of, rk4, solve_or_keep, wrap
 from .rollout import RobustRollout
 
 
@@ -30,9 +29,7 @@ def plant_feet(prim: CompiledPrimitive) -> list[str]:
 
 def robust_plant(prim: CompiledPrimitive, frame: str) -> ca.Function:
     """(x, u, k, F, t) -> (xdot, lam, c) of the primitive's dynamics perturbed (uncertain_plant)."""
-    plan = prim.contacts
-    phases = list(plan.phases) if isinstance(plan, Schedule) else None
-    return prim.system.uncertain_plant(plan.feet, frame, phases, prim.period)
+    return prim.system.uncertain_plant(prim.contacts, frame)
 
 
 def robust_jump(prim: CompiledPrimitive, frame: str) -> ca.Function:
@@ -41,7 +38,7 @@ def robust_jump(prim: CompiledPrimitive, frame: str) -> ca.Function:
     sys = prim.system
     x, u, t, s = sys.x, ca.SX.sym("u", sys.nu), ca.SX.sym("t"), ca.SX.sym("s")
     k, F = ca.SX.sym("k"), ca.SX.sym("F", 3)
-    if sys.events and not isinstance(prim.contacts, Schedule):
+    if sys.events and not prim.contacts.by_clock:
         xn = sys.project(x, u, s, k, sys.push_wrench(frame, x[:sys.model.nq], F))
     else:
         xn = jump_of(prim)(x, u, t, s)
@@ -147,10 +144,7 @@ def _hold_next(law, hold, xn, t, s, xsw, held, dt: float):
     if m == 1:
         u_next, w_next = law.solve(xn, t, s, xsw, w)
     else:
-        a = [*law.solve.mx_in(), ca.MX.sym("u", nu)]
-        sample = ca.Function.if_else("sample", ca.Function("solve", a, law.solve.call(a[:5])),
-                                     ca.Function("keep", a, [a[5], a[4]]))
-        u_next, w_next = sample(c_next < 0.5, xn, t, s, xsw, w, held)
+        u_next, w_next = solve_or_keep(law, nu)(c_next < 0.5, xn, t, s, xsw, w, held)
     return ca.vertcat(c_next, u_next, w_next)
 
 

@@ -5,6 +5,7 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 
+from ..contacts import ContactPlan
 from ..exprs import ExprCompiler
 from ..system import CompiledSystem
 
@@ -24,9 +25,9 @@ class ControlContext:
     ec: ExprCompiler
     fixed: bool
     xdot: ca.SX | None = None  # open-loop xdot(x, u) of the primitive's dynamics mode
-    contacts: tuple[str, ...] = ()
+    plan: ContactPlan | None = None  # which feet the dynamics hold, and when (None: no feet); a law
+    # asks it for the loop's set (plan.feet) and for the mode at the clock (plan.mode(frames, t))
     info: dict = field(default_factory=dict)
-    mode: dict | None = None  # rigid bodies: foot -> 1 while held (constant, or a function of the clock)
     sampled: object | None = None  # hold.SampledLaw: set by a law the oracle solves at a control rate
 
 

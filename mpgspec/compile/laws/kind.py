@@ -9,19 +9,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from importlib import import_module
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
+
+if TYPE_CHECKING:  # the spec layer imports this module without CasADi
+    from ..contacts import Schedule
 
 
 @dataclass
 class Setup:
     """What a kind's setup hands the compiler before the law is built.
 
-    `schedule`: (until, feet held) over the primitive's clock, when the kind sets the contact mode
-    by the clock (as the trot does); `info`: entries for the compiled primitive's info, which the
-    law can read back through ControlContext.info.
+    `contacts`: the contact plan, when the kind sets the contact mode by the clock (as the trot
+    does; it runs on the primitive's clock and period); `info`: entries for the compiled
+    primitive's info, which the law can read back through ControlContext.info.
     """
 
-    schedule: list[tuple[float, tuple[str, ...]]] | None = None
+    contacts: Schedule | None = None
     info: dict[str, Any] = field(default_factory=dict)
 
 

@@ -63,7 +63,7 @@ def pd_law(c: PDController, ctx: ControlContext) -> ca.SX:
                             location=ctx.ec.locate(("controller", "gravity_compensation")),
                             key=f"{ctx.ec.owner}: controller.gravity_compensation", expected="system kind rigid_body",
                             found="an analytic system", code="MPG108")
-        u = u + sys.static_torque(ctx.contacts)
+        u = u + sys.static_torque(ctx.plan.feet)
     return u
 
 

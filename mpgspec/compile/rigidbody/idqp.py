@@ -134,7 +134,7 @@ def _qp(c, ctx: ControlContext) -> _QP:
     m = sys.model
     nq, nv, nu = m.nq, m.nv, m.nu
     q, v = sys.x[:nq], sys.x[nq:nq + nv]  # contact flags and event clocks may follow
-    M, H, J, drift, gamma = _contact_rows(sys, ctx.contacts, q, v)
+    M, H, J, drift, gamma = _contact_rows(sys, ctx.plan.feet, q, v)
     nc = J.shape[0]
     Jc, drift_c, a_d, S, a_post = _tasks(c, ctx, q, v)
     B = ca.DM(m.actuation_matrix)

@@ -16,6 +16,7 @@ import numpy as np
 
 from ...errors import SpecError
 from ...spec.models import ContactEvent
+from ..contacts import ContactPlan, Fixed
 from ..events import NEVER, clock_name, clock_rate
 from ..system import CompiledSystem, OpenLoop
 from .constrained import Baumgarte, ContactDynamics
@@ -83,7 +84,7 @@ class RigidBodyCompiledSystem(CompiledSystem):
         for k, f in enumerate(key):
             for j, ax in enumerate("xyz"):
                 env[f"{f}_f{ax}"] = lam[3 * k + j]
-        loop = OpenLoop(xdot, env, contacts=key)
+        loop = OpenLoop(xdot, env)
         self._loops[key] = loop
         return loop
 
@@ -91,7 +92,7 @@ class RigidBodyCompiledSystem(CompiledSystem):
         """The contact set follows the flags in the state; `key` only names the initial set."""
         m = self.model
         flags = self.x[m.nq + m.nv:]
-        return self.scheduled_loop({f: flags[i] for i, f in enumerate(m.contact_frames)}, key)
+        return self.scheduled_loop({f: flags[i] for i, f in enumerate(m.contact_frames)})
 
     def contact_flag(self, frame: str) -> ca.SX | None:
         return self.x[self.state_names.index(f"contact_{frame}")] if self.events else None
@@ -215,34 +216,32 @@ class RigidBodyCompiledSystem(CompiledSystem):
         f_base = ca.mtimes(quat_to_rotation(q[3:7]).T, F)
         return ca.vertcat(f_base, ca.cross(ca.DM(m.frame(frame).translation), f_base), ca.DM.zeros(m.nv - 6))
 
-    def uncertain_plant(self, contacts: tuple[str, ...], frame: str, schedule=None,
-                        period: float | None = None) -> ca.Function:
+    def uncertain_plant(self, plan: ContactPlan | tuple[str, ...], frame: str) -> ca.Function:
         """(x, u, k, F, t) -> (xdot, lam, c): the dynamics with every link's mass and inertia scaled
         by k and a world-frame force F at `frame` (attached to the base), at clock t.
 
         k M a + k H = B u + J_f^T F + J^T lam is M a + H = (B u + J_f^T F) / k + J^T (lam / k): the
         nominal dynamics under the generalized force divided by k, with the ground forces k times the
-        nominal solution's. The feet held are those a primitive's dynamics hold: `contacts` (lam and
-        c over them, c = 1), or with a contact schedule (clock t) or contact events (flags in x)
-        every contact frame, c saying which is held (lam 0 for the others).
+        nominal solution's. The feet held are those of the primitive's contact plan (a tuple of feet:
+        held throughout): its feet (lam and c over them, c = 1), or with a contact schedule (clock t)
+        or contact events (flags in x) every contact frame, c saying which is held (lam 0 for the others).
         """
         from .hybrid import masked_contact_dynamics
 
+        plan = plan if isinstance(plan, ContactPlan) else Fixed(tuple(plan))
         m = self.model
         k, F, t = ca.SX.sym("k"), ca.SX.sym("F", 3), ca.SX.sym("t")
         xq, xv = self.x[:m.nq], self.x[m.nq:m.nq + m.nv]
-        if schedule is None and not self.events:
-            cd = ContactDynamics(self.dyn, contacts, self.baumgarte)
+        if not plan.by_clock and not self.events:
+            cd = ContactDynamics(self.dyn, plan.feet, self.baumgarte)
             a, lam = cd.solve((cd.tau_expr + self.push_wrench(frame, self.dyn.q, F)) / k)
             a, lam = ca.substitute([a, lam], [self.dyn.q, self.dyn.v, cd.u], [xq, xv, self.u])
             xdot = ca.vertcat(qdot(m, xq, xv), a, ca.DM.zeros(self.nx - m.nq - m.nv))
-            c, lam = ca.DM.ones(len(contacts)), k * lam
+            c, lam = ca.DM.ones(len(plan.feet)), k * lam
         else:
             feet = m.contact_frames
-            if schedule is not None:
-                from ..contacts import scheduled_mode
-
-                mode = scheduled_mode(schedule, feet, t, period)
+            if plan.by_clock:
+                mode = plan.mode(feet, t)
                 c = ca.vertcat(*[mode[f] for f in feet])
             else:
                 c = self.x[m.nq + m.nv:m.nq + m.nv + len(feet)]
@@ -264,9 +263,10 @@ class RigidBodyCompiledSystem(CompiledSystem):
         c = mode[frame] if mode is not None else (self.contact_flag(frame) if flags else None)
         return h if c is None else ca.if_else(c > 0.5, h, 1e3)
 
-    def scheduled_loop(self, mode: dict, contacts: tuple[str, ...] | None = None) -> OpenLoop:
+    def scheduled_loop(self, mode: dict) -> OpenLoop:
         """Constrained dynamics holding the feet whose mode is 1 (mode: foot -> 0/1 symbols, of the
-        clock under a schedule or the contact flags of the state); `contacts` names the loop's set."""
+        clock from a contact plan, or the contact flags of the state); lambda of every contact frame
+        in env."""
         from .hybrid import masked_contact_dynamics
 
         m = self.model
@@ -279,18 +279,18 @@ class RigidBodyCompiledSystem(CompiledSystem):
         for k, f in enumerate(m.contact_frames):
             for j, ax in enumerate("xyz"):
                 env[f"{f}_f{ax}"] = lam[3 * k + j]
-        return OpenLoop(xdot, env, contacts=tuple(m.contact_frames) if contacts is None else contacts)
+        return OpenLoop(xdot, env)
 
-    def builtin_safe_set(self, name: str, contacts: tuple[str, ...], mode: dict | None = None,
-                         env: dict | None = None, tol: float = 1e-3) -> list[tuple[str, ca.SX]]:
-        """The paper's common safe sets as lists of (name, h) with h >= 0 safe.
+    def builtin_safe_set(self, name: str, loop: OpenLoop, plan: ContactPlan, t: ca.SX,
+                         tol: float = 1e-3) -> list[tuple[str, ca.SX]]:
+        """The paper's common safe sets as lists of (name, h) with h >= 0 safe, for the feet of the
+        primitive's contact plan, with the ground forces of its open loop.
 
-        Under a contact schedule (`mode` given, with the scheduled loop's `env`), the contact
-        conditions of every foot bind while the schedule holds it."""
+        When the clock sets the contact set (a contact schedule, of clock t), the contact conditions
+        of every foot bind while the plan holds it."""
         m = self.model
-        if mode is not None:
-            contacts = tuple(m.contact_frames)
-        loop_env = env
+        contacts = plan.feet
+        mode = plan.mode(m.contact_frames, t) if plan.by_clock else None
         env = self.extra_env
         out = []
         if name == "joint_limits":  # C_{q, qdot}
@@ -310,7 +310,7 @@ class RigidBodyCompiledSystem(CompiledSystem):
                         (f"foot_still[{f}]", self._when_in_contact(
                             f, tol - ca.norm_2(ca.vertcat(*[env[f"{f}_v{a}"] for a in "xyz"])), mode, False))]
         elif name == "no_slip":  # lambda in the friction cone, lambda_z >= 0
-            forces = loop_env if loop_env is not None else self.open_loop(list(contacts)).env
+            forces = loop.env
             for f in contacts:
                 normal, cone = no_slip(*(forces[f"{f}_f{a}"] for a in "xyz"), self.friction)
                 out += [(f"normal_force[{f}]", self._when_in_contact(f, normal, mode)),

@@ -66,7 +66,8 @@ def jump_law(c, ctx) -> ca.SX:
                             key=f"{ctx.ec.owner}: controller.{key}", expected="joint names of the system",
                             found=repr(unknown[0][:60]), code="MPG106")
     sys = ctx.sys
-    mode = {f: sys.contact_flag(f) for f in sys.model.contact_frames} if sys.events else ctx.mode
+    feet = sys.model.contact_frames
+    mode = {f: sys.contact_flag(f) for f in feet} if sys.events else ctx.plan.mode(feet, ctx.t)
     ctx.info["jump"] = {"takeoff_time": float(c.takeoff_time), "takeoff_velocity": float(c.takeoff_velocity),
                         "rise": float(c.rise)}
     return jump_torque(sys, c, mode, ctx.t)

@@ -49,8 +49,7 @@ def trot_setup(inst, sys, ec, consts: dict) -> Setup:
         out["gait"] = {k: head[k] for k in head}
         out["gait_file"] = str(raw)
     gains = gains_of(c, out["command"])
-    schedule = [(u, tuple(f)) for u, f in gains.schedule(tuple(sys.model.contact_frames))]
-    return Setup(schedule=schedule, info={"trot": out})
+    return Setup(contacts=gains.schedule(tuple(sys.model.contact_frames)), info={"trot": out})
 
 
 def gait_header(path) -> dict[str, str]:

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ...compile.contacts import Schedule, wrap_clock
 from ...compile.laws.base import cubic_profile
 from ...errors import SpecError
 from .stance import PAIR_A, PAIR_B, level_trunk_moment, nominal_geometry, split_wrench, trunk
@@ -66,10 +67,10 @@ class TrotGains:
     def stance(self) -> float:
         return self.swing + 2 * self.double_support
 
-    def schedule(self, feet: tuple[str, ...]) -> list[tuple[float, tuple[str, ...]]]:
-        """(until, feet in contact) over one period."""
+    def schedule(self, feet: tuple[str, ...]) -> Schedule:
+        """The contact plan over one period: all `feet`, pair A, all, pair B."""
         h, ds = self.half, self.double_support
-        return [(ds, feet), (h, PAIR_A), (h + ds, feet), (2 * h, PAIR_B)]
+        return Schedule(((ds, feet), (h, PAIR_A), (h + ds, feet), (2 * h, PAIR_B)), self.period, feet)
 
 
 def _smoothstep(sig):
@@ -99,7 +100,7 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
     dyn = sys.dyn
     mu = float(sys.friction)
     half, period = g.half, g.period
-    tc = t - period * ca.floor(t / period)
+    tc = wrap_clock(t, period)
     tau_swing = {PAIR_B: tc - g.double_support, PAIR_A: tc - half - g.double_support}
     z_up = lambda s: cubic_profile(s, g.swing / 2, ca.DM(0), ca.DM(0), ca.DM(g.apex), ca.DM(0))  # noqa: E731
     z_dn = lambda s: cubic_profile(s, g.swing / 2, ca.DM(g.apex), ca.DM(0), ca.DM(0), ca.DM(-g.touchdown_speed))  # noqa: E731
@@ -147,7 +148,7 @@ def trot_law(c, ctx) -> ca.SX:
     g = gains_of(c, info["command"])
     inertia, offsets = nominal_geometry(ctx.sys, dict(c.pose))
     info["period"] = g.period
-    return trot_torque(ctx.sys, g, ctx.t, ctx.mode, inertia, offsets)
+    return trot_torque(ctx.sys, g, ctx.t, ctx.plan.mode(ctx.sys.model.contact_frames, ctx.t), inertia, offsets)
 
 
 def gains_of(c, speed: float) -> TrotGains:

@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ....compile.contacts import Schedule
 from ....compile.primitive import saturate
 from ....compile.rigidbody.symmetry import (NEUTRAL, lift_function, lift_jacobian, reduce_function,
                                           reduced_monodromy)
@@ -64,11 +63,11 @@ class StrideMap:
         self.period = g.period
         g = gains_of(controller, c)
         n = int(round(g.period / dt))
-        if abs(n * dt - g.period) > 1e-9 or any(abs(u / dt - round(u / dt)) > 1e-6 for u, _ in g.schedule(())):
+        feet = tuple(sys.model.contact_frames)
+        schedule = g.schedule(feet)
+        if abs(n * dt - g.period) > 1e-9 or any(abs(u / dt - round(u / dt)) > 1e-6 for u in schedule.boundaries):
             raise ValueError(f"the trot's switching times must be multiples of dt = {dt:g}")
         self.steps = n
-        feet = tuple(sys.model.contact_frames)
-        schedule = Schedule(tuple((u, tuple(f)) for u, f in g.schedule(feet)), g.period, feet)
         t = ca.SX.sym("t")
         mode = schedule.mode(feet, t)
         loop = sys.scheduled_loop(mode)
