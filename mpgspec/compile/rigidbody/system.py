@@ -22,6 +22,7 @@ from ..system import CompiledSystem, OpenLoop
 from .constrained import Baumgarte, ContactDynamics
 from .dynamics import RigidBodyDynamics
 from .frames import center_of_mass
+from .legs import Leg, resolve_legs
 from .linalg import dense_ldl_solve
 from .liegroup import normalize_quaternion, qdot, quat_to_rotation
 from .model import RigidBodyModel, find_urdf
@@ -38,6 +39,7 @@ class RigidBodyCompiledSystem(CompiledSystem):
     friction: float = 0.7
     baumgarte: Baumgarte | None = None
     events: bool = False  # contact flags in the state, touchdown / lift-off / impact (hybrid.py)
+    legs: tuple[Leg, ...] = ()  # named feet and their joints from the tree (legs.py)
     _loops: dict = field(default_factory=dict)
 
     kind = "rigid_body"
@@ -367,6 +369,7 @@ def compile_rigid_body(spec) -> RigidBodyCompiledSystem:
         raise SpecError("cannot load the robot model", location=where, key="system.urdf",
                         expected="a readable URDF with the named contact frames",
                         found=f"{clip_repr(s.urdf)} ({str(err)[:300]})", code="MPG109") from None
+    legs = resolve_legs(s, model, spec.system_locate)
     dyn = RigidBodyDynamics(model)
     qn = (BASE_Q if model.n_base else []) + list(model.joint_names)
     vn = (BASE_V if model.n_base else []) + [f"{j}_dot" for j in model.joint_names]
@@ -394,7 +397,7 @@ def compile_rigid_body(spec) -> RigidBodyCompiledSystem:
         name=s.name, state_names=qn + vn + cn, input_names=[f"tau_{j}" for j in model.joint_names],
         parameters=dict(s.parameters), x=x, u=u, xdot=ca.SX(0, 1), u_lo=-hi, u_hi=hi,
         wrap=np.zeros(x.shape[0]), extra_env=env, dyn=dyn, friction=s.friction,
-        baumgarte=Baumgarte(s.baumgarte.alpha, s.baumgarte.beta), events=s.contact_events,
+        baumgarte=Baumgarte(s.baumgarte.alpha, s.baumgarte.beta), events=s.contact_events, legs=legs,
     )
     sysc.xdot = sysc.open_loop(None).xdot
     return sysc
