@@ -317,12 +317,40 @@ class RigidBodyCompiledSystem(CompiledSystem):
                 normal, cone = no_slip(*(forces[f"{f}_f{a}"] for a in "xyz"), self.friction)
                 out += [(f"normal_force[{f}]", self._when_in_contact(f, normal, mode)),
                         (f"friction_cone[{f}]", self._when_in_contact(f, cone, mode))]
+        elif name == "touchdown_gap":  # a scheduled touchdown finds the foot on the ground
+            out += touchdown_gaps(plan, env)
         elif name == "aerial":  # C_aerial: no foot below the ground
             for f in m.contact_frames:  # a foot resting on the ground sits at 0 up to the contact drift
                 out.append((f"above_ground[{f}]", env[f"{f}_z"] + tol))
         else:
             raise KeyError(name)
         return out
+
+
+TOUCHDOWN_GAP = 0.003
+"""Largest height (m) a foot may have over the last step before its scheduled touchdown."""
+TOUCHDOWN_WIDTH = 0.001
+"""Width (s) of a touchdown_gap window: one oracle step at the usual dt = 0.001 s."""
+
+
+def touchdown_gaps(plan: ContactPlan, env: dict, gap: float = TOUCHDOWN_GAP,
+                   width: float = TOUCHDOWN_WIDTH) -> list[tuple[str, ca.SX, tuple[float, float]]]:
+    """(name, gap - foot_z, window) for every foot that joins the held set at a switching time T of a
+    contact schedule, active on [T - width, T]: the windows users once computed from the gait timing.
+    Raises KeyError (the block does not apply) unless the clock sets the contact set."""
+    phases = getattr(plan, "phases", None)
+    if not getattr(plan, "by_clock", False) or not phases:
+        raise KeyError("touchdown_gap")
+    out = []
+    for k, (until, held) in enumerate(phases):
+        if k + 1 == len(phases) and plan.period is None:
+            break  # the last phase of an unwrapped schedule lasts
+        after = phases[(k + 1) % len(phases)][1]
+        for f in plan.feet:
+            if f in after and f not in held:
+                T = float(until)
+                out.append((f"touchdown_gap[{f}]", gap - env[f"{f}_z"], (T - width, T)))
+    return out
 
 
 def no_slip(fx, fy, fz, mu) -> tuple:
