@@ -83,7 +83,7 @@ def _size(flow: HybridFlow, problem: PeriodicProblem, Xs: np.ndarray, W: np.ndar
     while True:
         r, tube = _tube(flow, Xs, W, periods, o)
         tried.append({"periods": periods, "radius": r})
-        if r >= COLLAPSE * float(o.get("r0", 0.05)) or periods >= cap or not _unconverged(tube["bisection"], r):
+        if r >= COLLAPSE * float(o.get("r0", 0.05)) or periods >= cap or not unconverged(tube["bisection"], r):
             break
         periods = min(2 * periods, cap)
     if len(tried) > 1:
@@ -91,7 +91,7 @@ def _size(flow: HybridFlow, problem: PeriodicProblem, Xs: np.ndarray, W: np.ndar
     return r, tube
 
 
-def _unconverged(log: list[dict], r: float) -> bool:
+def unconverged(log: list[dict], r: float) -> bool:
     """Whether the starts that failed at the least failing radius above r all stayed safe (so
     failed only by not yet converging)."""
     above = [e for e in log if e["r"] > r and e["failed"]]

@@ -123,3 +123,20 @@ def test_given_periods_are_kept():
 def test_fast_loop_keeps_the_first_count():
     r, tube = _size(np.diag([0.4, 0.3]))
     assert tube["periods"] == 6 and "periods_tried" not in tube and r > 0.5
+
+
+def test_smooth_floquet_adapts_its_periods_too():
+    """x' = A x, A = [[-0.92, 10], [0, -0.92]], T = 1: multipliers 0.4, but after the first count
+    (7 periods at conv 0.02) the transient 70 e^-6.4 = 0.11 has not decayed: r = 0; 14 periods pass."""
+    import casadi as ca
+
+    from mpgspec.certify.problem import PeriodicProblem
+    from verifiers import floquet
+
+    x, t = ca.SX.sym("x", 2), ca.SX.sym("t")
+    A = ca.DM([[-0.92, 10.0], [0.0, -0.92]])
+    prob = PeriodicProblem(ca.Function("f", [x, t], [ca.mtimes(A, x)]), ca.Function("xs", [t], [ca.DM.zeros(2)]), 1.0)
+    res = floquet.verifier.estimate(prob, {"samples": 16, "steps_per_period": 50, "r_max": 1.0})
+    tube = res.evidence["tube"]
+    assert tube["periods_tried"][0] == {"periods": 7, "radius": 0.0}
+    assert res.evidence["periods"] == 14 and res.level == "empirical" and res.radius == 1.0
