@@ -9,10 +9,12 @@ would size it again. The typical size is
 - the radius the spec requests (`roa.radius`), when it gives one;
 - else the safe set's own scale: the least W-distance from x*(t) to the boundary of C, to first
   order, r_C = min over t and safety functions i of h_i(x*(t)) / ||W^-1/2 grad h_i(x*(t))||
-  (the largest W-ball around x* the linearised C admits; no E inside C can be larger).
+  (the largest W-ball around x* the linearised C admits; for robots with contacts E is checked on
+  the contact manifold and may reach further, so this scale is conservative there).
 
 E is collapsed when r < COLLAPSE * typical. A radius the spec gives (method 'given') is the
-author's choice and is not compared, but an empty one is still a FAIL.
+author's choice and is not compared, but an empty one is still a FAIL; a spec radius kept because
+its verifier failed is a WARN.
 """
 from __future__ import annotations
 
@@ -72,8 +74,12 @@ def region_size(p: CompiledPrimitive, rec) -> AssumptionCheck | None:
         return AssumptionCheck(p.name, "roa_size", "fail", rec.level,
                                f"E is empty (r = 0): no transition into {p.name} can be claimed. {how}{fix}",
                                {"radius": r, "method": rec.method})
-    if rec.method == "given" or rec.level in ("given", "failed"):
+    if rec.method == "given":
         return None
+    if rec.level in ("given", "failed"):  # the verifier failed; E is the spec's radius, not verified
+        return AssumptionCheck(p.name, "roa_size", "warn", rec.level,
+                               f"E (r = {r:.4g}) is the spec's roa.radius, not verified: {how}; "
+                               f"try {_fix(rec.method)}", {"radius": r, "method": rec.method})
     if rec.spec_radius:
         typical, basis = float(rec.spec_radius), "the radius the spec requests (roa.radius)"
     else:

@@ -140,3 +140,10 @@ def test_smooth_floquet_adapts_its_periods_too():
     tube = res.evidence["tube"]
     assert tube["periods_tried"][0] == {"periods": 7, "radius": 0.0}
     assert res.evidence["periods"] == 14 and res.level == "empirical" and res.radius == 1.0
+
+
+def test_unverified_spec_radius_warns(tmp_path):
+    """The verifier fails (x* on the wall) and the spec's radius is kept: a WARN says it is unverified."""
+    res = _project(tmp_path, "fallback", "0", "{method: lyapunov, radius: 0.01}")
+    checks, _ = _size_check(res)
+    assert [c["status"] for c in checks] == ["warn"] and "not verified" in checks[0]["message"]
