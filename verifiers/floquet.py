@@ -64,7 +64,9 @@ class FloquetVerifier:
         if not r > 0 or not np.isfinite(r):  # NaN or inf is no radius
             why = "; an autonomous loop keeps a phase shift, so starts off the orbit need not converge to x*(t)" \
                 if m["autonomous"] else ""
-            return RoAResult(0.0, "failed", self.name, ev, f"orbit is stable but no sampled tube converged safely{why}")
+            return RoAResult(0.0, "failed", self.name, ev,
+                             f"orbit is stable but no sampled tube converged safely within {periods} periods "
+                             f"(roa.options.periods, periods_max){why}")
         return RoAResult(r, "empirical", self.name, ev,
                          f"multipliers inside the unit circle (max |mu| = {rho:.3g}); {tube['simulations']} "
                          f"rollouts at random phases converged safely from W-distance {r:.4g}")

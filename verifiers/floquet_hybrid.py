@@ -55,7 +55,8 @@ def estimate(problem: PeriodicProblem, o: dict, name: str) -> RoAResult:
     r, tube = _size(flow, problem, Xs, W, rho, o)
     ev.update(tube=tube, time_s=time.perf_counter() - t_start)
     if not r > 0:
-        return RoAResult(0.0, "failed", name, ev, "the orbit is stable but no sampled tube converged safely")
+        return RoAResult(0.0, "failed", name, ev, f"the orbit is stable but no sampled tube converged safely within "
+                         f"{tube['periods']} periods (roa.options.periods, periods_max)")
     parts = [f"{k} {v['multiplier']:.6f}" for k, v in found.items()]
     neutral_txt = f"; neutral {', '.join(parts)}" if parts else ""
     return RoAResult(r, "empirical", name, ev,
