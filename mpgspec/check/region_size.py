@@ -64,9 +64,19 @@ def safe_set_scale(p: CompiledPrimitive, n: int = 24) -> float:
     return best
 
 
-def region_size(p: CompiledPrimitive, rec) -> AssumptionCheck | None:
+def _scale(p: CompiledPrimitive, memo) -> float:
+    key = memo.key("safe_set_scale", p.digest()) if memo else None
+    known = memo.get(key) if memo else None
+    if known is None:
+        known = safe_set_scale(p)
+        if memo:
+            memo.put(key, known)
+    return float(known)
+
+
+def region_size(p: CompiledPrimitive, rec, memo=None) -> AssumptionCheck | None:
     """FAIL for an empty E, WARN for a collapsed one, None otherwise (rec: the primitive's
-    RoARecord, mpgspec.certify.roa)."""
+    RoARecord, mpgspec.certify.roa; memo, optional, keeps the safe set's scale by content hash)."""
     r = float(p.radius)
     how = f"{rec.method} ({rec.level}): {rec.message}"
     if not r > 0:
@@ -83,7 +93,7 @@ def region_size(p: CompiledPrimitive, rec) -> AssumptionCheck | None:
     if rec.spec_radius:
         typical, basis = float(rec.spec_radius), "the radius the spec requests (roa.radius)"
     else:
-        typical, basis = safe_set_scale(p), "the safe set's scale (W-distance from x* to the linearised boundary of C)"
+        typical, basis = _scale(p, memo), "the safe set's scale (W-distance from x* to the linearised boundary of C)"
     if not (np.isfinite(typical) and typical > 0) or r >= COLLAPSE * typical:
         return None
     return AssumptionCheck(p.name, "roa_size", "warn", rec.level,

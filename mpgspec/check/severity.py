@@ -20,7 +20,7 @@ def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict, memo=
         checks = [AssumptionCheck(**c) for c in known] if known is not None else check_primitive(p)
         if memo and known is None:
             memo.put(key, [c.to_dict() for c in checks])
-        size = region_size(p, roa[p.name]) if roa and p.name in roa else None
+        size = region_size(p, roa[p.name], memo) if roa and p.name in roa else None
         for c in checks + ([size] if size else []):
             sev = severity.get(c.name, "fail")
             if sev == "off":

@@ -147,3 +147,21 @@ def test_unverified_spec_radius_warns(tmp_path):
     res = _project(tmp_path, "fallback", "0", "{method: lyapunov, radius: 0.01}")
     checks, _ = _size_check(res)
     assert [c["status"] for c in checks] == ["warn"] and "not verified" in checks[0]["message"]
+
+
+def test_safe_set_scale_is_the_typical_size_without_a_spec_radius(tmp_path):
+    """Without roa.radius the typical size is the W-distance from x* = 0 to the nearer wall (0.5);
+    a verified r = 0.01 is below COLLAPSE of it: WARN; r = 0.2 is not."""
+    from mpgspec.api import compile_project
+    from mpgspec.certify.roa import RoARecord
+    from mpgspec.check.region_size import region_size, safe_set_scale
+    from mpgspec.spec.loader import load_project
+
+    d = tmp_path / "scale"
+    d.mkdir()
+    (d / "project.yaml").write_text(SYSTEM.format(name="scale", wall="0.5", roa="{method: lyapunov}"))
+    home = compile_project(load_project(d / "project.yaml"))["Home"]
+    assert safe_set_scale(home) == pytest.approx(0.5)
+    small = region_size(home.with_radius(0.01), RoARecord("Home", "lyapunov", "empirical", 0.01))
+    assert small.status == "warn" and small.numbers["typical"] == pytest.approx(0.5) and "safe set" in small.message
+    assert region_size(home.with_radius(0.2), RoARecord("Home", "lyapunov", "empirical", 0.2)) is None
