@@ -14,6 +14,7 @@ import numpy as np
 from mpgspec.certify.monodromy import monodromy
 from mpgspec.certify.problem import PeriodicProblem, RoAResult
 
+from .floquet_hybrid import COLLAPSE, unconverged
 from .floquet_hybrid import estimate as estimate_hybrid
 from .sampling import Simulator, search
 
@@ -58,21 +59,42 @@ class FloquetVerifier:
             ev["verdict"] = "not exponentially stable"
             return RoAResult(0.0, "failed", self.name, ev, f"Floquet multiplier of modulus {rho:.6g} >= 1 - {tol:g}")
         ev["verdict"] = "orbitally exponentially stable" if m["autonomous"] else "locally exponentially stable"
-        n = int(o.get("samples", 256))
-        conv = float(o.get("conv", 0.02))
-        periods = int(o.get("periods", np.clip(np.ceil(np.log(conv / 4) / np.log(max(rho, 1e-12))) + 1, 2, 20)))
-        sim = Simulator(problem.f, problem.h, problem.x_star, problem.W, n, periods * T,
-                        float(o.get("dt", T / int(o.get("steps_per_period", 200)))), conv)
-        rng = np.random.default_rng(o.get("seed", 0))
-        r, tube = search(sim, lambda: T * rng.random(n), rng, o)
+        r, tube, periods = _size(problem, rho, o)
         ev.update(tube=tube, periods=periods, time_s=time.perf_counter() - t_start)
         if not r > 0 or not np.isfinite(r):  # NaN or inf is no radius
             why = "; an autonomous loop keeps a phase shift, so starts off the orbit need not converge to x*(t)" \
                 if m["autonomous"] else ""
-            return RoAResult(0.0, "failed", self.name, ev, f"orbit is stable but no sampled tube converged safely{why}")
+            return RoAResult(0.0, "failed", self.name, ev,
+                             f"orbit is stable but no sampled tube converged safely within {periods} periods "
+                             f"(roa.options.periods, periods_max){why}")
         return RoAResult(r, "empirical", self.name, ev,
                          f"multipliers inside the unit circle (max |mu| = {rho:.3g}); {tube['simulations']} "
                          f"rollouts at random phases converged safely from W-distance {r:.4g}")
+
+
+def _size(problem: PeriodicProblem, rho: float, o: dict) -> tuple[float, dict, int]:
+    """The tube radius over an adaptive number of periods: first the least n with rho^n below
+    conv/4, plus one (at most 20); doubled, up to `periods_max`, while the radius collapses (below
+    COLLAPSE of r0) and the starts that failed all stayed safe but had not yet converged. A count
+    given as `periods` is used as is."""
+    T = float(problem.period)
+    n = int(o.get("samples", 256))
+    conv = float(o.get("conv", 0.02))
+    periods = int(o.get("periods", np.clip(np.ceil(np.log(conv / 4) / np.log(max(rho, 1e-12))) + 1, 2, 20)))
+    cap = int(o.get("periods_max", max(4 * periods, 24))) if "periods" not in o else periods
+    tried = []
+    while True:
+        sim = Simulator(problem.f, problem.h, problem.x_star, problem.W, n, periods * T,
+                        float(o.get("dt", T / int(o.get("steps_per_period", 200)))), conv)
+        rng = np.random.default_rng(o.get("seed", 0))
+        r, tube = search(sim, lambda: T * rng.random(n), rng, o)
+        tried.append({"periods": periods, "radius": r})
+        if r >= COLLAPSE * float(o.get("r0", 0.1)) or periods >= cap or not unconverged(tube["bisection"], r):
+            break
+        periods = min(2 * periods, cap)
+    if len(tried) > 1:
+        tube["periods_tried"] = tried
+    return r, tube, periods
 
 
 verifier = FloquetVerifier()

@@ -55,7 +55,8 @@ def estimate(problem: PeriodicProblem, o: dict, name: str) -> RoAResult:
     r, tube = _size(flow, problem, Xs, W, rho, o)
     ev.update(tube=tube, time_s=time.perf_counter() - t_start)
     if not r > 0:
-        return RoAResult(0.0, "failed", name, ev, "the orbit is stable but no sampled tube converged safely")
+        return RoAResult(0.0, "failed", name, ev, f"the orbit is stable but no sampled tube converged safely within "
+                         f"{tube['periods']} periods (roa.options.periods, periods_max)")
     parts = [f"{k} {v['multiplier']:.6f}" for k, v in found.items()]
     neutral_txt = f"; neutral {', '.join(parts)}" if parts else ""
     return RoAResult(r, "empirical", name, ev,
@@ -63,14 +64,52 @@ def estimate(problem: PeriodicProblem, o: dict, name: str) -> RoAResult:
                      f"{tube['simulations']} rollouts at random phases converged safely from W-distance {r:.4g}")
 
 
+COLLAPSE = 0.1
+"""A tube radius below this fraction of the first radius tried (option r0) counts as collapsed."""
+
+
 def _size(flow: HybridFlow, problem: PeriodicProblem, Xs: np.ndarray, W: np.ndarray, rho: float, o: dict):
+    """The tube radius over an adaptive number of periods.
+
+    The first count is the least n with rho^n below conv/4, plus one (the linear transient decays by
+    the largest multiplier). When the radius then collapses (below COLLAPSE of r0) and the starts
+    that failed all stayed safe but had not yet converged, the transient outlasted the count (slow
+    or non-normal multipliers): the count is doubled, up to `periods_max`, and the tube sized again.
+    A count given as `periods` is used as is."""
+    conv = float(o.get("conv", 0.05))
+    first = max(2, int(np.ceil(np.log(conv / 4) / np.log(max(rho, 1e-12)))) + 1)
+    periods = int(o.get("periods", first))
+    cap = int(o.get("periods_max", max(4 * periods, 24))) if "periods" not in o else periods
+    tried = []
+    while True:
+        r, tube = _tube(flow, Xs, W, periods, o)
+        tried.append({"periods": periods, "radius": r})
+        if r >= COLLAPSE * float(o.get("r0", 0.05)) or periods >= cap or not unconverged(tube["bisection"], r):
+            break
+        periods = min(2 * periods, cap)
+    if len(tried) > 1:
+        tube["periods_tried"] = tried
+    return r, tube
+
+
+def unconverged(log: list[dict], r: float) -> bool:
+    """Whether the starts that failed at the least failing radius above r all stayed safe (so
+    failed only by not yet converging)."""
+    above = [e for e in log if e["r"] > r and e["failed"]]
+    if not above:
+        return False
+    least = min(above, key=lambda e: e["r"])
+    return least["unsafe"] == 0
+
+
+def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict):
     """Bisection on r: starts x*(t0) + r W^-1/2 u at random phases on the dt grid, put on the contact
-    manifold of the feet held at t0, must stay in C and end within conv r of the orbit."""
+    manifold of the feet held at t0, must stay in C and end within conv r of the orbit after
+    `periods` periods."""
     prim = flow.prim
     sys = prim.system
     n = int(o.get("samples", 48))
     conv = float(o.get("conv", 0.05))
-    periods = int(o.get("periods", max(2, int(np.ceil(np.log(conv / 4) / np.log(max(rho, 1e-12)))) + 1)))
     rng = np.random.default_rng(o.get("seed", 0))
     w, U = np.linalg.eigh(0.5 * (W + W.T))
     keep = w > 1e-12 * max(w.max(), 1e-300)

@@ -3,13 +3,16 @@ from __future__ import annotations
 
 from ..compile.primitive import CompiledPrimitive
 from .assumptions import AssumptionCheck, check_primitive
+from .region_size import region_size
 
 
-def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict, memo=None) -> list[AssumptionCheck]:
+def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict, memo=None,
+                      roa: dict | None = None) -> list[AssumptionCheck]:
     """Definition-1 checks of every primitive; a failure counts as the project's severity says
     ('fail', 'warn' or 'off').
 
-    memo (optional) keeps the checks of each primitive by its content hash."""
+    memo (optional) keeps the checks of each primitive by its content hash. roa (optional, name ->
+    RoARecord of mpgspec.certify.roa) adds `roa_size` where E is empty (fail) or collapsed (warn)."""
     out = []
     for p in prims.values():
         key = memo.key("assumptions", p.digest()) if memo else None
@@ -17,7 +20,8 @@ def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict, memo=
         checks = [AssumptionCheck(**c) for c in known] if known is not None else check_primitive(p)
         if memo and known is None:
             memo.put(key, [c.to_dict() for c in checks])
-        for c in checks:
+        size = region_size(p, roa[p.name], memo) if roa and p.name in roa else None
+        for c in checks + ([size] if size else []):
             sev = severity.get(c.name, "fail")
             if sev == "off":
                 continue

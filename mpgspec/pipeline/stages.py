@@ -150,7 +150,7 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     t2 = time.perf_counter()
     if progress:
         progress(spec.name, "assumptions (Definition 1)", 0, len(prims))
-    assumed = check_assumptions(prims, spec.project.assumptions, memo)
+    assumed = check_assumptions(prims, spec.project.assumptions, memo, cp.roa)
     st = [c.status for c in checks] + [a.status for a in assumed]
     status = "error" if "error" in st else "fail" if "fail" in st else "pass"
     return Checks(plans, table, runs, checks, assumed, status,

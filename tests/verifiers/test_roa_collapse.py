@@ -1,0 +1,167 @@
+"""An empty or collapsed region of attraction never leaves the project PASS silently.
+
+An empty E (the setpoint sits on the boundary of C, so no level set fits inside it) is a FAIL of
+the `roa_size` assumption check and exit 1; an E far below the radius the spec requests is a WARN
+naming the option to change. The hybrid tube sizing (verifiers/floquet_hybrid.py) doubles its
+number of periods when the transient outlasts the first count; the gait of the A1 takes minutes
+to compile, so a linear stand-in with the same multipliers (0.4) and a non-normal transient plays
+it: over the first count (6 periods) no start has converged, so the old sizing returned r = 0.
+"""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from mpgspec.api import verify
+from mpgspec.check.region_size import COLLAPSE
+from verifiers import floquet_hybrid
+
+SYSTEM = """
+project: {name}
+system:
+  name: integrator
+  kind: analytic
+  states: [x]
+  inputs: [u]
+  dynamics: {{f: [0], g: [[1]]}}
+  input_bounds: {{u: [-5, 5]}}
+primitives:
+  - name: Home
+    class: fixed
+    setpoint: {{expr: [0]}}
+    controller: {{type: expression, u: ["-2*x"]}}
+    safe_set:
+      - {{name: wall, h: "{wall} - x"}}
+      - {{name: floor, h: "x + 1"}}
+    roa: {roa}
+  - name: Away
+    class: fixed
+    setpoint: {{expr: [0.5]}}
+    controller: {{type: expression, u: ["-2*(x - 0.5)"]}}
+    roa: {{radius: 0.05}}
+oracle: {{horizon: 3.0, dt: 0.02, accuracy: low}}
+"""
+
+
+def _project(tmp_path, name: str, wall: str, roa: str):
+    d = tmp_path / name
+    d.mkdir()
+    (d / "project.yaml").write_text(SYSTEM.format(name=name, wall=wall, roa=roa))
+    return verify(d, tmp_path / "out")
+
+
+def _size_check(res):
+    rep = res.projects[0].report
+    return [c for c in rep["assumptions"] if c["name"] == "roa_size"], rep
+
+
+def test_empty_region_fails_the_project(tmp_path):
+    """x* = 0 on the wall h = -x: no level set of V lies inside C, so E is empty (r = 0)."""
+    res = _project(tmp_path, "empty", "0", "{method: lyapunov}")
+    checks, rep = _size_check(res)
+    assert [c["status"] for c in checks] == ["fail"] and checks[0]["primitive"] == "Home"
+    assert "E is empty" in checks[0]["message"] and "roa.options" in checks[0]["message"]
+    assert rep["status"] == "fail" and res.exit_code == 1
+
+
+def test_collapsed_region_warns(tmp_path):
+    """The spec requests r = 1 but the wall at 0.05 lets the verifier size r ~ 0.05 < COLLAPSE * 1."""
+    res = _project(tmp_path, "collapsed", "0.05", "{method: lyapunov, radius: 1.0}")
+    checks, rep = _size_check(res)
+    assert [c["status"] for c in checks] == ["warn"]
+    c = checks[0]
+    assert c["numbers"]["radius"] < COLLAPSE * c["numbers"]["typical"] and c["numbers"]["typical"] == 1.0
+    assert "roa.radius" in c["message"] and "roa.options.degree" in c["message"]
+    assert rep["status"] == "pass" and res.exit_code == 0
+
+
+def test_sized_region_is_silent(tmp_path):
+    """A region the wall does not squeeze gives no roa_size check at all."""
+    res = _project(tmp_path, "fine", "0.5", "{method: lyapunov}")
+    checks, rep = _size_check(res)
+    assert checks == [] and rep["status"] == "pass"
+
+
+class _LinearFlow:
+    """A stand-in for HybridFlow: x -> M x once per period (orbit x* = 0), unsafe where |x|_inf >= 1."""
+
+    def __init__(self, M: np.ndarray, steps: int = 10):
+        self.M, self.steps, self.dt = M, steps, 1.0 / steps
+        self.prim = SimpleNamespace(system=None, contacts=None)
+
+    def run(self, X0, t0, periods):
+        X, hmin = X0.copy(), 1 - np.abs(X0).max(0)
+        for _ in range(periods):
+            X = self.M @ X
+            hmin = np.minimum(hmin, 1 - np.abs(X).max(0))
+        return X, hmin
+
+
+def _size(M, o=None):
+    flow = _LinearFlow(M)
+    rho = float(np.abs(np.linalg.eigvals(M)).max())
+    return floquet_hybrid._size(flow, None, np.zeros((2, flow.steps)), np.eye(2), rho, dict(o or {}))
+
+
+SLOW = np.array([[0.4, 10.0], [0.0, 0.4]])  # multipliers 0.4, transient n 10 0.4^(n-1): 0.61 at n = 6
+
+
+def test_slow_transient_gets_more_periods():
+    r, tube = _size(SLOW)
+    assert tube["periods_tried"][0] == {"periods": 6, "radius": 0.0}  # the first count: rho^n < conv/4
+    assert tube["periods"] > 6 and r >= COLLAPSE * 0.05
+    assert r == pytest.approx(0.1, rel=0.1)  # the transient's peak (10 r at n = 1) reaches |x| = 1
+
+
+def test_given_periods_are_kept():
+    r, tube = _size(SLOW, {"periods": 6})
+    assert r == 0.0 and tube["periods"] == 6 and "periods_tried" not in tube
+
+
+def test_fast_loop_keeps_the_first_count():
+    r, tube = _size(np.diag([0.4, 0.3]))
+    assert tube["periods"] == 6 and "periods_tried" not in tube and r > 0.5
+
+
+def test_smooth_floquet_adapts_its_periods_too():
+    """x' = A x, A = [[-0.92, 10], [0, -0.92]], T = 1: multipliers 0.4, but after the first count
+    (7 periods at conv 0.02) the transient 70 e^-6.4 = 0.11 has not decayed: r = 0; 14 periods pass."""
+    import casadi as ca
+
+    from mpgspec.certify.problem import PeriodicProblem
+    from verifiers import floquet
+
+    x, t = ca.SX.sym("x", 2), ca.SX.sym("t")
+    A = ca.DM([[-0.92, 10.0], [0.0, -0.92]])
+    prob = PeriodicProblem(ca.Function("f", [x, t], [ca.mtimes(A, x)]), ca.Function("xs", [t], [ca.DM.zeros(2)]), 1.0)
+    res = floquet.verifier.estimate(prob, {"samples": 16, "steps_per_period": 50, "r_max": 1.0})
+    tube = res.evidence["tube"]
+    assert tube["periods_tried"][0] == {"periods": 7, "radius": 0.0}
+    assert res.evidence["periods"] == 14 and res.level == "empirical" and res.radius == 1.0
+
+
+def test_unverified_spec_radius_warns(tmp_path):
+    """The verifier fails (x* on the wall) and the spec's radius is kept: a WARN says it is unverified."""
+    res = _project(tmp_path, "fallback", "0", "{method: lyapunov, radius: 0.01}")
+    checks, _ = _size_check(res)
+    assert [c["status"] for c in checks] == ["warn"] and "not verified" in checks[0]["message"]
+
+
+def test_safe_set_scale_is_the_typical_size_without_a_spec_radius(tmp_path):
+    """Without roa.radius the typical size is the W-distance from x* = 0 to the nearer wall (0.5);
+    a verified r = 0.01 is below COLLAPSE of it: WARN; r = 0.2 is not."""
+    from mpgspec.api import compile_project
+    from mpgspec.certify.roa import RoARecord
+    from mpgspec.check.region_size import region_size, safe_set_scale
+    from mpgspec.spec.loader import load_project
+
+    d = tmp_path / "scale"
+    d.mkdir()
+    (d / "project.yaml").write_text(SYSTEM.format(name="scale", wall="0.5", roa="{method: lyapunov}"))
+    home = compile_project(load_project(d / "project.yaml"))["Home"]
+    assert safe_set_scale(home) == pytest.approx(0.5)
+    small = region_size(home.with_radius(0.01), RoARecord("Home", "lyapunov", "empirical", 0.01))
+    assert small.status == "warn" and small.numbers["typical"] == pytest.approx(0.5) and "safe set" in small.message
+    assert region_size(home.with_radius(0.2), RoARecord("Home", "lyapunov", "empirical", 0.2)) is None
