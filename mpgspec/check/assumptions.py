@@ -5,7 +5,9 @@
 - roa_in_safe_set: E(t) lies inside C(t) (sampled points of E plus a local worst-case search; with
   contact constraints, on the contact manifold the constrained flows stay on);
 - local_stability: eigenvalues of the closed-loop Jacobian at a fixed setpoint (Floquet
-  multipliers of the orbit for periodic primitives, certify/monodromy.py).
+  multipliers of the orbit for periodic primitives, certify/monodromy.py);
+- robot_limits (rigid bodies, only when it warns): input bounds, and with the joint_limits block
+  joint velocity and position limits, that look like a URDF's placeholders and so bound nothing.
 
 Periodic primitives whose state jumps (gaits under a contact schedule) are checked on the loop's
 own discrete flow (RK4 steps and impacts, certify/hybrid_orbit.py): x*(t) by its orbit defect,
@@ -32,6 +34,9 @@ from ..compile.rigidbody.symmetry import NEUTRAL
 from ..spec.models import PrimitiveClass
 
 S_SETTLED = 1e3  # time since switch-in at which every motion profile has finished
+PLACEHOLDER_EFFORT = 1000.0  # N m: an input bound at least this large bounds nothing a leg can do
+PLACEHOLDER_VELOCITY = 1000.0  # rad/s
+PLACEHOLDER_POSITION = 9.0  # rad: beyond about 1.4 turns either way (URDFs write +-10 for "no limit")
 
 
 @dataclass
@@ -394,6 +399,34 @@ def hybrid_stability(p: CompiledPrimitive, tol: float = 1e-6) -> AssumptionCheck
                             "neutral": o["neutral"], "orbit_defect": o["defect"]})
 
 
+def robot_limits(p: CompiledPrimitive) -> AssumptionCheck | None:
+    """A WARN naming the joints whose limits look like placeholders (None when none do): input bounds
+    of |u| >= 1000 N m (the URDF's efforts when system.torque_limit is not given) and, when the
+    primitive uses the joint_limits block, velocity limits >= 1000 rad/s and positions |q| >= 9 rad."""
+    sys = p.system
+    if not getattr(sys, "is_rigid_body", False):
+        return None
+    m = sys.model
+    found = {"torque": [n for n, u in zip(m.joint_names, sys.u_hi) if u >= PLACEHOLDER_EFFORT]}
+    if any(str(h).startswith("qdot_max[") for h in p.h_names):
+        lo, hi = m.position_limits
+        found["velocity"] = [n for n, v in zip(m.joint_names, m.velocity_limits) if v >= PLACEHOLDER_VELOCITY]
+        found["position"] = [n for n, a, b in zip(m.joint_names, lo, hi)
+                             if max(abs(a), abs(b)) >= PLACEHOLDER_POSITION]
+    found = {k: v for k, v in found.items() if v}
+    if not found:
+        return None
+    what = "; ".join(f"{k} of {', '.join(v[:4])}{' ...' if len(v) > 4 else ''}" for k, v in found.items())
+    return AssumptionCheck(p.name, "robot_limits", "warn", "computed",
+                           f"limits that look like URDF placeholders bound nothing ({what}): give "
+                           "system.torque_limit, or the robot's real limits in the URDF",
+                           {"placeholders": found, "thresholds": {"torque": PLACEHOLDER_EFFORT,
+                                                                  "velocity": PLACEHOLDER_VELOCITY,
+                                                                  "position": PLACEHOLDER_POSITION}})
+
+
 def check_primitive(p: CompiledPrimitive, h_tol: float = 1e-9, dyn_tol: float = 1e-3) -> list[AssumptionCheck]:
-    """All assumption checks of one primitive, in the order of Definition 1."""
-    return [setpoint_dynamics(p, dyn_tol), setpoint_safe(p, h_tol), roa_in_safe_set(p, h_tol), local_stability(p)]
+    """All assumption checks of one primitive, in the order of Definition 1 (and robot_limits when it warns)."""
+    limits = robot_limits(p)
+    return [setpoint_dynamics(p, dyn_tol), setpoint_safe(p, h_tol), roa_in_safe_set(p, h_tol), local_stability(p),
+            *([limits] if limits is not None else [])]

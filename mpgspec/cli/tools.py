@@ -33,5 +33,5 @@ def cmd_gait(args) -> int:
     for path in run.written:
         print(f"wrote {path}")
     for n in run.unstable:
-        print(f"{n}: no stable orbit (see the table's header)")
+        print(n if ": " in n else f"{n}: no stable orbit (see the table's header)")
     return EXIT_CHECK_FAILED if run.unstable else EXIT_OK

@@ -194,11 +194,12 @@ def _safety_functions(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprComp
             items = [(sf.name, ec.sx(sf.h, path + ("h",), henv))]
         else:
             items = [(sf.name, sf.tol - ca.fabs(ec.sx(sf.eq, path + ("eq",), henv)))]
-        for name, hv in items:
+        for name, hv, *own in items:  # a block may give its rows their own clock windows
             hv = ca.substitute(hv, sys.u, sat_u) if sys.nu else hv
             hs_raw.append(hv)
-            if isinstance(sf.when, tuple):
-                a, b = float(sf.when[0]), float(sf.when[1])
+            when = own[0] if own else sf.when
+            if isinstance(when, tuple):
+                a, b = float(when[0]), float(when[1])
                 windows.append((a, b))
                 hv = ca.if_else(ca.logic_and(clock.tc >= a, clock.tc < b), hv, INACTIVE)
             elif sf.when is not None:  # anchored on a contact event: the loader checked the system has them
@@ -221,7 +222,8 @@ def _builtin_block(inst: PrimitiveInstance, sys: CompiledSystem, use: str, path:
     except KeyError:
         raise SpecError("this safe-set block does not apply to the system", location=inst.locate(path + ("use",)),
                         key=f"primitive '{inst.name}': {'.'.join(map(str, path))}.use", expected="a block of the "
-                        "project or, for rigid bodies, joint_limits, ground_contact, no_slip or aerial",
+                        "project or, for rigid bodies, joint_limits, ground_contact, no_slip, aerial or (under a "
+                        "contact schedule) touchdown_gap",
                         found=repr(use), code="MPG302") from None
 
 

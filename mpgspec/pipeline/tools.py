@@ -37,7 +37,7 @@ class GaitRun:
     """The gait tables of one gait file: regenerated, compared with the files on disk or written."""
 
     tables: list
-    unstable: list[str]  # nodes without a converged, stable orbit
+    unstable: list[str]  # nodes without a converged, stable orbit (with the reason when none was found)
     stale: list[str] = field(default_factory=list)  # with check: what differs from the files on disk
     written: list[Path] = field(default_factory=list)
 
@@ -51,9 +51,8 @@ def gait(path, check: bool = False, progress=None) -> GaitRun:
     path = Path(path)
     tables = generate(path, progress=progress or (lambda m: None))
     names = compile_system(load_project(path.parent / load_gait_file(path).project)).state_names
-    bad = [t.node for t in tables if isinstance(t, GaitTable) and (t.orbit.status != "converged"
-                                                                   or not t.orbit.spectral_radius < 1)]
+    bad = [f"{t.node}: {t.failure}" if t.failure else t.node for t in tables
+           if isinstance(t, GaitTable) and (t.orbit.status != "converged" or not t.orbit.spectral_radius < 1)]
     if check:
         return GaitRun(tables, bad, stale=compare(tables, names))
-    write(tables, names)
-    return GaitRun(tables, bad, written=[t.path for t in tables])
+    return GaitRun(tables, bad, written=write(tables, names))

@@ -34,8 +34,9 @@ from .project import node_refs
 from .yamlpos import PositionMap, parse_yaml
 
 PROJECT_FILE = "project.yaml"
-BUILTIN_BLOCKS = ("joint_limits", "ground_contact", "no_slip", "aerial")
-"""Safe-set blocks the rigid-body system provides (the paper's C_{q,qdot}, C_ground, no slip, C_aerial)."""
+BUILTIN_BLOCKS = ("joint_limits", "ground_contact", "no_slip", "aerial", "touchdown_gap")
+"""Safe-set blocks the rigid-body system provides (the paper's C_{q,qdot}, C_ground, no slip, C_aerial, and
+the touchdown gaps of a contact schedule)."""
 
 Locator = Callable[[tuple], Location]
 

@@ -91,6 +91,12 @@ class BaumgarteGains(Strict):
     beta: Number = Field(default=10.0, ge=0)
 
 
+class LegSpec(Strict):
+    """One leg of a legged robot: the contact frame at its tip (its joints come from the kinematic tree)."""
+
+    foot: Text = Field(description="the leg's foot: one of the system's contacts")
+
+
 class RigidBodySystem(Strict):
     """A URDF robot: floating base, actuated joints, point-contact feet (Section IV).
 
@@ -104,8 +110,12 @@ class RigidBodySystem(Strict):
     urdf: Text = Field(description="path relative to the spec, or 'share:<path>' inside cmeel.prefix/share")
     floating_base: bool = True
     contacts: list[Text] = Field(default_factory=list, description="contact frames (feet)")
+    legs: dict[Text, LegSpec] | None = Field(
+        default=None, description="leg name -> {foot: <contact frame>}; a leg's joints are the actuated joints "
+        "on the tree's path from the base to its foot. Default: one leg per contact, named by the frame "
+        "without a trailing _foot/_FOOT (FL_foot -> FL, LF_FOOT -> LF)")
     torque_limit: Annotated[Number, Field(gt=0)] | list[Annotated[Number, Field(gt=0)]] | None = Field(
-        default=None, description="U = [-l, l]^m; URDF efforts if omitted")
+        default=None, description="U = [-l, l]^m; URDF efforts if omitted (a WARN when they look like placeholders)")
     friction: Number = Field(default=0.7, gt=0)
     baumgarte: BaumgarteGains = BaumgarteGains()
     contact_events: bool = Field(default=False, description="contact flags in the state: touchdown (with "

@@ -73,11 +73,7 @@ def masked_impact(sys, q: ca.SX, v: ca.SX, c: ca.SX) -> ca.SX:
 
 def leg_joints(m, frame: str) -> list[int]:
     """Configuration indices of the 1-dof joints on the chain from the base to `frame`."""
-    out, j = [], m.frame(frame).joint
-    while j >= 0 and m.joints[j].kind != "free":
-        out.append(m.joints[j].idx_q)
-        j = m.joints[j].parent
-    return sorted(out)
+    return sorted(j.idx_q for j in m.chain(frame))
 
 
 def touchdown_projection(sys, q: ca.SX, joined: list) -> ca.SX:

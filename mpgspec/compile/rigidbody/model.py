@@ -175,6 +175,15 @@ class RigidBodyModel:
     def frame(self, name: str) -> Frame:
         return self.frames[self._frame_index[name]]
 
+    def chain(self, frame: str) -> tuple[Joint, ...]:
+        """The actuated joints on the path from the base (or the world) to `frame`, base first: a
+        leg's joints when `frame` is its foot (the tree's order, whatever the URDF lists first)."""
+        out, j = [], self.frame(frame).joint
+        while j >= 0 and self.joints[j].kind != "free":
+            out.append(self.joints[j])
+            j = self.joints[j].parent
+        return tuple(reversed(out))
+
     def neutral(self) -> np.ndarray:
         """Neutral configuration (identity quaternion, zero joint angles)."""
         return np.array(pin.neutral(self.pin_model))

@@ -22,6 +22,7 @@ from ..system import CompiledSystem, OpenLoop
 from .constrained import Baumgarte, ContactDynamics
 from .dynamics import RigidBodyDynamics
 from .frames import center_of_mass
+from .legs import Leg, resolve_legs
 from .linalg import dense_ldl_solve
 from .liegroup import normalize_quaternion, qdot, quat_to_rotation
 from .model import RigidBodyModel, find_urdf
@@ -38,6 +39,7 @@ class RigidBodyCompiledSystem(CompiledSystem):
     friction: float = 0.7
     baumgarte: Baumgarte | None = None
     events: bool = False  # contact flags in the state, touchdown / lift-off / impact (hybrid.py)
+    legs: tuple[Leg, ...] = ()  # named feet and their joints from the tree (legs.py)
     _loops: dict = field(default_factory=dict)
 
     kind = "rigid_body"
@@ -315,12 +317,40 @@ class RigidBodyCompiledSystem(CompiledSystem):
                 normal, cone = no_slip(*(forces[f"{f}_f{a}"] for a in "xyz"), self.friction)
                 out += [(f"normal_force[{f}]", self._when_in_contact(f, normal, mode)),
                         (f"friction_cone[{f}]", self._when_in_contact(f, cone, mode))]
+        elif name == "touchdown_gap":  # a scheduled touchdown finds the foot on the ground
+            out += touchdown_gaps(plan, env)
         elif name == "aerial":  # C_aerial: no foot below the ground
             for f in m.contact_frames:  # a foot resting on the ground sits at 0 up to the contact drift
                 out.append((f"above_ground[{f}]", env[f"{f}_z"] + tol))
         else:
             raise KeyError(name)
         return out
+
+
+TOUCHDOWN_GAP = 0.003
+"""Largest height (m) a foot may have over the last step before its scheduled touchdown."""
+TOUCHDOWN_WIDTH = 0.001
+"""Width (s) of a touchdown_gap window: one oracle step at the usual dt = 0.001 s."""
+
+
+def touchdown_gaps(plan: ContactPlan, env: dict, gap: float = TOUCHDOWN_GAP,
+                   width: float = TOUCHDOWN_WIDTH) -> list[tuple[str, ca.SX, tuple[float, float]]]:
+    """(name, gap - foot_z, window) for every foot that joins the held set at a switching time T of a
+    contact schedule, active on [T - width, T]: the windows users once computed from the gait timing.
+    Raises KeyError (the block does not apply) unless the clock sets the contact set."""
+    phases = getattr(plan, "phases", None)
+    if not getattr(plan, "by_clock", False) or not phases:
+        raise KeyError("touchdown_gap")
+    out = []
+    for k, (until, held) in enumerate(phases):
+        if k + 1 == len(phases) and plan.period is None:
+            break  # the last phase of an unwrapped schedule lasts
+        after = phases[(k + 1) % len(phases)][1]
+        for f in plan.feet:
+            if f in after and f not in held:
+                T = float(until)
+                out.append((f"touchdown_gap[{f}]", gap - env[f"{f}_z"], (T - width, T)))
+    return out
 
 
 def no_slip(fx, fy, fz, mu) -> tuple:
@@ -367,6 +397,7 @@ def compile_rigid_body(spec) -> RigidBodyCompiledSystem:
         raise SpecError("cannot load the robot model", location=where, key="system.urdf",
                         expected="a readable URDF with the named contact frames",
                         found=f"{clip_repr(s.urdf)} ({str(err)[:300]})", code="MPG109") from None
+    legs = resolve_legs(s, model, spec.system_locate)
     dyn = RigidBodyDynamics(model)
     qn = (BASE_Q if model.n_base else []) + list(model.joint_names)
     vn = (BASE_V if model.n_base else []) + [f"{j}_dot" for j in model.joint_names]
@@ -394,7 +425,7 @@ def compile_rigid_body(spec) -> RigidBodyCompiledSystem:
         name=s.name, state_names=qn + vn + cn, input_names=[f"tau_{j}" for j in model.joint_names],
         parameters=dict(s.parameters), x=x, u=u, xdot=ca.SX(0, 1), u_lo=-hi, u_hi=hi,
         wrap=np.zeros(x.shape[0]), extra_env=env, dyn=dyn, friction=s.friction,
-        baumgarte=Baumgarte(s.baumgarte.alpha, s.baumgarte.beta), events=s.contact_events,
+        baumgarte=Baumgarte(s.baumgarte.alpha, s.baumgarte.beta), events=s.contact_events, legs=legs,
     )
     sysc.xdot = sysc.open_loop(None).xdot
     return sysc

@@ -21,7 +21,7 @@ import casadi as ca
 
 from ...compile.laws.base import cubic_profile
 from ...errors import SpecError
-from .stance import check_quadruped, level_trunk_moment, nominal_geometry, nominal_state, split_wrench, trunk
+from .stance import level_trunk_moment, nominal_geometry, nominal_state, quadruped_legs, split_wrench, trunk
 
 
 def jump_torque(sys, c, mode: dict, t: ca.SX) -> ca.SX:
@@ -38,27 +38,31 @@ def jump_torque(sys, c, mode: dict, t: ca.SX) -> ca.SX:
     force = tk.mass * ca.vertcat(-float(c.kv) * tk.cdot[:2],
                                  tk.grav + az_d + float(c.kz) * (z_d - tk.com[2]) + float(c.dz) * (vz_d - tk.cdot[2]))
     wrench = ca.vertcat(force, level_trunk_moment(tk, inertia, float(c.k_tilt), float(c.d_tilt), float(c.d_yaw)))
-    f_all = split_wrench(tk, mode, feet, wrench, 10.0, 1e-4)
+    f_all = split_wrench(tk, mode, feet, wrench, float(c.moment_weight), float(c.regularization))
     q, v = sys.x[7:m.nq], sys.x[m.nq + 6:m.nq + m.nv]
     stance_q, tuck_q = ca.DM(x0[7:m.nq]), ca.DM(nominal_state(sys, dict(c.tuck))[7:m.nq])  # joint angles
     kp, kd = float(c.kp_joint), float(c.kd_joint)
     hold = kp * (stance_q - q) - kd * v
     tuck = kp * (tuck_q - q) - kd * v
-    u = []
+    legs = {leg.foot: leg for leg in sys.legs}
+    u = [None] * m.nu
     for i, f in enumerate(feet):
-        leg = slice(3 * i, 3 * i + 3)  # the leg of foot i (joint order follows the feet)
-        J = tk.sub(sys.dyn.contact_jacobian_expr([f]))[:, 6 + 3 * i:9 + 3 * i]
+        leg = legs[f]
+        at = [k - 7 for k in leg.q]  # the leg's joints among the joint angles
+        J = tk.sub(sys.dyn.contact_jacobian_expr([f]))[:, list(leg.v)]
         fi = f_all[3 * i:3 * i + 3]
-        push = tk.H[6 + 3 * i:9 + 3 * i] - ca.mtimes(J.T, fi)
-        push = mode[f] * push + (1 - mode[f]) * hold[leg]
-        u.append(ca.if_else(t < float(c.takeoff_time), push, tuck[leg]))
+        push = tk.H[list(leg.v)] - ca.mtimes(J.T, fi)
+        push = mode[f] * push + (1 - mode[f]) * hold[at]
+        tau_leg = ca.if_else(t < float(c.takeoff_time), push, tuck[at])
+        for k, j in enumerate(leg.u):
+            u[j] = tau_leg[k]
     return ca.vertcat(*u)
 
 
 def jump_law(c, ctx) -> ca.SX:
     """Jump's u(x, t) for a compiled primitive: the contact flags in the state (contact events), else
     the primitive's contact set."""
-    check_quadruped(ctx.sys, ctx.ec)
+    quadruped_legs(ctx.sys, ctx.ec, "jump")
     for key in ("pose", "tuck"):
         unknown = [j for j in getattr(c, key) if j not in ctx.sys.state_names[7:ctx.sys.model.nq]]
         if unknown:

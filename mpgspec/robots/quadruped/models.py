@@ -2,13 +2,15 @@
 reads them through the entry points `mpgspec.controllers`)."""
 from __future__ import annotations
 
-from typing import ClassVar, Literal
+from typing import Annotated, ClassVar, Literal
 
 from pydantic import Field
 
 from ...spec.base import Strict
 from ...spec.system import Expr, Number, Text
 
+
+Pair = Annotated[list[Text], Field(min_length=2, max_length=2)]
 
 # The docstrings are the schema's descriptions (`mpgspec schema`), kept as published.
 class TrotController(Strict):
@@ -24,7 +26,12 @@ class TrotController(Strict):
                                                                       "its CoM offsets and inertia shape the law")
     swing: Number = Field(default=0.16, gt=0, description="swing time T_sw (s)")
     double_support: Number = Field(default=0.02, gt=0, description="time with all four feet down T_ds (s)")
-    height: Number = Field(default=0.2586, gt=0, description="CoM height h_d (m)")
+    pairs: Annotated[list[Pair], Field(min_length=2, max_length=2)] | None = Field(
+        default=None, description="the two diagonal pairs by leg name (system.legs), e.g. [[LF, RH], [RF, LH]]: "
+        "the first pair stands while the second swings first. Default [[FL, RR], [FR, RL]] when the robot "
+        "has legs of those names (the A1), else required")
+    height: Number | None = Field(default=None, gt=0, description="CoM height h_d (m); default: the CoM height "
+                                  "of the nominal stance (pose) with the feet on the ground")
     apex: Number = Field(default=0.07, gt=0, description="swing foot apex (m)")
     touchdown_speed: Number = Field(default=0.3, ge=0, description="downward foot speed at touchdown (m/s)")
     kv: Number = Field(default=10.0, ge=0, description="CoM velocity gain (1/s)")
@@ -33,6 +40,22 @@ class TrotController(Strict):
     kd_swing: Number = Field(default=200.0, ge=0, description="swing foot damping (N s/m)")
     k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
     d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
+    d_yaw: Number = Field(default=10.0, ge=0, description="yaw-rate damping (1/s)")
+    kz: Number = Field(default=100.0, ge=0, description="CoM height stiffness (1/s^2)")
+    dz: Number = Field(default=20.0, ge=0, description="CoM height damping (1/s)")
+    f_min: Number | None = Field(default=None, ge=0, description="least normal force asked of a stance foot (N); "
+                                 "default: f_min_fraction of the robot's weight")
+    f_min_fraction: Number = Field(default=0.075, ge=0, lt=0.25, description="f_min as a fraction of the robot's "
+                                   "weight when f_min is not given (0.075: about 10 N on a 13.7 kg robot, 30 % of "
+                                   "a foot's share in four-foot support)")
+    cone_fraction: Number = Field(default=0.9, gt=0, le=1, description="share of the friction cone mu f_z a "
+                                  "stance foot's tangential force may use")
+    placement_fraction: Number = Field(default=0.8, gt=0, le=1, description="share of the swing after which the "
+                                       "foot is over its Raibert target")
+    moment_weight: Number = Field(default=10.0, gt=0, description="weight of the moment against the force in the "
+                                  "stance feet's wrench split")
+    regularization: Number = Field(default=1e-4, gt=0, description="force regularization of the wrench split (the "
+                                   "least-squares weight on ||f||^2)")
 
 
 class JumpController(Strict):
@@ -55,3 +78,7 @@ class JumpController(Strict):
     d_yaw: Number = Field(default=10.0, ge=0, description="yaw-rate damping (1/s)")
     kp_joint: Number = Field(default=60.0, ge=0, description="joint stiffness of the tuck (N m/rad)")
     kd_joint: Number = Field(default=2.0, ge=0, description="joint damping of the tuck (N m s/rad)")
+    moment_weight: Number = Field(default=10.0, gt=0, description="weight of the moment against the force in the "
+                                  "stance feet's wrench split")
+    regularization: Number = Field(default=1e-4, gt=0, description="force regularization of the wrench split (the "
+                                   "least-squares weight on ||f||^2)")

@@ -9,8 +9,8 @@ from ...compile.laws.kind import Setup
 from ...compile.setpoint import spec_file
 from ...errors import SpecError
 from ...spec.paths import MAX_FILE_BYTES, ReadProblem, read_text_bounded
-from .stance import check_quadruped
-from .trot import gains_of
+from .pairs import trot_pairs
+from .trot import check_pose, gains_of, min_normal_force, stance_height
 
 
 def trot_setup(inst, sys, ec, consts: dict) -> Setup:
@@ -18,7 +18,7 @@ def trot_setup(inst, sys, ec, consts: dict) -> Setup:
     calibrated command of its gait table and the table's header."""
     c = inst.spec.controller
     owner = f"primitive '{inst.name}'"
-    check_quadruped(sys, ec)
+    check_ready(c, sys, ec)
     speed = ec.number(c.speed, ("controller", "speed"), consts, finite=True)
     out = {"speed": speed, "command": speed, "gait": None, "inputs": trot_inputs(c, sys, speed)}
     if c.gait is not None:
@@ -48,8 +48,15 @@ def trot_setup(inst, sys, ec, consts: dict) -> Setup:
                             found=str(head.get("command")), code="MPG110") from None
         out["gait"] = {k: head[k] for k in head}
         out["gait_file"] = str(raw)
-    gains = gains_of(c, out["command"])
+    gains = gains_of(c, out["command"], sys, ec)
     return Setup(contacts=gains.schedule(tuple(sys.model.contact_frames)), info={"trot": out})
+
+
+def check_ready(c, sys, ec) -> None:
+    """The checks a trot passes before its gait table is read (or written by `mpgspec gait`): a
+    quadruped with its pairs named, and a pose of the system's joints (located SpecErrors)."""
+    trot_pairs(c, sys, ec)
+    check_pose(c, sys, ec)
 
 
 def gait_header(path) -> dict[str, str]:
@@ -63,10 +70,22 @@ def gait_header(path) -> dict[str, str]:
     return out
 
 
+LEGACY = {"kz": 100.0, "dz": 20.0, "d_yaw": 10.0, "f_min": 10.0, "regularization": 1e-4, "moment_weight": 10.0,
+          "cone_fraction": 0.9, "placement_fraction": 0.8}
+"""Settings the trot's law had as fixed numbers before they were spec fields: the hash of the inputs
+holds them only when they differ, so that tables generated before stay valid."""
+
+
 def trot_inputs(c, sys, speed: float) -> str:
-    """Hash of what a gait table depends on: the robot model and limits, the trot's settings and the speed."""
+    """Hash of what a gait table depends on: the robot model and limits, the trot's settings (as the
+    law resolves them: h_d, f_min) and the speed."""
     m = sys.model
-    ctrl = c.model_dump(mode="json", exclude={"gait", "speed"})
+    ctrl = c.model_dump(mode="json", exclude={"gait", "speed", "pairs", "f_min_fraction", *LEGACY})
+    ctrl["height"] = float(c.height) if c.height is not None else stance_height(sys, dict(c.pose))
+    resolved = {**{k: float(getattr(c, k)) for k in LEGACY if k != "f_min"}, "f_min": min_normal_force(c, sys)}
+    ctrl.update({k: v for k, v in resolved.items() if v != LEGACY[k]})
+    if c.pairs is not None:
+        ctrl["pairs"] = [list(p) for p in c.pairs]
     robot = {"mass": round(float(m.total_mass), 9), "nq": m.nq, "feet": list(m.contact_frames),
              "friction": float(sys.friction), "u_hi": [float(v) for v in sys.u_hi],
              "baumgarte": [float(sys.baumgarte.alpha), float(sys.baumgarte.beta)]}

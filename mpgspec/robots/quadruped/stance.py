@@ -1,6 +1,6 @@
 """What the quadruped laws share: the trunk's symbols, the levelling moment, the split of a trunk
 wrench over the stance feet, the nominal stance and its geometry, and the check that a system is
-a point-foot quadruped with feet FL, FR, RL, RR."""
+a point-foot quadruped (four legs from the kinematic tree, compile/rigidbody/legs.py)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -14,9 +14,6 @@ from ...compile.rigidbody.spatial import skew
 from ...compile.rigidbody.system import feet_on_ground
 from ...errors import SpecError
 
-PAIR_A = ("FL_foot", "RR_foot")
-PAIR_B = ("FR_foot", "RL_foot")
-"""The trot's diagonal pairs; in this order the four feet are FL, FR, RL, RR."""
 
 
 @dataclass
@@ -98,13 +95,21 @@ def nominal_geometry(sys, pose: dict) -> tuple[np.ndarray, dict[str, np.ndarray]
     return np.array(data.Ig.inertia), offsets
 
 
-def check_quadruped(sys, ec) -> None:
-    """A SpecError at controller.type unless sys is a floating-base quadruped with FL, FR, RL, RR feet."""
-    ok = sys.is_rigid_body and sys.model.floating_base and len(sys.model.contact_frames) == 4 \
-        and tuple(sys.model.contact_frames) == PAIR_A[:1] + PAIR_B + PAIR_A[1:]
+def quadruped_legs(sys, ec, kind: str) -> tuple:
+    """The four legs of a floating-base point-foot quadruped, else a SpecError at controller.type
+    naming what the system has. Every actuated joint must be on one leg (the laws drive the legs only)."""
+    model = getattr(sys, "model", None) if sys.is_rigid_body else None
+    legs = tuple(getattr(sys, "legs", ()))
+    found = (f"a {getattr(sys, 'kind', 'non-rigid')} system" if model is None else
+             f"{'a floating' if model.floating_base else 'a fixed'} base with legs "
+             f"{ {g.name: f'{g.foot} ({len(g.joints)} joints)' for g in legs} }")
+    on_legs = sorted(k for g in legs for k in g.u)
+    ok = model is not None and model.floating_base and len(legs) == 4 and all(g.joints for g in legs) \
+        and on_legs == list(range(model.nu))
     if not ok:
-        raise SpecError("the trot needs a floating-base quadruped with contact frames FL_foot, FR_foot, RL_foot, "
-                        "RR_foot in this order", location=ec.locate(("controller", "type")),
-                        key=f"{ec.owner}: controller.type", expected="system kind rigid_body with four feet",
-                        found=f"contacts {list(getattr(getattr(sys, 'model', None), 'contact_frames', []))}",
-                        code="MPG108")
+        raise SpecError(f"the {kind} needs a floating-base quadruped: four legs whose joints are all the "
+                        "actuated joints", location=ec.locate(("controller", "type")),
+                        key=f"{ec.owner}: controller.type", expected="system kind rigid_body, floating_base, "
+                        "four contacts (or system.legs naming four feet), each foot at the end of its own joints",
+                        found=found[:400], code="MPG108")
+    return legs

@@ -1,23 +1,25 @@
 """A trot for point-foot quadrupeds: stance wrench split, Raibert swing placement, clock-driven phases.
 
 The gait runs on the primitive's clock t within one period T = 2 (T_sw + T_ds): both diagonal
-pairs stand for T_ds, then pair B (FR, RL) swings for T_sw while pair A (FL, RR) stands, then both
-stand for T_ds, then pair A swings. The law receives the contact mode (which feet the plant holds,
+pairs stand for T_ds, then pair B (the second of `pairs`; the A1's FR, RL) swings for T_sw while
+pair A (the first; FL, RR) stands, then both stand for T_ds, then pair A swings. The law receives the contact mode (which feet the plant holds,
 as symbols of the clock) and uses the Jacobians of exactly those feet.
 
 - Stance feet share the trunk wrench that drives the CoM velocity to the command, the CoM height
   to h_d and the trunk level (roll and pitch), with the yaw rate damped; x, y and yaw are not
   tracked, so the orbit can be moved and turned on flat ground (three neutral Floquet directions).
   Forces f = argmin ||A f - w||_S^2 + reg ||f||^2 in closed form, then f_z >= f_min and
-  |f_xy| <= 0.9 mu f_z per foot; leg torques tau = h_leg - J_leg^T f.
+  |f_xy| <= cone_fraction mu f_z per foot; leg torques tau = h_leg - J_leg^T f.
 - Swing feet follow a Cartesian PD (tau = h_leg + J_leg^T (Kp (p_d - p) + Kd (v_d - v))) on a
   path from the lift-off point to the Raibert target c + cdot (T_sw - tau) + cdot T_st / 2 +
-  k_v (cdot - v_cmd) (a smoothstep done at 80 % of the swing) and a height profile up to the apex
+  k_v (cdot - v_cmd) (a smoothstep done at placement_fraction of the swing) and a height profile up to the apex
   and down to the ground at the scheduled touchdown with a set downward speed.
 
 Step-to-step correction comes from where the next pair lands: with two point feet on a diagonal,
 no torque changes the angular momentum about the line through them, so a clock-driven joint PD
 alone has no stable trot.
+
+Each leg's torques go to its own joints, read off the kinematic tree (compile/rigidbody/legs.py).
 """
 from __future__ import annotations
 
@@ -29,7 +31,7 @@ import numpy as np
 from ...compile.contacts import Schedule, wrap_clock
 from ...compile.laws.base import cubic_profile
 from ...errors import SpecError
-from .stance import PAIR_A, PAIR_B, level_trunk_moment, nominal_geometry, split_wrench, trunk
+from .stance import level_trunk_moment, nominal_geometry, nominal_state, split_wrench, trunk
 
 
 @dataclass(frozen=True)
@@ -39,7 +41,7 @@ class TrotGains:
     speed: float = 0.0  # commanded forward speed in the heading frame (a number, or a symbol)
     swing: float = 0.16  # T_sw
     double_support: float = 0.02  # T_ds
-    height: float = 0.2586  # CoM height h_d
+    height: float = float("nan")  # CoM height h_d (gains_of: the spec's, else the stance's)
     apex: float = 0.07  # swing foot apex
     touchdown_speed: float = 0.3  # downward foot speed at the scheduled touchdown
     kv: float = 10.0  # CoM velocity gain (1/s)
@@ -54,6 +56,10 @@ class TrotGains:
     f_min: float = 10.0  # least normal force asked of a stance foot (N)
     regularization: float = 1e-4
     moment_weight: float = 10.0
+    cone_fraction: float = 0.9  # share of the friction cone a stance force may use
+    placement_fraction: float = 0.8  # share of the swing after which the foot is over its target
+    pair_a: tuple[str, ...] = ()  # feet that stand during the first swing
+    pair_b: tuple[str, ...] = ()  # feet that swing first
 
     @property
     def half(self) -> float:
@@ -70,7 +76,7 @@ class TrotGains:
     def schedule(self, feet: tuple[str, ...]) -> Schedule:
         """The contact plan over one period: all `feet`, pair A, all, pair B."""
         h, ds = self.half, self.double_support
-        return Schedule(((ds, feet), (h, PAIR_A), (h + ds, feet), (2 * h, PAIR_B)), self.period, feet)
+        return Schedule(((ds, feet), (h, self.pair_a), (h + ds, feet), (2 * h, self.pair_b)), self.period, feet)
 
 
 def _smoothstep(sig):
@@ -101,31 +107,32 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
     mu = float(sys.friction)
     half, period = g.half, g.period
     tc = wrap_clock(t, period)
-    tau_swing = {PAIR_B: tc - g.double_support, PAIR_A: tc - half - g.double_support}
+    tau_swing = {g.pair_b: tc - g.double_support, g.pair_a: tc - half - g.double_support}
     z_up = lambda s: cubic_profile(s, g.swing / 2, ca.DM(0), ca.DM(0), ca.DM(g.apex), ca.DM(0))  # noqa: E731
     z_dn = lambda s: cubic_profile(s, g.swing / 2, ca.DM(g.apex), ca.DM(0), ca.DM(0), ca.DM(-g.touchdown_speed))  # noqa: E731
-    u = []
+    legs = {leg.foot: leg for leg in sys.legs}
+    u = [None] * m.nu
     for i, f in enumerate(feet):
-        leg = slice(6 + 3 * i, 9 + 3 * i)  # the leg of foot i (joint order follows the feet)
-        J = sub(dyn.contact_jacobian_expr([f]))[:, leg]
-        h_leg = H[leg]
+        leg = legs[f]
+        J = sub(dyn.contact_jacobian_expr([f]))[:, list(leg.v)]
+        h_leg = H[list(leg.v)]
         # stance
         fi = f_all[3 * i:3 * i + 3]
         fz = ca.fmax(fi[2], g.f_min)
         fxy = fi[:2]
-        cap = 0.9 * mu * fz
+        cap = g.cone_fraction * mu * fz
         scale = ca.fmin(1, cap / ca.sqrt(ca.sumsqr(fxy) + 1e-12))
         f_st = ca.vertcat(scale * fxy, fz)
         tau_st = h_leg - ca.mtimes(J.T, f_st)
         # swing
-        tau = tau_swing[PAIR_A if f in PAIR_A else PAIR_B]
+        tau = tau_swing[g.pair_a if f in g.pair_a else g.pair_b]
         tau = ca.fmin(ca.fmax(tau, 0), g.swing)
         d = ca.mtimes(Ryaw[:2, :2], ca.DM(offsets[f]))
         p_lo = com[:2] + d - cdot[:2] * (g.stance / 2 + tau)
         p_td = com[:2] + d + cdot[:2] * (g.swing - tau + g.stance / 2) + g.raibert * (cdot[:2] - v_cmd)
-        s, ds = _smoothstep(tau / (0.8 * g.swing))
+        s, ds = _smoothstep(tau / (g.placement_fraction * g.swing))
         p_xy = p_lo + s * (p_td - p_lo)
-        v_xy = ds / (0.8 * g.swing) * (p_td - p_lo)
+        v_xy = ds / (g.placement_fraction * g.swing) * (p_td - p_lo)
         zu, vu = z_up(tau)
         zd, vd = z_dn(tau - g.swing / 2)
         up = tau < g.swing / 2
@@ -133,27 +140,57 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
         v_d = ca.vertcat(v_xy, ca.if_else(up, vu, vd))
         tau_sw = h_leg + ca.mtimes(J.T, g.kp_swing * (p_d - pos[f]) + g.kd_swing * (v_d - vel[f]))
         c = flags[f]
-        u.append(c * tau_st + (1 - c) * tau_sw)
+        tau_leg = c * tau_st + (1 - c) * tau_sw
+        for k, j in enumerate(leg.u):
+            u[j] = tau_leg[k]
     return ca.vertcat(*u)
 
 
 def trot_law(c, ctx) -> ca.SX:
     """The trot's u(x, t) for a compiled primitive (the command and gains come from trot_setup)."""
-    unknown = [j for j in c.pose if j not in ctx.sys.state_names]
-    if unknown:
-        raise SpecError("unknown joint in the trot's pose", location=ctx.ec.locate(("controller", "pose", unknown[0])),
-                        key=f"{ctx.ec.owner}: controller.pose", expected="joint names of the system",
-                        found=repr(unknown[0][:60]), code="MPG106")
+    check_pose(c, ctx.sys, ctx.ec)
     info = ctx.info["trot"]
-    g = gains_of(c, info["command"])
+    g = gains_of(c, info["command"], ctx.sys, ctx.ec)
     inertia, offsets = nominal_geometry(ctx.sys, dict(c.pose))
     info["period"] = g.period
     return trot_torque(ctx.sys, g, ctx.t, ctx.plan.mode(ctx.sys.model.contact_frames, ctx.t), inertia, offsets)
 
 
-def gains_of(c, speed: float) -> TrotGains:
+def check_pose(c, sys, ec) -> None:
+    """A located SpecError (MPG106) for a joint of the trot's pose that the system does not have."""
+    joints = list(sys.model.joint_names)
+    unknown = [j for j in c.pose if j not in sys.state_names]
+    if unknown:
+        raise SpecError("unknown joint in the trot's pose", location=ec.locate(("controller", "pose", unknown[0])),
+                        key=f"{ec.owner}: controller.pose", expected=f"joint names of the system: {joints}"[:400],
+                        found=repr(unknown[0][:60]), code="MPG106")
+
+
+def stance_height(sys, pose: dict) -> float:
+    """The CoM height of the nominal stance (`pose`, feet on the ground): the trot's default h_d."""
+    x0 = nominal_state(sys, pose)
+    return float(ca.Function("com_z", [sys.x], [sys.extra_env["com_z"]])(x0))
+
+
+def min_normal_force(c, sys) -> float:
+    """f_min as given, else f_min_fraction of the robot's weight."""
+    if c.f_min is not None:
+        return float(c.f_min)
+    return float(c.f_min_fraction) * float(sys.model.total_mass) * float(-sys.model.gravity[2])
+
+
+def gains_of(c, speed: float, sys, ec=None) -> TrotGains:
+    """The trot's gains from its spec, with the defaults the robot sets (h_d, f_min, the pairs)."""
+    from .pairs import trot_pairs
+
     speed = speed if isinstance(speed, (ca.SX, ca.MX)) else float(speed)  # float() of a symbol would be NaN
+    pair_a, pair_b = trot_pairs(c, sys, ec)
+    height = stance_height(sys, dict(c.pose)) if c.height is None else float(c.height)
     return TrotGains(speed=speed, swing=float(c.swing), double_support=float(c.double_support),
-                     height=float(c.height), apex=float(c.apex), touchdown_speed=float(c.touchdown_speed),
+                     height=height, apex=float(c.apex), touchdown_speed=float(c.touchdown_speed),
                      kv=float(c.kv), raibert=float(c.raibert), kp_swing=float(c.kp_swing),
-                     kd_swing=float(c.kd_swing), k_tilt=float(c.k_tilt), d_tilt=float(c.d_tilt))
+                     kd_swing=float(c.kd_swing), k_tilt=float(c.k_tilt), d_tilt=float(c.d_tilt),
+                     kz=float(c.kz), dz=float(c.dz), d_yaw=float(c.d_yaw), f_min=min_normal_force(c, sys),
+                     regularization=float(c.regularization), moment_weight=float(c.moment_weight),
+                     cone_fraction=float(c.cone_fraction), placement_fraction=float(c.placement_fraction),
+                     pair_a=pair_a, pair_b=pair_b)

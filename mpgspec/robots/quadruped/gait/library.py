@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field
 
+from ....compile.exprs import ExprCompiler
 from ....compile.primitive import compile_primitive
 from ....compile.setpoint import spec_file
 from ....compile.system import compile_system
@@ -33,7 +34,7 @@ from ....spec.base import Strict
 from ....spec.loader import _read, load_project
 from ....spec.primitive import Setpoint
 from ..models import TrotController
-from ..setup import trot_inputs
+from ..setup import check_ready, trot_inputs
 from ..stance import nominal_state
 from .orbit import Orbit, StrideMap, find_orbit
 
@@ -68,6 +69,16 @@ class GaitTable:
     path: Path
     orbit: Orbit
     inputs: str
+
+    @property
+    def failure(self) -> str | None:
+        """What went wrong when no orbit was found, with what to try (None when one was)."""
+        o = self.orbit
+        if o.status == "converged":
+            return None
+        return (f"no orbit found ({o.status} after {o.iterations} Newton steps, residual {o.residual:.1e}): try "
+                "a lower speed, the robot's own stance (controller.pose, controller.height), diagonal pairs "
+                "(controller.pairs) and the legs of system.legs; `mpgspec simulate` shows the loop's flow")
 
     def text(self, state_names: list[str]) -> str:
         o = self.orbit
@@ -196,6 +207,8 @@ def generate(path: str | Path, progress=print) -> list:
                         expected="the name of a primitive with controller type trot", found=gf.primitive,
                         code="MPG104")
     ctrl = nodes[0].spec.controller
+    for inst in nodes:  # the checks verify runs, located in the spec, before any orbit is computed
+        check_ready(inst.spec.controller, sys, ExprCompiler(inst.locate, f"primitive '{inst.name}'"))
     targets = {}  # written only inside the project: checked before any orbit is computed
     for inst in nodes:
         raw = inst.spec.controller.gait or f"gaits/{gf.primitive.lower()}_{{speed}}.csv"
@@ -209,10 +222,13 @@ def generate(path: str | Path, progress=print) -> list:
         speed = float(next(iter(inst.argument.values()))) if inst.argument else float(ctrl.speed)
         orbit = find_orbit(sm, stand, speed)
         table = GaitTable(inst.name, targets[inst.name], orbit, trot_inputs(ctrl, sys, speed))
+        out.append(table)
+        if table.failure:
+            progress(f"{inst.name}: {table.failure} ({orbit.seconds:.1f} s)")
+            continue
         progress(f"{inst.name}: {orbit.status} in {orbit.iterations} Newton steps, residual {orbit.residual:.1e}, "
                  f"command {orbit.command:.4f} m/s for a mean speed of {orbit.stats['mean_speed']:.4f} m/s, "
                  f"largest multiplier {orbit.spectral_radius:.4f} ({orbit.seconds:.1f} s)")
-        out.append(table)
     done: dict[str, FlowTable] = {}
     for entry in gf.transients:
         done[entry.primitive] = flow_table(spec, sys, entry, gf.dt, progress, done)
@@ -220,16 +236,25 @@ def generate(path: str | Path, progress=print) -> list:
     return out
 
 
-def write(tables: list[GaitTable], state_names: list[str]) -> None:
+def write(tables: list[GaitTable], state_names: list[str]) -> list[Path]:
+    """Write the tables of found orbits and flows; return their paths (a failed orbit writes nothing)."""
+    done = []
     for t in tables:
+        if getattr(t, "failure", None):
+            continue
         t.path.parent.mkdir(parents=True, exist_ok=True)
         write_atomic(t.path, t.text(state_names))
+        done.append(t.path)
+    return done
 
 
 def compare(tables: list[GaitTable], state_names: list[str]) -> list[str]:
     """Differences between the regenerated tables and those on disk (empty when they agree)."""
     problems = []
     for t in tables:
+        if getattr(t, "failure", None):
+            problems.append(f"{t.node}: {t.failure}")
+            continue
         if not t.path.is_file():
             problems.append(f"{t.node}: {t.path} is missing")
             continue

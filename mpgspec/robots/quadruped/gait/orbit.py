@@ -59,9 +59,9 @@ class StrideMap:
     def __init__(self, sys, controller, dt: float, jit: bool = True):
         self.sys, self.dt = sys, float(dt)
         c = ca.SX.sym("c")
-        g = gains_of(controller, 0.0)
+        g = gains_of(controller, 0.0, sys)
         self.period = g.period
-        g = gains_of(controller, c)
+        g = gains_of(controller, c, sys)
         n = int(round(g.period / dt))
         feet = tuple(sys.model.contact_frames)
         schedule = g.schedule(feet)
