@@ -78,7 +78,7 @@ def leg_joints(m, frame: str) -> list[int]:
 
 def touchdown_projection(sys, q: ca.SX, joined: list) -> ca.SX:
     """q with each joining foot put on the ground by its own leg: one Gauss-Newton step on its
-    height over the leg's three joints (minimal norm). A scheduled touchdown finds the foot up to
+    height over the leg's joints (minimal norm). A scheduled touchdown finds the foot up to
     a tracking error off the ground (millimetres); left there, the constraint's Baumgarte term
     would move the foot after the impact. A foot's leg is the chain of actuated joints from the
     base to the foot."""

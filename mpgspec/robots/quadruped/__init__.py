@@ -1,2 +1,3 @@
-"""Point-foot quadrupeds (the Unitree A1): the trot and jump controller kinds, their stance
-helpers, and the gait tools behind `mpgspec gait`."""
+"""Point-foot quadrupeds (the Unitree A1, ANYmal, any robot whose four legs the kinematic tree
+gives): the trot and jump controller kinds, their stance helpers, and the gait tools behind
+`mpgspec gait`."""

@@ -215,7 +215,12 @@ def generate(path: str | Path, progress=print) -> list:
         targets[inst.name] = spec_file(inst, raw, inst.locate(("controller", "gait")),
                                        f"primitive '{inst.name}': controller.gait")[1]
     progress(f"compiling the stride map of {gf.primitive} (dt = {gf.dt:g} s)")
-    sm = StrideMap(sys, ctrl, gf.dt)
+    try:
+        sm = StrideMap(sys, ctrl, gf.dt)
+    except ValueError as err:  # the trot's switching times are not on the step grid
+        raise SpecError("the gait's step does not divide the trot's timing", location=_read(path)[1].locate(("dt",)),
+                        key="dt", expected="a step that divides swing and double_support",
+                        found=f"{gf.dt:g} s ({err})", code="MPG104") from None
     stand = nominal_state(sys, dict(ctrl.pose))
     out = []
     for inst in nodes:
