@@ -75,6 +75,12 @@ def test_gait_tables_hold_stable_orbits(speed):
     assert float(head["peak_torque"]) < 80 and float(head["least_cone_margin"]) > 0
 
 
+def test_gait_tables_match_their_regeneration():
+    run = api.gait(PROJECT / "gaits.yaml", check=True)
+    assert run.unstable == [] and run.stale == []
+    assert [t.node for t in run.tables] == ["Walk(in_place)", "Walk(slow)"]
+
+
 @pytest.mark.slow
 def test_project_verifies():
     """Lie <-> Stand, Stand -> Walk, the walks both ways and the sequence: every assertion holds
