@@ -10,7 +10,7 @@ pinocchio's own algorithms to 1e-8 in tests/compile/rigidbody.
 """
 from .constrained import Baumgarte, ContactDynamics, impact_map, solve_contact
 from .dynamics import RigidBodyDynamics, crba, rnea
-from .model import A1_FEET, A1_URDF, RigidBodyModel, find_urdf
+from .model import RigidBodyModel, find_urdf
 
-__all__ = ["A1_FEET", "A1_URDF", "Baumgarte", "ContactDynamics", "RigidBodyDynamics",
+__all__ = ["Baumgarte", "ContactDynamics", "RigidBodyDynamics",
            "RigidBodyModel", "crba", "find_urdf", "impact_map", "rnea", "solve_contact"]

@@ -15,14 +15,11 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-A1_URDF = "example-robot-data/robots/a1_description/urdf/a1.urdf"
-A1_FEET = ("FL_foot", "FR_foot", "RL_foot", "RR_foot")
-
 _AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 
 
 def find_urdf(package_relative: str) -> Path:
-    """Locate a file shipped by a cmeel wheel, e.g. ``find_urdf(A1_URDF)``.
+    """Locate a file shipped by a cmeel wheel, e.g. ``find_urdf("example-robot-data/robots/a1_description/urdf/a1.urdf")``.
 
     cmeel packages (example-robot-data, ...) install data under ``<site>/cmeel.prefix/share``
     rather than in an importable module, so the path is resolved against each site directory.
@@ -102,11 +99,6 @@ class RigidBodyModel:
         self.floating_base = bool(self.joints) and self.joints[0].kind == "free"
         self.gravity = np.array(model.gravity.linear)
         self.armature = np.array(model.armature, dtype=float)
-
-    @classmethod
-    def a1(cls) -> RigidBodyModel:
-        """The Unitree A1 from example-robot-data with its four feet as contact frames."""
-        return cls(find_urdf(A1_URDF), A1_FEET)
 
     @staticmethod
     def _read_joint(model: pin.Model, i: int) -> Joint:

@@ -12,7 +12,9 @@ import pinocchio as pin
 import pytest
 
 from mpgspec.compile.rigidbody.legs import leg_name, resolve_legs
-from mpgspec.compile.rigidbody.model import A1_URDF, RigidBodyModel, find_urdf
+from a1_model import A1_URDF
+
+from mpgspec.compile.rigidbody.model import RigidBodyModel, find_urdf
 from mpgspec.compile.system import compile_system
 from mpgspec.robots.quadruped.stance import nominal_geometry
 from mpgspec.robots.quadruped.trot import gains_of, trot_torque

@@ -5,7 +5,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from mpgspec.compile.rigidbody import A1_FEET, Baumgarte, ContactDynamics
+from a1_model import A1_FEET
+
+from mpgspec.compile.rigidbody import Baumgarte, ContactDynamics
 
 TOL = 1e-8
 CONTACT_SETS = [A1_FEET, ("FL_foot", "RR_foot"), ("RL_foot",), ("FL_foot", "FR_foot", "RR_foot")]

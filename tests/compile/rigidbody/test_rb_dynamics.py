@@ -6,7 +6,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from mpgspec.compile.rigidbody import A1_FEET, RigidBodyModel, find_urdf
+from a1_model import A1_FEET
+
+from mpgspec.compile.rigidbody import RigidBodyModel, find_urdf
 from mpgspec.compile.rigidbody.linalg import dense_ldl_solve, dof_parents, tree_solve
 
 TOL = 1e-8
