@@ -417,9 +417,12 @@ def robot_limits(p: CompiledPrimitive) -> AssumptionCheck | None:
     if not found:
         return None
     what = "; ".join(f"{k} of {', '.join(v[:4])}{' ...' if len(v) > 4 else ''}" for k, v in found.items())
+    fix = (["system.torque_limit"] if "torque" in found else []) + (
+        ["the robot's real limits in the URDF, or safety functions of your own"]
+        if {"velocity", "position"} & set(found) else [])
     return AssumptionCheck(p.name, "robot_limits", "warn", "computed",
                            f"limits that look like URDF placeholders bound nothing ({what}): give "
-                           "system.torque_limit, or the robot's real limits in the URDF",
+                           + " and ".join(fix),
                            {"placeholders": found, "thresholds": {"torque": PLACEHOLDER_EFFORT,
                                                                   "velocity": PLACEHOLDER_VELOCITY,
                                                                   "position": PLACEHOLDER_POSITION}})
