@@ -14,7 +14,7 @@ import numpy as np
 from mpgspec.certify.monodromy import monodromy
 from mpgspec.certify.problem import PeriodicProblem, RoAResult
 
-from .floquet_hybrid import COLLAPSE, unconverged
+from .floquet_hybrid import grow_periods
 from .floquet_hybrid import estimate as estimate_hybrid
 from .sampling import Simulator, search
 
@@ -82,19 +82,14 @@ def _size(problem: PeriodicProblem, rho: float, o: dict) -> tuple[float, dict, i
     conv = float(o.get("conv", 0.02))
     periods = int(o.get("periods", np.clip(np.ceil(np.log(conv / 4) / np.log(max(rho, 1e-12))) + 1, 2, 20)))
     cap = int(o.get("periods_max", max(4 * periods, 24))) if "periods" not in o else periods
-    tried = []
-    while True:
-        sim = Simulator(problem.f, problem.h, problem.x_star, problem.W, n, periods * T,
-                        float(o.get("dt", T / int(o.get("steps_per_period", 200)))), conv)
+    dt = float(o.get("dt", T / int(o.get("steps_per_period", 200))))
+
+    def size(k: int):
+        sim = Simulator(problem.f, problem.h, problem.x_star, problem.W, n, k * T, dt, conv)
         rng = np.random.default_rng(o.get("seed", 0))
-        r, tube = search(sim, lambda: T * rng.random(n), rng, o)
-        tried.append({"periods": periods, "radius": r})
-        if r >= COLLAPSE * float(o.get("r0", 0.1)) or periods >= cap or not unconverged(tube["bisection"], r):
-            break
-        periods = min(2 * periods, cap)
-    if len(tried) > 1:
-        tube["periods_tried"] = tried
-    return r, tube, periods
+        return search(sim, lambda: T * rng.random(n), rng, o)
+
+    return grow_periods(size, periods, cap, float(o.get("r0", 0.1)))
 
 
 verifier = FloquetVerifier()

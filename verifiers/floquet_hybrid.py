@@ -80,16 +80,24 @@ def _size(flow: HybridFlow, problem: PeriodicProblem, Xs: np.ndarray, W: np.ndar
     first = max(2, int(np.ceil(np.log(conv / 4) / np.log(max(rho, 1e-12)))) + 1)
     periods = int(o.get("periods", first))
     cap = int(o.get("periods_max", max(4 * periods, 24))) if "periods" not in o else periods
+    r, tube, _ = grow_periods(lambda n: _tube(flow, Xs, W, n, o), periods, cap, float(o.get("r0", 0.05)))
+    return r, tube
+
+
+def grow_periods(size, periods: int, cap: int, r0: float) -> tuple[float, dict, int]:
+    """(r, tube, periods) of size(periods); while r collapses below COLLAPSE r0 and the starts that
+    failed all stayed safe but had not yet converged, the periods double, up to cap. Each count
+    tried is listed in tube["periods_tried"] when there was more than one."""
     tried = []
     while True:
-        r, tube = _tube(flow, Xs, W, periods, o)
+        r, tube = size(periods)
         tried.append({"periods": periods, "radius": r})
-        if r >= COLLAPSE * float(o.get("r0", 0.05)) or periods >= cap or not unconverged(tube["bisection"], r):
+        if r >= COLLAPSE * r0 or periods >= cap or not unconverged(tube["bisection"], r):
             break
         periods = min(2 * periods, cap)
     if len(tried) > 1:
         tube["periods_tried"] = tried
-    return r, tube
+    return r, tube, periods
 
 
 def unconverged(log: list[dict], r: float) -> bool:
