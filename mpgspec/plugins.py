@@ -1,7 +1,7 @@
 """Plug-in loading shared by the registries: built-in targets, overridden by entry points."""
 from __future__ import annotations
 
-from importlib.metadata import entry_points
+from importlib.metadata import EntryPoint, entry_points
 from typing import Callable
 
 Check = Callable[[str, str, object], None]
@@ -29,3 +29,26 @@ def load_plugins(group: str, builtin: dict[str, str], check: Check | None = None
         if plugin.is_installed():
             out[name] = plugin
     return out
+
+
+_ADDED: dict[str, dict[str, EntryPoint]] = {}
+"""Entry points added in this process, by group and name (as an installed package would declare them)."""
+
+
+def add_entry_point(ep: EntryPoint, group: str) -> None:
+    """Declare an entry point of `group` in this process."""
+    if ep.group != group:
+        raise ValueError(f"entry point {ep.name!r} belongs to the group {ep.group!r}, not {group!r}")
+    _ADDED.setdefault(group, {})[ep.name] = ep
+
+
+def remove_entry_point(group: str, name: str) -> None:
+    """Forget an entry point added in this process (installed ones stay)."""
+    _ADDED.get(group, {}).pop(name, None)
+
+
+def group_entry_points(group: str) -> dict[str, EntryPoint]:
+    """The group's entry points by name: the installed ones, then those added in this process."""
+    found = {ep.name: ep for ep in entry_points(group=group)}
+    found.update(_ADDED.get(group, {}))
+    return found

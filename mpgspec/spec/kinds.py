@@ -4,33 +4,31 @@ models. Loading a kind's object must not import CasADi (compile/laws/kind.py).""
 from __future__ import annotations
 
 from functools import lru_cache
-from importlib.metadata import EntryPoint, entry_points
+from importlib.metadata import EntryPoint
 from typing import Annotated, Union
 
 from pydantic import Field
 
+from .. import plugins
+from ..plugins import group_entry_points
+
 GROUP = "mpgspec.controllers"
-_ADDED: dict[str, EntryPoint] = {}
 
 
 def controller_entry_points() -> dict[str, EntryPoint]:
     """The group's entry points by name: the installed ones, then those added in-process."""
-    found = {ep.name: ep for ep in entry_points(group=GROUP)}
-    found.update(_ADDED)
-    return found
+    return group_entry_points(GROUP)
 
 
 def add_entry_point(ep: EntryPoint) -> None:
     """Register a controller kind in this process, as an installed entry point would."""
-    if ep.group != GROUP:
-        raise ValueError(f"a controller kind's entry point belongs to the group {GROUP!r}; got {ep.group!r}")
-    _ADDED[ep.name] = ep
+    plugins.add_entry_point(ep, GROUP)
     loaded_kinds.cache_clear()
 
 
 def remove_entry_point(name: str) -> None:
     """Forget a kind added in-process (installed kinds stay)."""
-    _ADDED.pop(name, None)
+    plugins.remove_entry_point(GROUP, name)
     loaded_kinds.cache_clear()
 
 

@@ -6,27 +6,26 @@ in this process, the way an installed one is found (a notebook or a test uses it
 from __future__ import annotations
 
 from functools import lru_cache
-from importlib.metadata import EntryPoint, entry_points
+from importlib.metadata import EntryPoint
 
+from ... import plugins
+from ...plugins import group_entry_points
 from . import ReportSection
 
 GROUP = "mpgspec.report_sections"
 BUILTIN = {"robust": "mpgspec.report.sections.robust:section",
            "crosscheck": "mpgspec.report.sections.crosscheck:section"}
-_registered: dict[str, EntryPoint] = {}
 
 
 def register(ep: EntryPoint) -> None:
     """Add a report section through an entry point of the group, in this process."""
-    if ep.group != GROUP:
-        raise ValueError(f"entry point {ep.name!r} is of group {ep.group!r}, not {GROUP!r}")
-    _registered[ep.name] = ep
+    plugins.add_entry_point(ep, GROUP)
     report_sections.cache_clear()
 
 
 def unregister(name: str) -> None:
     """Remove a section added by register()."""
-    _registered.pop(name, None)
+    plugins.remove_entry_point(GROUP, name)
     report_sections.cache_clear()
 
 
@@ -34,8 +33,7 @@ def unregister(name: str) -> None:
 def report_sections() -> dict[str, ReportSection]:
     """Every section by name: the built-in ones first, in their report-v2 order, then plug-ins."""
     found = {name: EntryPoint(name, target, GROUP) for name, target in BUILTIN.items()}
-    for ep in [*entry_points(group=GROUP), *_registered.values()]:
-        found[ep.name] = ep
+    found.update(group_entry_points(GROUP))
     out = {}
     for name, ep in found.items():
         section = ep.load()
