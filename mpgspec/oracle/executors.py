@@ -38,11 +38,17 @@ def split(points: dict[str, tuple[np.ndarray, np.ndarray]], workers: int) -> lis
 
 def evaluate(oracles: dict, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
              task: Task) -> list[OracleEvidence]:
-    """One task's evidence; a compile or backend failure is the evidence of each of its calls."""
+    """One task's evidence; a compile or backend failure is the evidence of each of its calls.
+
+    `oracles` outlives a project (one executor serves every project of a run), so an oracle is kept
+    by the content of its closed loop and the settings, never by the primitive's name alone: two
+    robots' `Stand` are different oracles."""
     try:
-        if task.target not in oracles:
-            oracles[task.target] = SafetyOracle(prims[task.target], settings)
-        return oracles[task.target].evaluate(task.x0s, task.t0s)
+        prim = prims[task.target]
+        key = (prim.digest(), settings)
+        if key not in oracles:
+            oracles[key] = SafetyOracle(prim, settings)
+        return oracles[key].evaluate(task.x0s, task.t0s)
     except Exception as err:
         return [OracleEvidence(0, Reason.ERROR, 0.0, status="inconclusive", message=str(err)[:500])
                 for _ in range(len(task))]

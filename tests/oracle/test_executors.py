@@ -112,3 +112,24 @@ def test_hybrid_project_gives_the_same_report_in_a_process_pool(tmp_path):
     assert serial.projects[0].report["transitions"], serial.projects[0].errors
     pooled = api.verify([path], out_dir=None, executor=ProcessPool(2))
     assert report_text(pooled) == report_text(serial)
+
+
+def test_one_executor_keeps_projects_apart(tmp_path):
+    """Two projects whose primitives share names but not dynamics, through one executor in one run:
+    the second gets its own oracles (the same report as alone), not the first one's `ParkA`."""
+    text = (ROOT / "specs" / "cart" / "project.yaml").read_text()
+    tight = text.replace("project: cart", "project: cart_tight").replace('h: "1 - v^2"', 'h: "0.3 - v^2"')
+    assert tight != text
+    for name, body in (("cart", text), ("cart_tight", tight)):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "project.yaml").write_text(body)
+    def numbers(report):  # without wall-clock figures (the SOS solves' *_s too)
+        drop = lambda v: ({k: drop(x) for k, x in v.items() if not k.endswith("_s") and k not in ("timing", "generated_at")}
+                          if isinstance(v, dict) else [drop(x) for x in v] if isinstance(v, list) else v)  # noqa: E731
+        return json.dumps(drop(report), sort_keys=True)
+
+    (alone,) = api.verify([tmp_path / "cart_tight"], out_dir=None, executor=InProcess()).projects
+    both = api.verify([tmp_path / "cart", tmp_path / "cart_tight"], out_dir=None, executor=InProcess())
+    second = next(p for p in both.projects if p.report["project"]["name"] == "cart_tight")
+    assert alone.report["edges"] != both.projects[0].report["edges"]  # the two projects differ
+    assert numbers(second.report) == numbers(alone.report)
