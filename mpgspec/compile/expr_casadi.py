@@ -200,19 +200,17 @@ def _clamp(t: Sym | float, knots: np.ndarray) -> Sym:
 def interp_linear(t: Sym | float, ts: Sequence[float], ys: Sequence) -> Sym:
     """Piecewise-linear interpolant of (ts, ys) at t, held constant outside [ts[0], ts[-1]].
 
-    ys of shape (n,) gives a scalar, shape (n, m) a column of m values.
+    ys of shape (n,) gives a scalar, shape (n, m) a column of m values (one if_else tree over
+    columns of pieces: the same operations per entry as m scalar interpolants, built m times faster).
     Raises ValueError for fewer than 2 samples, non-increasing times or non-finite values.
     """
     knots, y = _samples(ts, ys)
     tc = _clamp(t, knots)
-    columns = y.reshape(len(knots), -1).T
-    out = []
-    for col in columns:
-        slopes = np.diff(col) / np.diff(knots)
-        pieces = [float(col[i]) + float(slopes[i]) * (tc - float(knots[i]))
-                  for i in range(len(knots) - 1)]
-        out.append(_select(tc, knots, pieces, 0, len(pieces) - 1))
-    return out[0] if y.ndim == 1 else ca.vertcat(*out)
+    rows = y.reshape(len(knots), -1)
+    slopes = np.diff(rows, axis=0) / np.diff(knots)[:, None]
+    pieces = [ca.DM(rows[i]) + ca.DM(slopes[i]) * (tc - float(knots[i])) for i in range(len(knots) - 1)]
+    out = _select(tc, knots, pieces, 0, len(pieces) - 1)
+    return out[0] if y.ndim == 1 else out
 
 
 def interp_cubic(t: Sym | float, ts: Sequence[float], ys: Sequence,
@@ -225,12 +223,10 @@ def interp_cubic(t: Sym | float, ts: Sequence[float], ys: Sequence,
     tc = _clamp(t, knots)
     spline = CubicSpline(knots, y, bc_type=bc_type, axis=0)
     coeffs = spline.c.reshape(4, len(knots) - 1, -1)
-    out = []
-    for j in range(coeffs.shape[2]):
-        pieces = []
-        for i in range(len(knots) - 1):
-            c3, c2, c1, c0 = (float(c) for c in coeffs[:, i, j])
-            dt = tc - float(knots[i])
-            pieces.append(((c3 * dt + c2) * dt + c1) * dt + c0)
-        out.append(_select(tc, knots, pieces, 0, len(pieces) - 1))
-    return out[0] if y.ndim == 1 else ca.vertcat(*out)
+    pieces = []
+    for i in range(len(knots) - 1):
+        c3, c2, c1, c0 = (ca.DM(coeffs[k, i]) for k in range(4))
+        dt = tc - float(knots[i])
+        pieces.append(((c3 * dt + c2) * dt + c1) * dt + c0)
+    out = _select(tc, knots, pieces, 0, len(pieces) - 1)
+    return out[0] if y.ndim == 1 else out

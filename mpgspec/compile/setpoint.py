@@ -50,7 +50,7 @@ def _setpoint_expr(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompile
         ts = np.asarray(sp.times, float)
         ys = np.asarray(sp.samples, float)
     interp = interp_cubic if sp.interpolation == "cubic" else interp_linear
-    return ca.vertcat(*[interp(t, ts, ys[:, i]) for i in range(sys.nx)]), (ts, ys, sp.interpolation)
+    return interp(t, ts, ys.reshape(len(ts), sys.nx)), (ts, ys, sp.interpolation)
 
 
 def _named(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, consts: dict, contacts, t: ca.SX):

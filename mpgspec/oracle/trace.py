@@ -36,7 +36,10 @@ def trace(prim: CompiledPrimitive, x0: np.ndarray, t0: float, horizon: float, se
     t = O[r.s, sel]
 
     def clean(v):
-        return [None if (not np.isfinite(a) or abs(a) >= INACTIVE / 2) else float(a) for a in v]
+        out = v.tolist()
+        for k in np.flatnonzero(~(np.abs(v) < INACTIVE / 2)).tolist():  # non-finite or inactive
+            out[k] = None
+        return out
 
     return {
         "t": [float(a) for a in t],

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import datetime as _dt
+import math
 from dataclasses import asdict
 
 import numpy as np
@@ -27,6 +28,8 @@ def finite_json(v):
     if isinstance(v, dict):
         return {k if isinstance(k, str) else str(k): finite_json(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
+        if all(type(x) is float for x in v):  # the long series of traces: one pass, no call per number
+            return [x if -math.inf < x < math.inf else None for x in v]
         return [finite_json(x) for x in v]
     if isinstance(v, np.ndarray):
         return finite_json(v.tolist())
