@@ -29,6 +29,7 @@ from ..certify.hybrid_orbit import monodromy as hybrid_monodromy
 from ..certify.monodromy import monodromy
 from ..certify.problem import from_primitive
 from ..compile.contacts import held_feet
+from ..compile.numeric import numeric
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from ..compile.rigidbody.symmetry import NEUTRAL
 from ..spec.models import PrimitiveClass
@@ -59,12 +60,20 @@ def _clock(p: CompiledPrimitive, n: int) -> np.ndarray:
     return np.zeros(1) if p.cls is PrimitiveClass.FIXED else np.linspace(a, b, n, endpoint=False)
 
 
+def _numeric(p: CompiledPrimitive, name: str):
+    """p's Function `name` on numpy arrays, kept with p's compiled chunks (compile/numeric.py)."""
+    key = ("numeric", name)
+    if key not in p.cache:
+        p.cache[key] = numeric(getattr(p, name))
+    return p.cache[key]
+
+
 def _f(p, x, t):
-    return np.array(p.f_cl(x, t, S_SETTLED, x)).ravel()
+    return _numeric(p, "f_cl")(x, t, S_SETTLED, x)[0]
 
 
 def _h(p, x, t):
-    v = np.array(p.h(x, t, S_SETTLED, x)).ravel()
+    v = _numeric(p, "h")(x, t, S_SETTLED, x)[0]
     return v[np.abs(v) < INACTIVE / 2]
 
 

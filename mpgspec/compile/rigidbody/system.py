@@ -18,6 +18,7 @@ from ...errors import SpecError
 from ...spec.models import ContactEvent
 from ..contacts import ContactPlan, Fixed
 from ..events import NEVER, clock_name, clock_rate
+from ..numeric import numeric
 from ..system import CompiledSystem, OpenLoop
 from .constrained import Baumgarte, ContactDynamics
 from .dynamics import RigidBodyDynamics
@@ -156,10 +157,16 @@ class RigidBodyCompiledSystem(CompiledSystem):
         G = ca.jacobian(qdot(self.model, dyn.q, dyn.v), dyn.v)
         return ca.Function("manifold_kinematics", [dyn.q], [ca.vertcat(z, ca.vec(J), ca.vec(G))])
 
+    @cached_property
+    def _numeric(self) -> dict:
+        """The Functions each Gauss-Newton step of project_to_contacts evaluates, on numpy arrays."""
+        return {"kinematics": numeric(self._manifold_kinematics), "normalize": numeric(self.dyn.normalize),
+                "integrate": numeric(self.dyn.integrate)}
+
     def _kinematics_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         m = self.model
         nc, nv, nq = len(m.contact_frames), m.nv, m.nq
-        out = self._manifold_kinematics(q).full().ravel()
+        out = self._numeric["kinematics"](q)[0]
         z, J, G = out[:nc], out[nc:nc + 3 * nc * nv], out[nc + 3 * nc * nv:]
         return z, J.reshape((nv, 3 * nc)).T, G.reshape((nv, nq)).T
 
@@ -185,7 +192,7 @@ class RigidBodyCompiledSystem(CompiledSystem):
         def inverse_metric(block: np.ndarray) -> np.ndarray:
             return np.linalg.inv(block + 1e-3 * max(1e-12, float(np.abs(block).max())) * np.eye(block.shape[0]))
 
-        q = np.array(self.dyn.normalize(x[:nq])).ravel()
+        q = self._numeric["normalize"](x[:nq])[0]
         Wq = W[:nq, :nq]
         for _ in range(max_iter):
             z, J, G = self._kinematics_at(q)
@@ -195,7 +202,7 @@ class RigidBodyCompiledSystem(CompiledSystem):
             A = J[[3 * i + 2 for i in rows]]
             Minv = inverse_metric(G.T @ Wq @ G)
             dv = -Minv @ A.T @ np.linalg.lstsq(A @ Minv @ A.T, r, rcond=None)[0]
-            q = np.array(self.dyn.integrate(q, dv, 1.0)).ravel()
+            q = self._numeric["integrate"](q, dv, 1.0)[0]
         v = x[nq:nq + nv]
         if rows:
             J = self._kinematics_at(q)[1][rows3]
