@@ -16,7 +16,7 @@ import numpy as np
 from ..compile.rigidbody.symmetry import reduced_monodromy
 from ..compile.contacts import Schedule
 from ..oracle.flow import LEFT, rk4_jump
-from ..oracle.integrator import compile_cached
+from ..oracle.jit import compile_cached
 
 FD = 1e-6
 S_LONG = 1e6  # time since switch-in: long after any motion profile

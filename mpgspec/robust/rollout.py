@@ -18,7 +18,7 @@ import numpy as np
 from ..compile.primitive import CompiledPrimitive
 from ..compile.system import compile_analytic
 from ..oracle.flow import rk4
-from ..oracle.integrator import compile_cached
+from ..oracle.jit import compile_cached
 from ..settings import OracleSettings
 
 

@@ -18,7 +18,7 @@ import numpy as np
 from ..compile.contacts import grid_clock
 from ..compile.primitive import CompiledPrimitive
 from ..oracle.flow import rk4
-from ..oracle.integrator import compile_cached
+from ..oracle.jit import compile_cached
 from ..spec.models import PrimitiveClass
 
 HOLD = 0.5

@@ -23,7 +23,7 @@ from ....compile.primitive import saturate
 from ....compile.rigidbody.symmetry import (NEUTRAL, lift_function, lift_jacobian, reduce_function,
                                           reduced_monodromy)
 from ....oracle.flow import LEFT, rk4_jump
-from ....oracle.integrator import compile_cached
+from ....oracle.jit import compile_cached
 from ..stance import nominal_geometry
 from ..trot import gains_of, trot_torque
 
