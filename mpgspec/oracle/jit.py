@@ -9,8 +9,9 @@ private temporary folder and moved into the cache with os.replace, so concurrent
 load a half-written one. When the compiler is missing or fails, the Function is returned
 uncompiled (CasADi's virtual machine) with a warning.
 
-with_cse(fn) rebuilds an SX Function with CasADi's common-subexpression elimination: smaller C,
-less gcc time and faster steps for the large generated loops.
+with_cse(fn) rebuilds a Function with CasADi's common-subexpression elimination (`cse`): for the
+robot's generated loops smaller C, less gcc time and faster steps (bench/bench_jit.py). cse(fn) does
+so unless CSE is off (only to measure what it saves).
 
 Compile log: when the environment variable MPGSPEC_JIT_LOG names a file, every Function that
 compile_cached or compile_many is asked for appends one JSON line to it:
@@ -40,6 +41,9 @@ LARGE_CODE_FLAGS = ("-fno-tree-ter", "-fno-tree-fre", "-fno-tree-dominator-opts"
 passes are superlinear: without them a 3.4 MB chunk compiles in 39 s instead of minutes and runs
 1.6x slower than with them (2.4x faster than -O0)."""
 
+CSE = True
+"""cse(fn) eliminates common subexpressions; False only to measure what that saves."""
+
 _LOG_LOCK = threading.Lock()
 
 
@@ -60,6 +64,16 @@ def with_cse(fn: ca.Function) -> ca.Function:
     """fn rebuilt with common subexpressions eliminated (same name, inputs and outputs)."""
     a = fn.sx_in() if fn.is_a("SXFunction") else fn.mx_in()
     return ca.Function(fn.name(), a, fn.call(a, True, False), fn.name_in(), fn.name_out(), {"cse": True})
+
+
+def cse(fn: ca.Function) -> ca.Function:
+    """with_cse(fn), unless CSE is off."""
+    return with_cse(fn) if CSE else fn
+
+
+def cse_sx(fn: ca.Function) -> ca.Function:
+    """cse(fn) for an SX Function (the large generated loops, called from MX graphs); an MX one as it is."""
+    return cse(fn) if fn.is_a("SXFunction") else fn
 
 
 @dataclass
