@@ -15,6 +15,7 @@ and the steps left until the next solve then ride in the augmented state (`hold_
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from dataclasses import dataclass, field
 
@@ -23,7 +24,7 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .flow import active, jump_of, rk4, solve_or_keep, step_end, step_length, wrap
-from .jit import compile_cached, cse, with_cse
+from .jit import compile_cached, compile_many, cse, with_cse
 
 
 INLINE_NODES = 4000
@@ -185,6 +186,18 @@ def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
 
 FD_STEP = 1e-6
 """Time step of the one-sided differences that give the rates of h along the flow in large loops."""
+
+
+def build_chunks(prims: list[CompiledPrimitive], dt: float, K: int, flags: tuple[str, ...] = ("-O1",),
+                 with_state: bool = False, boundaries: bool = True, error: str = "local") -> list[Chunk]:
+    """build_chunk with jit for several primitives at once: their C code generated one after the
+    other, then gcc run side by side (compile_many). Chunks remembered on a primitive are reused."""
+    key = (dt, K, True, tuple(flags), with_state, boundaries, error)
+    new = list({id(p): p for p in prims if key not in p.cache}.values())
+    raw = [build_chunk(p, dt, K, False, flags, with_state, boundaries, error) for p in new]
+    for p, c, fn in zip(new, raw, compile_many([c.fn for c in raw], flags)):
+        p.cache[key] = dataclasses.replace(c, fn=fn, _maps={}, _buffers={})
+    return [p.cache[key] for p in prims]
 
 
 def _ends(prim: CompiledPrimitive, held: bool = False) -> tuple[ca.Function, ca.Function, ca.Function]:

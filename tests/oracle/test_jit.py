@@ -3,13 +3,17 @@ the compile log, and common-subexpression elimination keeping outputs equal."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
 import pytest
 
+from mpgspec.api import compile_project
 from mpgspec.oracle import jit
+from mpgspec.oracle.integrator import build_chunk, build_chunks, initial_state
 from mpgspec.oracle.jit import cache_dir, compile_cached, compile_many, with_cse
+from mpgspec.spec.loader import load_project
 
 
 @pytest.fixture(autouse=True)
@@ -112,3 +116,20 @@ def test_cse_keeps_outputs_and_shrinks_the_code(sym):
     cf, cg = compile_many([f, g], ("-O1",))
     for v in rng.uniform(-1, 1, (5, 3)):
         assert np.max(np.abs(_eval(cf, v) - _eval(cg, v))) <= 1e-14
+
+
+def test_build_chunks_compiles_several_primitives_like_build_chunk(tmp_path):
+    root = Path(__file__).resolve().parents[2]
+    prims = list(compile_project(load_project(root / "specs" / "pendulum" / "project.yaml")).values())[:2]
+    chunks = build_chunks(prims + prims[:1], 0.005, 16)
+    assert len(chunks) == 3 and chunks[2] is chunks[0]
+    assert [c.prim for c in chunks[:2]] == prims
+    for p, c in zip(prims, chunks):
+        assert build_chunk(p, 0.005, 16) is c  # remembered on the primitive under build_chunk's key
+        plain = build_chunk(p, 0.005, 16, jit=False)
+        assert c.fn.class_name() != plain.fn.class_name()  # loaded from a library
+        z = initial_state(p, np.asarray(p.setpoint(0.0), float).ravel() + 0.1, 0.0)[:, None]
+        zf, out = c.run(z)
+        zf0, out0 = plain.run(z)
+        np.testing.assert_allclose(zf, zf0, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(out, out0, rtol=1e-12, atol=1e-12)
