@@ -1,13 +1,14 @@
 """Benchmark of the A1's compile work: CasADi's common-subexpression elimination (cse) and gcc run
 side by side, for one target primitive.
 
-    python bench/bench_jit.py                      # Walk(slow), about 4 minutes of gcc on 2 cores
+    python bench/bench_jit.py                      # Walk(slow): about 8 minutes on 2 shared cores
     python bench/bench_jit.py --target Stand --no-write
 
 Everything runs in one process on specs/a1 (closed loops compiled, E not sized: the margin's
 ellipsoid does not change the code's size). For the target's robust rollout (first sample, chunk of
 100 steps, gradient wrt the push) and its oracle chunk (the project's chunk length and error
-estimate), built with and without cse (oracle/jit.CSE), each in a fresh private compile cache:
+estimate), and the period of its hybrid flow (the Floquet verifiers'), built with and without cse
+(oracle/jit.CSE), each in a fresh private compile cache:
 C bytes and gcc seconds (from the MPGSPEC_JIT_LOG compile log), run time per call (median of
 interleaved rounds) and the largest difference between the outputs on random inputs near the
 primitive's setpoint. Then the three robust libraries (with cse) compiled one after the other
@@ -38,6 +39,8 @@ import common  # noqa: E402  (bench/common.py)
 from common import markdown_table, rounds, stamp, write_section  # noqa: E402
 
 from mpgspec.api import settings_for  # noqa: E402
+from mpgspec.certify.hybrid_orbit import HybridFlow  # noqa: E402
+from mpgspec.check.assumptions import HYBRID_DT  # noqa: E402
 from mpgspec.oracle import jit  # noqa: E402
 from mpgspec.oracle.integrator import build_chunk, initial_state  # noqa: E402
 from mpgspec.pipeline.stages import compile_project  # noqa: E402
@@ -65,7 +68,8 @@ def functions(spec, prim, st, use_cse: bool) -> tuple[dict[str, ca.Function], Ri
         prim.cache.clear()
     finally:
         jit.CSE = True
-    return {"robust first": rr.first, "robust chunk": rr.chunk, "robust gradient": rr.grad, "oracle chunk": ch.fn}, rr
+    fns = {"robust first": rr.first, "robust chunk": rr.chunk, "robust gradient": rr.grad, "oracle chunk": ch.fn}
+    return {k: f for k, f in fns.items() if f is not None}, rr  # a held law (Stand): no gradient
 
 
 def compile_logged(fns: list[ca.Function], flags, n_jobs: int) -> tuple[list[ca.Function], list[dict], float]:
@@ -114,6 +118,32 @@ def max_diff(f: ca.Function, g: ca.Function, args: list) -> float:
     return worst
 
 
+def hybrid_rows(prim, rng) -> list[tuple[str, str]]:
+    """The period of the target's hybrid flow (Floquet verifiers), with and without cse."""
+    if prim.period is None:
+        return []
+    flows, recs = {}, {}
+    for c in (False, True):
+        jit.CSE = c
+        try:
+            with tempfile.TemporaryDirectory() as tmp:
+                os.environ["MPGSPEC_CACHE"] = str(Path(tmp) / "cache")
+                os.environ["MPGSPEC_JIT_LOG"] = str(Path(tmp) / "log.jsonl")
+                flows[c] = HybridFlow(prim, HYBRID_DT)
+                recs[c] = json.loads(Path(os.environ["MPGSPEC_JIT_LOG"]).read_text().splitlines()[-1])
+        finally:
+            jit.CSE = True
+    x0 = np.asarray(prim.x_star(0.0), float).ravel()
+    diff = max(float(np.abs(flows[False].states(x) - flows[True].states(x)).max())
+               for x in (x0 + 1e-3 * rng.standard_normal(x0.size) for _ in range(3)))
+    r0, r1 = recs[False], recs[True]
+    return [("hybrid period: C bytes without / with cse (ratio)",
+             f"{r0['c_bytes'] / 1e6:.2f} / {r1['c_bytes'] / 1e6:.2f} MB ({r1['c_bytes'] / r0['c_bytes']:.2f})"),
+            ("hybrid period: gcc s without / with cse (ratio)",
+             f"{r0['gcc_s']:.1f} / {r1['gcc_s']:.1f} s ({r1['gcc_s'] / r0['gcc_s']:.2f})"),
+            ("hybrid period: largest state difference with / without cse", f"{diff:.1e}")]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--target", default="Walk(slow)")
@@ -157,15 +187,16 @@ def main(argv=None) -> int:
                      f"({statistics.median(a / b for a, b in zip(t['plain'], t['cse'])):.2f}x)"))
         rows.append((f"{k}: largest output difference with / without cse", f"{diff:.1e}"))
         log(rows[-4][1] + " | " + rows[-3][1] + " | " + rows[-2][1] + " | " + rows[-1][1])
-    robust = [built[True][0][k] for k in ("robust first", "robust chunk", "robust gradient")]
+    robust = [f for k, f in built[True][0].items() if k.startswith("robust")]
     _, _, seq = compile_logged(robust, st.jit_flags, n_jobs=1)
     _, _, par = compile_logged(robust, st.jit_flags, n_jobs=jit.jobs())
-    rows.append((f"robust first + chunk + gradient (cse), gcc wall: one at a time / {jit.jobs()} at once",
+    rows.append((f"robust first + chunk (+ gradient), cse, gcc wall: one at a time / {jit.jobs()} at once",
                  f"{seq:.1f} / {par:.1f} s ({seq / par:.2f}x)"))
     gcc0 = sum(r["gcc_s"] for r in recs[False].values())
     gcc1 = sum(r["gcc_s"] for r in recs[True].values())
     rows.append(("all four functions, gcc s without cse, sequential / with cse, parallel",
                  f"{gcc0:.1f} / {par + recs[True]['oracle chunk']['gcc_s']:.1f} s (cse alone: {gcc1:.1f} s)"))
+    rows += hybrid_rows(prim, rng)
     table = markdown_table(rows)
     print(table)
     if not args.no_write:
