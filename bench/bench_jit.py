@@ -7,7 +7,7 @@ side by side, for one target primitive.
 Everything runs in one process on specs/a1 (closed loops compiled, E not sized: the margin's
 ellipsoid does not change the code's size). For the target's robust rollout (first sample, chunk of
 100 steps, gradient wrt the push) and its oracle chunk (the project's chunk length and error
-estimate), and the period of its hybrid flow (the Floquet verifiers'), built with and without cse
+estimate; its large loop always has cse, the row tries cse on the MX graph around it too), and the period of its hybrid flow (the Floquet verifiers'), built with and without cse
 (oracle/jit.CSE), each in a fresh private compile cache:
 C bytes and gcc seconds (from the MPGSPEC_JIT_LOG compile log), run time per call (median of
 interleaved rounds) and the largest difference between the outputs on random inputs near the
@@ -41,7 +41,7 @@ from common import markdown_table, rounds, stamp, write_section  # noqa: E402
 from mpgspec.api import settings_for  # noqa: E402
 from mpgspec.certify.hybrid_orbit import HybridFlow  # noqa: E402
 from mpgspec.check.assumptions import HYBRID_DT  # noqa: E402
-from mpgspec.oracle import jit  # noqa: E402
+from mpgspec.oracle import integrator, jit  # noqa: E402
 from mpgspec.oracle.integrator import build_chunk, initial_state  # noqa: E402
 from mpgspec.pipeline.stages import compile_project  # noqa: E402
 from mpgspec.robust.rigid import RigidRobustRollout  # noqa: E402
@@ -64,10 +64,11 @@ def functions(spec, prim, st, use_cse: bool) -> tuple[dict[str, ca.Function], Ri
         rr = RigidRobustRollout(prim, list(unc.parameters), "trunk", True, unc.disturbance.segments, raw,
                                 st.horizon, unc.disturbance.force.duration)
         prim.cache.clear()  # the oracle's chunk is remembered on the primitive
+        integrator.cse_sx = jit.cse  # a trial: the chunk's MX body with cse too (the code: SX bodies only)
         ch = build_chunk(prim, st.dt, st.chunk, False, st.jit_flags, error=st.error)
         prim.cache.clear()
     finally:
-        jit.CSE = True
+        jit.CSE, integrator.cse_sx = True, jit.cse_sx
     fns = {"robust first": rr.first, "robust chunk": rr.chunk, "robust gradient": rr.grad, "oracle chunk": ch.fn}
     return {k: f for k, f in fns.items() if f is not None}, rr  # a held law (Stand): no gradient
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .flow import active, jump_of, rk4, solve_or_keep, step_end, step_length, wrap
-from .jit import compile_cached, compile_many, cse, with_cse
+from .jit import compile_cached, compile_many, cse_sx, with_cse
 
 
 INLINE_NODES = 4000
@@ -337,7 +337,9 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
     act = active(prim, wrap(prim, t + h / 2), x, s, x_next, h)  # a step lies inside or outside each window
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), dh, prim.roa_margin(x, t),
                      ca.norm_2(e), s, h, u_raw, u, *([x] if with_state else []))
-    body = cse(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out]))
+    # small SX loops: cse saves 1-8 % of C; an MX graph around a large loop (itself with cse) gains
+    # nothing measurable from it (bench/bench_jit.py)
+    body = cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out]))
     fn = _accumulate("chunk_", prim, dt, K, with_state, boundaries, body, nz)
     return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
                  Rows(nh, prim.system.nu, nx if with_state else 0))
@@ -401,7 +403,7 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
     m_f, m_c = prim.roa_margin(x, t), prim.roa_margin(xc, t)
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), ca.fabs(h1 - h1c), m_f,
                      ca.fabs(m_f - m_c), s, h, u_raw, u, *([x] if with_state else []), ca.fabs(h0 - h0c))
-    body = cse(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out]))
+    body = cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out]))
     fn = _accumulate("chunk2_", prim, dt, K, with_state, boundaries, body, nz)
     return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
                  Rows(nh, prim.system.nu, nx if with_state else 0, doubling=True))
