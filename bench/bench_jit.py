@@ -9,10 +9,12 @@ ellipsoid does not change the code's size). For the target's robust rollout (fir
 100 steps, gradient wrt the push) and its oracle chunk (the project's chunk length and error
 estimate; its large loop always has cse, the row tries cse on the MX graph around it too), and the period of its hybrid flow (the Floquet verifiers'), built with and without cse
 (oracle/jit.CSE), each in a fresh private compile cache:
-C bytes and gcc seconds (from the MPGSPEC_JIT_LOG compile log), run time per call (median of
+C bytes (from the MPGSPEC_JIT_LOG compile log) and gcc CPU seconds (one library at a time, with and
+without cse interleaved: CPU time is less disturbed than wall time by other work), run time per call (median of
 interleaved rounds) and the largest difference between the outputs on random inputs near the
-primitive's setpoint. Then the three robust libraries (with cse) compiled one after the other
-(n_jobs=1) and side by side (compile_many, one gcc per usable core), wall time.
+primitive's setpoint. Then the robust first sample and chunk (two libraries of similar size), and
+all three robust libraries, with cse, compiled one after the other (n_jobs=1) and side by side
+(compile_many, one gcc per usable core), wall time: the largest library bounds the second.
 
 Prints a table and replaces (or appends) the section "A1 compile work (cse, parallel gcc)" of
 bench/RESULTS.md.
@@ -23,6 +25,7 @@ import argparse
 import dataclasses
 import json
 import os
+import resource
 import statistics
 import sys
 import tempfile
@@ -49,6 +52,11 @@ from mpgspec.spec.loader import load_project  # noqa: E402
 
 SPEC = ROOT / "specs" / "a1" / "project.yaml"
 HEADING = "## A1 compile work (cse, parallel gcc)"
+NOTE = ("See the docstring of bench/bench_jit.py for the meaning of each row. gcc run side by side gains only "
+        "where cores are free: with the machine's load average above its core count (see above) the other work "
+        "takes the second core; on a quiet 2-core machine two gcc at once took 5.9 s against 11.1 s one after "
+        "the other (measured earlier on this machine). The oracle chunk's row tries cse on its MX graph too; the code "
+        "keeps cse on small SX bodies only.")
 
 
 def log(msg: str) -> None:
@@ -73,17 +81,18 @@ def functions(spec, prim, st, use_cse: bool) -> tuple[dict[str, ca.Function], Ri
     return {k: f for k, f in fns.items() if f is not None}, rr  # a held law (Stand): no gradient
 
 
-def compile_logged(fns: list[ca.Function], flags, n_jobs: int) -> tuple[list[ca.Function], list[dict], float]:
-    """fns compiled in a fresh private cache: the libraries, the compile log's lines, the wall time."""
+def compile_logged(fns: list[ca.Function], flags, n_jobs: int) -> tuple[list[ca.Function], list[dict], float, float]:
+    """fns compiled in a fresh private cache: the libraries, the compile log's lines, the wall time and
+    the CPU seconds of the compiler processes (less sensitive than wall time to other work)."""
     with tempfile.TemporaryDirectory() as tmp:
         os.environ["MPGSPEC_CACHE"] = str(Path(tmp) / "cache")
         os.environ["MPGSPEC_JIT_LOG"] = str(Path(tmp) / "log.jsonl")
-        t = time.perf_counter()
+        r0, t = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
         out = jit.compile_many(fns, flags, n_jobs=n_jobs)
-        wall = time.perf_counter() - t
+        wall, r1 = time.perf_counter() - t, resource.getrusage(resource.RUSAGE_CHILDREN)
         recs = [json.loads(line) for line in Path(os.environ["MPGSPEC_JIT_LOG"]).read_text().splitlines()]
         # the libraries stay loaded after their files are gone
-    return out, recs, wall
+    return out, recs, wall, (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime)
 
 
 def inputs(fn: ca.Function, prim, rr, rng, n: int) -> list[list[np.ndarray]]:
@@ -148,7 +157,7 @@ def hybrid_rows(prim, rng) -> list[tuple[str, str]]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--target", default="Walk(slow)")
-    ap.add_argument("--repeats", type=int, default=5, help="rounds of the run-time measurement")
+    ap.add_argument("--repeats", type=int, default=21, help="rounds of the run-time measurement")
     ap.add_argument("--no-write", action="store_true", help="do not touch bench/RESULTS.md")
     args = ap.parse_args(argv)
     T0 = time.perf_counter()
@@ -160,12 +169,13 @@ def main(argv=None) -> int:
     log(f"compiled the closed loops ({time.perf_counter() - T0:.0f} s)")
     built = {c: functions(spec, prim, st, c) for c in (False, True)}
     rr = built[True][1]
-    libs, recs = {}, {}
-    for c in (False, True):
-        names = list(built[c][0])
-        out, rec, _ = compile_logged([built[c][0][k] for k in names], st.jit_flags, n_jobs=1)
-        libs[c], recs[c] = dict(zip(names, out)), dict(zip(names, rec))
-        log(f"cse={c}: " + ", ".join(f"{k} {r['c_bytes'] / 1e6:.2f} MB {r['gcc_s']:.1f} s" for k, r in recs[c].items()))
+    libs, recs = {False: {}, True: {}}, {False: {}, True: {}}
+    for k in built[True][0]:  # one function at a time, with and without cse interleaved
+        for c in (False, True):
+            (lib,), (rec,), _, cpu = compile_logged([built[c][0][k]], st.jit_flags, n_jobs=1)
+            libs[c][k], recs[c][k] = lib, {**rec, "cpu_s": cpu}
+        log(f"{k}: " + ", ".join(f"cse={c} {recs[c][k]['c_bytes'] / 1e6:.2f} MB {recs[c][k]['cpu_s']:.1f} "
+                                 f"gcc CPU s" for c in (False, True)))
     rng = np.random.default_rng(0)
     rows = []
     for k in built[True][0]:
@@ -181,29 +191,35 @@ def main(argv=None) -> int:
         scale = 1e6 / steps if steps > 1 else 1e3
         rows.append((f"{k}: C bytes without / with cse (ratio)",
                      f"{r0['c_bytes'] / 1e6:.2f} / {r1['c_bytes'] / 1e6:.2f} MB ({r1['c_bytes'] / r0['c_bytes']:.2f})"))
-        rows.append((f"{k}: gcc s without / with cse (ratio)",
-                     f"{r0['gcc_s']:.1f} / {r1['gcc_s']:.1f} s ({r1['gcc_s'] / r0['gcc_s']:.2f})"))
+        rows.append((f"{k}: gcc CPU s without / with cse (ratio)",
+                     f"{r0['cpu_s']:.1f} / {r1['cpu_s']:.1f} s ({r1['cpu_s'] / r0['cpu_s']:.2f})"))
         rows.append((f"{k}: {per} without / with cse (speed-up)",
                      f"{statistics.median(t['plain']) * scale:.1f} / {statistics.median(t['cse']) * scale:.1f} "
                      f"({statistics.median(a / b for a, b in zip(t['plain'], t['cse'])):.2f}x)"))
         rows.append((f"{k}: largest output difference with / without cse", f"{diff:.1e}"))
         log(rows[-4][1] + " | " + rows[-3][1] + " | " + rows[-2][1] + " | " + rows[-1][1])
     robust = [f for k, f in built[True][0].items() if k.startswith("robust")]
-    _, _, seq = compile_logged(robust, st.jit_flags, n_jobs=1)
-    _, _, par = compile_logged(robust, st.jit_flags, n_jobs=jit.jobs())
-    rows.append((f"robust first + chunk (+ gradient), cse, gcc wall: one at a time / {jit.jobs()} at once",
-                 f"{seq:.1f} / {par:.1f} s ({seq / par:.2f}x)"))
-    gcc0 = sum(r["gcc_s"] for r in recs[False].values())
-    gcc1 = sum(r["gcc_s"] for r in recs[True].values())
-    rows.append(("all four functions, gcc s without cse, sequential / with cse, parallel",
-                 f"{gcc0:.1f} / {par + recs[True]['oracle chunk']['gcc_s']:.1f} s (cse alone: {gcc1:.1f} s)"))
+    for label, fns, R in (("robust first + chunk (similar sizes)", robust[:2], 3),
+                          ("robust first + chunk (+ gradient)", robust, 1)):
+        walls = {1: [], jit.jobs(): []}  # interleaved rounds: one at a time, then side by side
+        for _ in range(R):
+            for n in walls:
+                walls[n].append(compile_logged(fns, st.jit_flags, n_jobs=n)[2])
+        seq, par = statistics.median(walls[1]), statistics.median(walls[jit.jobs()])
+        ratio = statistics.median(a / b for a, b in zip(walls[1], walls[jit.jobs()]))
+        rows.append((f"{label}, cse, gcc wall: one at a time / {jit.jobs()} at once",
+                     f"{seq:.1f} / {par:.1f} s ({ratio:.2f}x; {R} round{'s' if R > 1 else ''})"))
+        log(rows[-1][1])
+    gcc0 = sum(r["cpu_s"] for r in recs[False].values())
+    gcc1 = sum(r["cpu_s"] for r in recs[True].values())
+    rows.append(("gcc CPU s of all four, without / with cse (ratio)", f"{gcc0:.1f} / {gcc1:.1f} s ({gcc1 / gcc0:.2f})"))
     rows += hybrid_rows(prim, rng)
     table = markdown_table(rows)
     print(table)
     if not args.no_write:
-        head = (f"{args.target}; " + stamp(mach, "python bench/bench_jit.py" + (f" --target '{args.target}'"
+        head = (f"{args.target}; " + stamp(mach, "bench_jit.py" + (f" --target '{args.target}'"
                 if args.target != "Walk(slow)" else ""), False, args.repeats, time.perf_counter() - T0))
-        write_section(ROOT / "bench" / "RESULTS.md", HEADING, HEADING + "\n\n" + head + "\n\n" + table + "\n")
+        write_section(ROOT / "bench" / "RESULTS.md", HEADING, HEADING + "\n\n" + head + "\n\n" + table + "\n\n" + NOTE + "\n")
     return 0
 
 
