@@ -16,7 +16,7 @@ import numpy as np
 from ..compile.rigidbody.symmetry import reduced_monodromy
 from ..compile.contacts import Schedule
 from ..oracle.flow import LEFT, rk4_jump
-from ..oracle.integrator import compile_cached
+from ..oracle.jit import compile_cached, cse_sx
 
 FD = 1e-6
 S_LONG = 1e6  # time since switch-in: long after any motion profile
@@ -35,11 +35,12 @@ class HybridFlow:
         xs0 = np.array(prim.setpoint(0.0), float).ravel()
         z = ca.MX.sym("z", nx + 2)  # [x; t; min h so far]
         x, t, m = z[:nx], z[nx], z[nx + 1]
-        f = lambda xx, tt: prim.f_cl(xx, tt, S_LONG, xs0)  # noqa: E731
-        k = lambda xx, tt: prim.control(xx, tt, S_LONG, xs0)[1]  # noqa: E731
+        f_cl, ctrl, jump, h_fn = (cse_sx(g) for g in (prim.f_cl, prim.control, prim.jump, prim.h))
+        f = lambda xx, tt: f_cl(xx, tt, S_LONG, xs0)  # noqa: E731
+        k = lambda xx, tt: ctrl(xx, tt, S_LONG, xs0)[1]  # noqa: E731
         h = self.dt
-        xn = rk4_jump(f, k, prim.jump, x, t, h, LEFT if isinstance(prim.contacts, Schedule) else 0.0)
-        hv = prim.h(xn, t + h, S_LONG, xs0)
+        xn = rk4_jump(f, k, jump, x, t, h, LEFT if isinstance(prim.contacts, Schedule) else 0.0)
+        hv = h_fn(xn, t + h, S_LONG, xs0)
         mn = ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
         body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn)])
         zz = ca.MX.sym("z", nx + 2)  # one compiled Function: a period, every step's state out

@@ -15,19 +15,16 @@ and the steps left until the next solve then ride in the augmented state (`hold_
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
-import os
-import subprocess
-import tempfile
-import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .flow import active, jump_of, rk4, solve_or_keep, step_end, step_length, wrap
+from .jit import compile_cached, compile_many, cse_sx, with_cse
 
 
 INLINE_NODES = 4000
@@ -187,13 +184,20 @@ def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
     return prim.cache[key]
 
 
-def _with_cse(f: ca.Function) -> ca.Function:
-    a = f.sx_in()
-    return ca.Function(f.name(), a, f.call(a), f.name_in(), f.name_out(), {"cse": True})
-
-
 FD_STEP = 1e-6
 """Time step of the one-sided differences that give the rates of h along the flow in large loops."""
+
+
+def build_chunks(prims: list[CompiledPrimitive], dt: float, K: int, flags: tuple[str, ...] = ("-O1",),
+                 with_state: bool = False, boundaries: bool = True, error: str = "local") -> list[Chunk]:
+    """build_chunk with jit for several primitives at once: their C code generated one after the
+    other, then gcc run side by side (compile_many). Chunks remembered on a primitive are reused."""
+    key = (dt, K, True, tuple(flags), with_state, boundaries, error)
+    new = list({id(p): p for p in prims if key not in p.cache}.values())
+    raw = [build_chunk(p, dt, K, False, flags, with_state, boundaries, error) for p in new]
+    for p, c, fn in zip(new, raw, compile_many([c.fn for c in raw], flags)):
+        p.cache[key] = dataclasses.replace(c, fn=fn, _maps={}, _buffers={})
+    return [p.cache[key] for p in prims]
 
 
 def _ends(prim: CompiledPrimitive, held: bool = False) -> tuple[ca.Function, ca.Function, ca.Function]:
@@ -243,7 +247,7 @@ def _loop(prim: CompiledPrimitive, held: bool = False) -> ca.Function:
     key = "cse_loop_u" if held else "cse_loop"
     if loop.is_a("SXFunction") and (loop.n_nodes() if held else prim.f_cl.n_nodes()) > INLINE_NODES:
         if key not in prim.cache:
-            prim.cache[key] = _with_cse(loop)
+            prim.cache[key] = with_cse(loop)
         return prim.cache[key]
     return loop
 
@@ -333,7 +337,9 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
     act = active(prim, wrap(prim, t + h / 2), x, s, x_next, h)  # a step lies inside or outside each window
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), dh, prim.roa_margin(x, t),
                      ca.norm_2(e), s, h, u_raw, u, *([x] if with_state else []))
-    body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out])
+    # small SX loops: cse saves 1-8 % of C; an MX graph around a large loop (itself with cse) gains
+    # nothing measurable from it (bench/bench_jit.py)
+    body = cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out]))
     fn = _accumulate("chunk_", prim, dt, K, with_state, boundaries, body, nz)
     return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
                  Rows(nh, prim.system.nu, nx if with_state else 0))
@@ -397,51 +403,10 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
     m_f, m_c = prim.roa_margin(x, t), prim.roa_margin(xc, t)
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), ca.fabs(h1 - h1c), m_f,
                      ca.fabs(m_f - m_c), s, h, u_raw, u, *([x] if with_state else []), ca.fabs(h0 - h0c))
-    body = ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out])
+    body = cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out]))
     fn = _accumulate("chunk2_", prim, dt, K, with_state, boundaries, body, nz)
     return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
                  Rows(nh, prim.system.nu, nx if with_state else 0, doubling=True))
-
-
-def cache_dir() -> Path:
-    """Where compiled chunks are kept between runs (MPGSPEC_CACHE, else ~/.cache/mpgspec)."""
-    return Path(os.environ.get("MPGSPEC_CACHE", Path.home() / ".cache" / "mpgspec")) / "jit"
-
-
-LARGE_CODE = 1_000_000
-LARGE_CODE_FLAGS = ("-fno-tree-ter", "-fno-tree-fre", "-fno-tree-dominator-opts")
-"""For generated C above LARGE_CODE bytes (robot loops: megabytes in one function) these -O1
-passes are superlinear: without them a 3.4 MB chunk compiles in 39 s instead of minutes and runs
-1.6x slower than with them (2.4x faster than -O0)."""
-
-
-def compile_cached(fn: ca.Function, flags: tuple[str, ...]) -> ca.Function:
-    """fn compiled to a shared library with the system C compiler, reused when the generated C
-    code and the flags are unchanged (the library's name is the hash of both)."""
-    cg = ca.CodeGenerator(f"{fn.name()}.c", {"with_header": False})
-    cg.add(fn)
-    code = cg.dump()
-    if len(code) > LARGE_CODE:
-        flags = (*flags, *LARGE_CODE_FLAGS)
-    key = hashlib.sha256((code + " ".join(flags) + ca.__version__).encode()).hexdigest()[:24]
-    folder = cache_dir()
-    lib = folder / f"{fn.name()}_{key}.so"
-    if not lib.exists():
-        folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=folder) as tmp:
-            src = Path(tmp) / f"{fn.name()}.c"
-            src.write_text(code)
-            out = Path(tmp) / lib.name
-            cc = os.environ.get("CC", "gcc")
-            try:
-                subprocess.run([cc, *flags, "-fPIC", "-shared", str(src), "-o", str(out), "-lm"], check=True,
-                               capture_output=True, text=True)
-            except (OSError, subprocess.CalledProcessError) as err:  # no compiler: CasADi's virtual machine
-                detail = getattr(err, "stderr", "") or str(err)
-                warnings.warn(f"compiling {fn.name()} failed, running it uncompiled: {detail[:300]}")
-                return fn
-            os.replace(out, lib)  # atomic: concurrent processes never load a half-written library
-    return ca.external(fn.name(), str(lib))
 
 
 def build_first(prim: CompiledPrimitive, dt: float, jit: bool = True) -> ca.Function:

@@ -18,6 +18,7 @@ import casadi as ca
 from ..compile.primitive import INACTIVE, CompiledPrimitive, saturate
 from ..compile.rigidbody.system import no_slip
 from ..oracle.flow import LEFT, active, jump_of, rk4, solve_or_keep, wrap
+from ..oracle.jit import cse, cse_sx
 from .rollout import RobustRollout
 
 
@@ -87,16 +88,18 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     F = d if nd else ca.DM.zeros(3)
     rows = no_slip_rows(prim)
     gated = prim.contacts.varies  # contact conditions bind while held
-    jump = robust_jump(prim, frame)
+    # the SX pieces the step calls, each generated once, with common subexpressions eliminated
+    plant_fn, jump = cse_sx(plant_fn), cse_sx(robust_jump(prim, frame))
+    ctrl, loop = cse_sx(prim.control), cse_sx(prim.loop_u if law is not None else prim.loop_raw)
     held = hold[1:1 + nu] if law is not None else None
 
     def control(xx, tt, ss, u_held):  # (u_raw, u) at a state; a sampled law holds its input
         if law is not None:
             return u_held, saturate(u_held, sys.u_lo, sys.u_hi)
-        return prim.control(xx, tt, ss, xsw)
+        return ctrl(xx, tt, ss, xsw)
 
     def raw_h(xx, tt, ss, ur):  # every safety function, unwindowed, under the nominal model
-        return (prim.loop_u(xx, tt, ss, xsw, ur) if law is not None else prim.loop_raw(xx, tt, ss, xsw))[1]
+        return (loop(xx, tt, ss, xsw, ur) if law is not None else loop(xx, tt, ss, xsw))[1]
 
     def h_of(xx, tt, ss, ur, lam, c):
         h = raw_h(xx, tt, ss, ur)
@@ -126,7 +129,7 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
         hs = ca.if_else(act, hs, INACTIVE)
     hold_next = _hold_next(law, hold, xn, t + dt, s + dt, xsw, held, dt) if law is not None else ca.MX(0, 1)
     out = ca.vertcat(hs, prim.roa_margin(xn, t + dt))
-    step = ca.Function("robust_rigid_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th, hold_next), out])
+    step = cse(ca.Function("robust_rigid_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th, hold_next), out]))
     # the first sample: h at the step's start, windowed at that instant
     h_start = h_of(x, t, s, ur0, lam0, c0)
     if len(prim.h_names):

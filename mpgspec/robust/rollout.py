@@ -18,7 +18,7 @@ import numpy as np
 from ..compile.primitive import CompiledPrimitive
 from ..compile.system import compile_analytic
 from ..oracle.flow import rk4
-from ..oracle.integrator import compile_cached
+from ..oracle.jit import compile_many, cse
 from ..settings import OracleSettings
 
 
@@ -91,12 +91,10 @@ class RobustRollout:
         f0 = first(x0, t0, s0, TH, D[:, 0] if self.nd else ca.MX(0, 1))
         self.nh = f0[0].shape[0] - 1
         self.nz = step.size1_in(0)
-        jit = (lambda fn: compile_cached(fn, settings.jit_flags)) if settings.jit else (lambda fn: fn)
-        self.first = jit(ca.Function(name + "_first", [x0, t0, s0, TH, D], [ca.vertcat(*f0)]))
         zc, Dc = ca.MX.sym("z", self.nz), ca.MX.sym("Dc", self.nd, self.CHUNK)
         zL, outs_c = step.mapaccum("robust_chunk", self.CHUNK)(zc, Dc)
-        self.chunk = jit(ca.Function(name + "_chunk", [zc, Dc], [ca.vertcat(zL[:, -1], ca.vec(outs_c))]))
-        self.grad = None
+        fns = [ca.Function(name + "_first", [x0, t0, s0, TH, D], [ca.vertcat(*f0)]),
+               ca.Function(name + "_chunk", [zc, Dc], [ca.vertcat(zL[:, -1], ca.vec(outs_c))])]
         if self.nd and self.nhold == 0:  # reverse mode: the gradient of one weighted sample w'vec(Y) wrt D
             S = np.zeros((self.K, self.N))
             on = self.seg < self.K
@@ -105,8 +103,12 @@ class RobustRollout:
             _, outs = step.mapaccum("robust_acc", self.N)(z0, ca.mtimes(D, ca.DM(S)))
             Y = ca.horzcat(first(x0, t0, 0, TH, D[:, 0])[0], outs)  # (nh + 1) x (N + 1), from switch-in
             w = ca.MX.sym("w", Y.numel())
-            self.grad = jit(ca.Function(name + "_grad", [x0, t0, TH, D, w],
-                                        [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))]))
+            fns.append(ca.Function(name + "_grad", [x0, t0, TH, D, w], [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))]))
+        fns = [cse(fn) for fn in fns]
+        if settings.jit:  # the three libraries compile side by side
+            fns = compile_many(fns, settings.jit_flags)
+        self.first, self.chunk = fns[:2]
+        self.grad = fns[2] if len(fns) > 2 else None
         self._maps: dict[tuple, ca.Function] = {}
 
     def _loop(self, prim: CompiledPrimitive, plant_fn: ca.Function, dist_inputs: list[int], dt: float):
@@ -127,9 +129,9 @@ class RobustRollout:
         xn, _ = rk4(f, x, (t, s), dt)
         out = ca.vertcat(prim.h(xn, t + dt, s + dt, xsw), prim.roa_margin(xn, t + dt))
         z = ca.vertcat(x, t, s, xsw, th)
-        step = ca.Function("robust_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th), out])
-        first = ca.Function("robust_first", [x, t, s, th, d], [ca.vertcat(prim.h(x, t, s, x), prim.roa_margin(x, t)),
-                                                         ca.SX(0, 1)])
+        step = cse(ca.Function("robust_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th), out]))
+        first = cse(ca.Function("robust_first", [x, t, s, th, d], [ca.vertcat(prim.h(x, t, s, x),
+                                                                           prim.roa_margin(x, t)), ca.SX(0, 1)]))
         return step, first, nth, nd, 0
 
     def _map(self, fn: ca.Function, n: int) -> ca.Function:

@@ -18,7 +18,7 @@ import numpy as np
 from ..compile.contacts import grid_clock
 from ..compile.primitive import CompiledPrimitive
 from ..oracle.flow import rk4
-from ..oracle.integrator import compile_cached
+from ..oracle.jit import compile_many, cse
 from ..spec.models import PrimitiveClass
 
 HOLD = 0.5
@@ -37,20 +37,19 @@ def _step(prim: CompiledPrimitive, plant_fn: ca.Function, Bd: np.ndarray, dt: fl
 
     xn, _ = rk4(f, x, (t, s), dt)
     z = ca.vertcat(x, t, s, xsw)
-    return ca.Function(f"dstep_{prim.digest()[:16]}", [z, th, d],
-                       [ca.vertcat(xn, t + dt, s + dt, xsw), prim.h(xn, t + dt, s + dt, xsw),
-                        prim.roa_margin(xn, t + dt)])
+    return cse(ca.Function(f"dstep_{prim.digest()[:16]}", [z, th, d],
+                           [ca.vertcat(xn, t + dt, s + dt, xsw), prim.h(xn, t + dt, s + dt, xsw),
+                            prim.roa_margin(xn, t + dt)]))
 
 
 class _Stepper:
     """One primitive's mapped step over the runs: init (x0, clock, theta, d) -> z and step (z, theta,
     d) -> (z next, h, RoA margin), on columns (runs); z = [x; clock; s; x_sw; ...]."""
 
-    def __init__(self, step: ca.Function, first: ca.Function | None, runs: int, rigid: bool, jit_flags):
-        jit = (lambda fn: compile_cached(fn, jit_flags)) if jit_flags is not None else (lambda fn: fn)
+    def __init__(self, step: ca.Function, first: ca.Function | None, runs: int, rigid: bool):
         self.rigid, self.nz = rigid, step.size1_in(0)
-        self.step = _Bound(jit(step).map(runs))
-        self.first = _Bound(jit(first).map(runs)) if first is not None else None
+        self.step = _Bound(step.map(runs))
+        self.first = _Bound(first.map(runs)) if first is not None else None
 
     def init(self, X0, T0, TH, D) -> np.ndarray:
         z = np.vstack([X0, T0[None, :], np.zeros((1, X0.shape[1])), X0])
@@ -271,6 +270,14 @@ class _Runs:
         return None
 
 
+def _compiled(built: dict, runs: int, rigid: bool, settings) -> dict[str, _Stepper]:
+    """Steppers of the (step, first) pairs of every primitive, all compiled side by side."""
+    fns = [f for pair in built.values() for f in pair if f is not None]
+    fns = iter(compile_many(fns, settings.jit_flags) if settings.jit else fns)
+    return {name: _Stepper(next(fns), next(fns) if first is not None else None, runs, rigid)
+            for name, (_step_fn, first) in built.items()}
+
+
 def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], list[str], int, np.ndarray]:
     """Each primitive's mapped step over `runs` on the perturbed plant, the uncertain parameters'
     names, the disturbance's size and bound."""
@@ -279,14 +286,12 @@ def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], lis
 
     unc, sys = spec.project.uncertainty, next(iter(prims.values())).system
     names, dist = list(unc.parameters), unc.disturbance
-    flags = settings.jit_flags if settings.jit else None
-    out = {}
     if sys.is_rigid_body:
         force = dist.force if dist is not None else None
         frame = force.frame if force is not None else sys.base_frames()[0]
-        for name, p in prims.items():
-            step, first, *_ = rigid_step(p, robust_plant(p, frame), names, frame, force is not None, settings.dt)
-            out[name] = _Stepper(step, first, runs, True, flags)
+        built = {name: rigid_step(p, robust_plant(p, frame), names, frame, force is not None, settings.dt)[:2]
+                 for name, p in prims.items()}
+        out = _compiled(built, runs, True, settings)
         return out, names, 3 if force is not None else 0, np.asarray(force.bound if force else [], float)
     dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
     bound = np.broadcast_to(np.asarray(dist.bound, float), (len(dist_idx),)) if dist is not None else np.zeros(0)
@@ -294,8 +299,7 @@ def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], lis
     for k, i in enumerate(dist_idx):
         Bd[i, k] = 1.0
     P = plant(spec, names)
-    for name, p in prims.items():
-        out[name] = _Stepper(_step(p, P, Bd, settings.dt), None, runs, False, flags)
+    out = _compiled({name: (_step(p, P, Bd, settings.dt), None) for name, p in prims.items()}, runs, False, settings)
     return out, names, len(dist_idx), bound
 
 

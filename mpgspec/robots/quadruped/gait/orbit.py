@@ -23,7 +23,7 @@ from ....compile.primitive import saturate
 from ....compile.rigidbody.symmetry import (NEUTRAL, lift_function, lift_jacobian, reduce_function,
                                           reduced_monodromy)
 from ....oracle.flow import LEFT, rk4_jump
-from ....oracle.integrator import compile_cached
+from ....oracle.jit import compile_cached, cse_sx
 from ..stance import nominal_geometry
 from ..trot import gains_of, trot_torque
 
@@ -79,7 +79,7 @@ class StrideMap:
         lam = ca.vertcat(*[loop.env[f"{ft}_f{a}"] for ft in feet for a in "xyz"])
         fz = ca.vertcat(*[sys.extra_env[f"{ft}_z"] for ft in feet])
         self.aux = ca.Function("aux", [x, t, c], [u, ca.substitute(lam, sys.u, u), ca.vertcat(*mode.values()), fz])
-        jump = schedule.jump(sys, ca.SX.sym("tj"))
+        jump = cse_sx(schedule.jump(sys, ca.SX.sym("tj")))
         z = ca.MX.sym("z", sys.nx + 2)  # [x; t; c]: the RK4 stages call f, so its code is generated once
         xm, tm, cm = z[:sys.nx], z[sys.nx], z[sys.nx + 1]
         xn = rk4_jump(lambda xx, tt: f(xx, tt, cm), lambda xx, tt: k_u(xx, tt, cm), jump, xm, tm, self.dt, LEFT)

@@ -1,0 +1,135 @@
+"""The compile cache: compile_many's order, cache hits and failure fallback, same-named Functions,
+the compile log, and common-subexpression elimination keeping outputs equal."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mpgspec.api import compile_project
+from mpgspec.oracle import jit
+from mpgspec.oracle.integrator import build_chunk, build_chunks, initial_state
+from mpgspec.oracle.jit import cache_dir, compile_cached, compile_many, with_cse
+from mpgspec.spec.loader import load_project
+
+
+@pytest.fixture(autouse=True)
+def private_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("MPGSPEC_CACHE", str(tmp_path / "cache"))
+    monkeypatch.delenv("MPGSPEC_JIT_LOG", raising=False)
+
+
+def _fns(tag: str, n: int) -> list[ca.Function]:
+    x = ca.SX.sym("x", 2)
+    return [ca.Function(f"{tag}{k}", [x], [(k + 1) * ca.sin(x[0]) + x[1] ** (k + 1)]) for k in range(n)]
+
+
+def _eval(fn: ca.Function, v) -> np.ndarray:
+    return np.asarray(fn(ca.DM(v))).ravel()
+
+
+def test_compile_many_keeps_order_and_values():
+    fns = _fns("order", 4)
+    out = compile_many(fns, ("-O1",), n_jobs=2)
+    assert [f.name() for f in out] == [f.name() for f in fns]
+    for f, g in zip(fns, out):
+        assert not g.is_a("SXFunction")  # loaded from a library
+        np.testing.assert_allclose(_eval(g, [0.3, 1.7]), _eval(f, [0.3, 1.7]), rtol=1e-14)
+
+
+def test_compile_many_hits_the_cache(tmp_path, monkeypatch):
+    log = tmp_path / "jit.jsonl"
+    monkeypatch.setenv("MPGSPEC_JIT_LOG", str(log))
+    fns = _fns("hit", 2)
+    compile_many(fns, ("-O1",))
+    libs = sorted(cache_dir().glob("*.so"))
+    assert len(libs) == 2
+    stamps = [p.stat().st_mtime_ns for p in libs]
+    compile_many(fns, ("-O1",))
+    assert [p.stat().st_mtime_ns for p in sorted(cache_dir().glob("*.so"))] == stamps
+    recs = [json.loads(line) for line in log.read_text().splitlines()]
+    assert [r["hit"] for r in recs] == [False, False, True, True]
+    assert [r["name"] for r in recs] == ["hit0", "hit1", "hit0", "hit1"]
+
+
+def test_failed_compile_falls_back_to_the_uncompiled_function(monkeypatch):
+    monkeypatch.setenv("CC", "/nonexistent/cc")
+    fns = _fns("fail", 2)
+    with pytest.warns(UserWarning, match="running it uncompiled"):
+        out = compile_many(fns, ("-O1",), n_jobs=2)
+    assert all(a is b for a, b in zip(out, fns))
+    assert not list(cache_dir().glob("*.so"))
+
+
+def test_same_name_different_code_loads_its_own_library():
+    x = ca.SX.sym("x")
+    f = ca.Function("twin", [x], [2 * x])
+    g = ca.Function("twin", [x], [3 * x + 1])
+    cf, cg = compile_many([f, g], ("-O1",), n_jobs=2)
+    cf2 = compile_cached(f, ("-O1",))
+    cg2 = compile_cached(g, ("-O1",))
+    assert float(cf(1.5)) == 3.0 and float(cf2(1.5)) == 3.0
+    assert float(cg(1.5)) == 5.5 and float(cg2(1.5)) == 5.5
+    assert len(list(cache_dir().glob("twin_*.so"))) == 2
+
+
+def test_compile_log_records_each_call(tmp_path, monkeypatch):
+    log = tmp_path / "log.jsonl"
+    monkeypatch.setenv("MPGSPEC_JIT_LOG", str(log))
+    (f,) = _fns("logged", 1)
+    compile_cached(f, ("-O1",))
+    compile_cached(f, ("-O1",))
+    first, second = [json.loads(line) for line in log.read_text().splitlines()]
+    assert first["name"] == "logged0" and first["hit"] is False and first["gcc_s"] > 0
+    assert first["c_bytes"] > 100 and first["flags"] == ["-O1"]
+    assert second["hit"] is True and second["gcc_s"] == 0 and second["c_bytes"] == first["c_bytes"]
+
+
+def test_large_code_gets_the_large_code_flags(monkeypatch, tmp_path):
+    log = tmp_path / "log.jsonl"
+    monkeypatch.setenv("MPGSPEC_JIT_LOG", str(log))
+    monkeypatch.setattr(jit, "LARGE_CODE", 10)
+    compile_cached(_fns("big", 1)[0], ("-O1",))
+    assert json.loads(log.read_text())["flags"] == ["-O1", *jit.LARGE_CODE_FLAGS]
+
+
+def _repeated(sym):
+    x = sym("x", 3)
+    a = ca.sin(x[0] * x[1]) + ca.exp(x[2] * x[0])
+    b = ca.sin(x[0] * x[1]) + ca.exp(x[2] * x[0])  # the same expression built twice
+    return x, ca.vertcat(a * b, a + b, ca.sqrt(1 + a * a))
+
+
+@pytest.mark.parametrize("sym", [ca.SX.sym, ca.MX.sym])
+def test_cse_keeps_outputs_and_shrinks_the_code(sym):
+    x, y = _repeated(sym)
+    f = ca.Function("rep", [x], [y])
+    g = with_cse(f)
+    assert g.name() == f.name() and g.n_in() == f.n_in()
+    assert g.n_instructions() < f.n_instructions()
+    rng = np.random.default_rng(0)
+    for v in rng.uniform(-1, 1, (20, 3)):
+        np.testing.assert_allclose(_eval(g, v), _eval(f, v), rtol=1e-15, atol=0)
+    cf, cg = compile_many([f, g], ("-O1",))
+    for v in rng.uniform(-1, 1, (5, 3)):
+        assert np.max(np.abs(_eval(cf, v) - _eval(cg, v))) <= 1e-14
+
+
+def test_build_chunks_compiles_several_primitives_like_build_chunk(tmp_path):
+    root = Path(__file__).resolve().parents[2]
+    prims = list(compile_project(load_project(root / "specs" / "pendulum" / "project.yaml")).values())[:2]
+    chunks = build_chunks(prims + prims[:1], 0.005, 16)
+    assert len(chunks) == 3 and chunks[2] is chunks[0]
+    assert [c.prim for c in chunks[:2]] == prims
+    for p, c in zip(prims, chunks):
+        assert build_chunk(p, 0.005, 16) is c  # remembered on the primitive under build_chunk's key
+        plain = build_chunk(p, 0.005, 16, jit=False)
+        assert c.fn.class_name() != plain.fn.class_name()  # loaded from a library
+        z = initial_state(p, np.asarray(p.setpoint(0.0), float).ravel() + 0.1, 0.0)[:, None]
+        zf, out = c.run(z)
+        zf0, out0 = plain.run(z)
+        np.testing.assert_allclose(zf, zf0, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(out, out0, rtol=1e-12, atol=1e-12)
