@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
-from ..oracle.trace import trace
+from ..oracle.trace import prebuild, trace
 from ..settings import OracleSettings
 from .transition import MotionPrimitiveGraph, TransitionClass
 
@@ -38,6 +38,8 @@ def failure_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive],
                    pairs: list[tuple[str, str]]) -> list[dict]:
     """For pairs without an edge: h over time from the start point whose flow came closest to E."""
     out = []
+    prebuild([prims[b] for a, b in pairs if (a, b) in g.transitions
+              and g.transitions[(a, b)].cls is TransitionClass.NONE], settings)
     for a, b in pairs:
         tr = g.transitions.get((a, b))
         if tr is None or tr.cls is not TransitionClass.NONE:
@@ -52,6 +54,7 @@ def failure_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive],
 def edge_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings) -> list[dict]:
     """For every edge: h and the E margin over time of the verified switch from the first available t_A."""
     out = []
+    prebuild([prims[b] for (a, b), tr in g.transitions.items() if tr.cls is not TransitionClass.NONE], settings)
     for (a, b), tr in g.transitions.items():
         if tr.cls is TransitionClass.NONE:
             continue

@@ -5,13 +5,27 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from ..settings import OracleSettings
-from .integrator import build_chunk, initial_state
+from .integrator import build_chunk, build_chunks, initial_state
+
+TRACE_STEPS = 64
+"""Steps per compiled call of a trace."""
+
+
+def prebuild(prims: list[CompiledPrimitive], settings: OracleSettings) -> None:
+    """Compile the trace chunks of several primitives side by side (gcc in parallel) before tracing.
+    A primitive that cannot be built here is left to its own trace, which records the error."""
+    if not (settings.jit and prims):
+        return
+    try:
+        build_chunks(prims, settings.dt, TRACE_STEPS, tuple(settings.jit_flags), with_state=True, boundaries=False)
+    except Exception:  # noqa: BLE001 - each trace builds its chunk again and reports its own failure
+        pass
 
 
 def trace(prim: CompiledPrimitive, x0: np.ndarray, t0: float, horizon: float, settings: OracleSettings,
           max_points: int = 400) -> dict:
     """Roll B's closed loop from x0 at clock t0 for `horizon` seconds; series decimated to max_points."""
-    ch = build_chunk(prim, settings.dt, 64, settings.jit, settings.jit_flags, with_state=True, boundaries=False)
+    ch = build_chunk(prim, settings.dt, TRACE_STEPS, settings.jit, settings.jit_flags, with_state=True, boundaries=False)
     n = int(np.ceil(horizon / settings.dt - 1e-9)) + 1
     z = initial_state(prim, np.asarray(x0, float), t0)
     outs = []
