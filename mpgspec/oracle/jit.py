@@ -35,6 +35,11 @@ from pathlib import Path
 
 import casadi as ca
 
+try:
+    import fcntl
+except ImportError:  # not on POSIX: concurrent processes may compile the same library twice
+    fcntl = None
+
 LARGE_CODE = 1_000_000
 LARGE_CODE_FLAGS = ("-fno-tree-ter", "-fno-tree-fre", "-fno-tree-dominator-opts")
 """For generated C above LARGE_CODE bytes (robot loops: megabytes in one function) these -O1
@@ -101,10 +106,23 @@ def _job(fn: ca.Function, flags: tuple[str, ...]) -> _Job:
 
 
 def _gcc(job: _Job) -> None:
-    """Compile job's code into its library (atomically); on failure, job.error says why."""
+    """Compile job's code into its library (atomically), once across processes: a process that finds
+    the library's lock taken waits for it and loads what the other compiled (test workers, oracle
+    worker processes and parallel runs share one cache). On failure, job.error says why."""
     folder = job.lib.parent
     folder.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
+    with open(folder / f"{job.lib.stem}.lock", "a") as lock:
+        if fcntl is not None:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
+        if job.lib.exists():  # compiled by another process while this one waited
+            job.hit = True
+        else:
+            _compile(job, folder)
+    job.gcc_s = time.perf_counter() - t
+
+
+def _compile(job: _Job, folder: Path) -> None:
     with tempfile.TemporaryDirectory(dir=folder) as tmp:
         src = Path(tmp) / f"{job.fn.name()}.c"
         src.write_text(job.code)
@@ -116,7 +134,6 @@ def _gcc(job: _Job) -> None:
             os.replace(out, job.lib)  # atomic: concurrent processes never load a half-written library
         except (OSError, subprocess.CalledProcessError) as err:
             job.error = getattr(err, "stderr", "") or str(err)
-    job.gcc_s = time.perf_counter() - t
 
 
 def _log(job: _Job) -> None:

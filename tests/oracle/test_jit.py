@@ -133,3 +133,24 @@ def test_build_chunks_compiles_several_primitives_like_build_chunk(tmp_path):
         zf0, out0 = plain.run(z)
         np.testing.assert_allclose(zf, zf0, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(out, out0, rtol=1e-12, atol=1e-12)
+
+
+def test_two_processes_compile_one_library_once(tmp_path):
+    """Concurrent processes asking for the same library: one gcc runs, the other waits and loads it."""
+    import os
+    import subprocess
+    import sys
+
+    count = tmp_path / "gcc_calls"
+    cc = tmp_path / "cc"
+    cc.write_text(f"#!/bin/sh\necho x >> {count}\nsleep 1\nexec gcc \"$@\"\n")
+    cc.chmod(0o755)
+    script = ("import casadi as ca, numpy as np\nfrom mpgspec.oracle.jit import compile_cached\n"
+              "x = ca.SX.sym('x')\nf = compile_cached(ca.Function('shared_lib', [x], [3 * x + 1]), ('-O1',))\n"
+              "print(float(f(2)))\n")
+    env = {**os.environ, "CC": str(cc)}
+    procs = [subprocess.Popen([sys.executable, "-c", script], env=env, stdout=subprocess.PIPE, text=True)
+             for _ in range(2)]
+    outs = [p.communicate(timeout=120)[0].strip() for p in procs]
+    assert outs == ["7.0", "7.0"]
+    assert count.read_text().count("x") == 1
