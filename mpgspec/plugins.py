@@ -22,13 +22,23 @@ def load_plugins(group: str, builtin: dict[str, str], check: Check | None = None
         mod, _, attr = target.partition(":")
         try:
             plugin = getattr(__import__(mod, fromlist=[attr]), attr)
-        except ImportError:
+        except ImportError as err:  # an optional dependency is missing, or the plug-in itself is broken
+            _UNLOADED.setdefault(group, {})[name] = f"{type(err).__name__}: {err}"
             continue
         if check is not None:
             check(name, target, plugin)
         if plugin.is_installed():
             out[name] = plugin
     return out
+
+
+_UNLOADED: dict[str, dict[str, str]] = {}
+"""Plug-ins declared but not importable, by group and name, with the import error."""
+
+
+def unloaded(group: str) -> dict[str, str]:
+    """The plug-ins of `group` that load_plugins skipped because importing them failed, with why."""
+    return dict(_UNLOADED.get(group, {}))
 
 
 _ADDED: dict[str, dict[str, EntryPoint]] = {}

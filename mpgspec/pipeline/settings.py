@@ -7,7 +7,8 @@ import difflib
 import numpy as np
 
 from ..errors import SpecError, UsageError
-from ..oracle.registry import backends, get_backend
+from ..oracle.registry import GROUP, backends, get_backend
+from ..plugins import unloaded
 from ..settings import OracleSettings
 from ..spec.loader import ProjectSpec
 
@@ -25,9 +26,12 @@ def settings_for(spec: ProjectSpec, overrides: dict | None = None) -> OracleSett
             raise
         names = sorted(backends())
         near = difflib.get_close_matches(s.method, names, n=1)
+        broken = unloaded(GROUP).get(s.method)
+        hint = (f"the backend {s.method!r} is installed but could not be imported ({broken}); reinstall mpgspec"
+                if broken else f"did you mean {near[0]!r}?" if near else "")
         raise SpecError("unknown oracle method", location=spec.locate(("oracle", "method")), key="oracle.method",
-                        expected="one of " + ", ".join(names), found=repr(s.method),
-                        hint=f"did you mean {near[0]!r}?" if near else "", code="MPG104") from None
+                        expected="one of " + ", ".join(names) if names else "an installed oracle backend",
+                        found=repr(s.method), hint=hint, code="MPG104") from None
     _check_budget(spec, s)
     return s
 

@@ -108,3 +108,20 @@ def test_a_backend_without_a_runner_is_refused_naming_its_entry_point(tmp_path, 
     with pytest.raises(BackendError, match=r"entry point norunner = .*:broken.*lacks method runner\(\)") as err:
         registry.get_backend("rk4")
     assert isinstance(err.value, UsageError)
+
+
+def test_a_backend_that_cannot_be_imported_is_named_with_its_import_error(tmp_path, monkeypatch, fresh_registry):
+    """A declared backend whose module fails to import: the spec error says so, with the import error."""
+    from mpgspec.errors import SpecError
+    from mpgspec.pipeline.settings import settings_for
+    from mpgspec.spec.loader import load_project
+
+    install(tmp_path / "site", monkeypatch, halfway="mpgspec_no_such_module_xyz:backend")
+    project = tmp_path / "pendulum"
+    shutil.copytree(ROOT / "specs" / "pendulum", project)
+    text = (project / "project.yaml").read_text()
+    (project / "project.yaml").write_text(text.replace("oracle:\n", "oracle:\n  method: halfway\n", 1))
+    with pytest.raises(SpecError) as err:
+        settings_for(load_project(project / "project.yaml"))
+    msg = str(err.value)
+    assert "halfway" in msg and "could not be imported" in msg and "mpgspec_no_such_module_xyz" in msg, msg
