@@ -6,12 +6,18 @@ workers once (pickled through CasADi's serialisation; each worker rebuilds its c
 from the on-disk cache) and results come back in task order. Every rollout is computed in its own
 batch slot, independently of its neighbours, so the graph does not depend on the executor or the
 number of workers.
+
+Any other per-item work of a build (the robust stage's targets, the uncertain sequence's modes)
+goes through `map(fn, items)`: a picklable module-level function, results in item order, a call
+that raises (or whose worker dies) is that item's Failed result, never the end of the run.
 """
 from __future__ import annotations
 
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
+
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
@@ -20,7 +26,8 @@ from ..settings import OracleSettings
 from .cache import CachedExecutor
 from .evidence import OracleEvidence, Reason
 from .oracle import SafetyOracle
-from .tasks import Executor, Task
+from .tasks import Executor, Failed, Task, call
+
 TASKS_PER_WORKER = 4
 MIN_BATCH = 16
 
@@ -70,6 +77,16 @@ class InProcess:
             out.append(evaluate(self.oracles, prims, settings, task))
         return out
 
+    def map(self, fn, items, progress=None, label="tasks"):
+        """fn over items, one after the other, in this process."""
+        items = list(items)
+        out = []
+        for k, item in enumerate(items):
+            if progress:
+                progress(label, k, len(items))
+            out.append(call(fn, item))
+        return out
+
 
 _worker: dict = {}
 
@@ -107,22 +124,46 @@ class ProcessPool:
         self.workers = max(1, int(workers))
 
     def run(self, prims, settings, tasks, progress=None):
-        out: list = [None] * len(tasks)
         pool = ProcessPoolExecutor(max_workers=self.workers, initializer=_init, initargs=(prims, settings))
-        finished = False
-        try:
-            futures = {pool.submit(_run, t): k for k, t in enumerate(tasks)}
-            for done, f in enumerate(as_completed(futures), start=1):
+        return _collect(pool, [(_run, t) for t in tasks], progress, f"oracle on {self.workers} processes")
+
+    def map(self, fn, items, progress=None, label="tasks"):
+        """fn over items in up to `workers` fresh processes (each item pickled to its worker)."""
+        items = list(items)
+        if not items:
+            return []
+        pool = ProcessPoolExecutor(max_workers=min(self.workers, len(items)), initializer=_worker_signals)
+        return _collect(pool, [(call, fn, item) for item in items], progress,
+                        f"{label} on {min(self.workers, len(items))} processes",
+                        lambda err: Failed(f"{type(err).__name__}: {err}"[:500]))
+
+
+def _collect(pool: ProcessPoolExecutor, jobs: list[tuple], progress, what: str, on_error=None) -> list:
+    """The results of jobs (function, *args) submitted to the pool, in job order; on_error(err) is
+    the result of a job whose future raised (a dead worker, a result that does not pickle), else the
+    error propagates. The pool is shut down after; on an error, SIGINT or SIGTERM (raised by the
+    CLI's handler) its workers are stopped, so none outlives us."""
+    out: list = [None] * len(jobs)
+    finished = False
+    try:
+        futures = {pool.submit(*job): k for k, job in enumerate(jobs)}
+        for done, f in enumerate(as_completed(futures), start=1):
+            if on_error is None:
                 out[futures[f]] = f.result()
-                if progress:
-                    progress(f"oracle on {self.workers} processes", done, len(tasks))
-            finished = True
-        finally:
-            if finished:
-                pool.shutdown(wait=True)
-            else:  # an error, SIGINT or SIGTERM (raised by the CLI's handler): no worker outlives us
-                _stop_pool(pool)
-        return out
+            else:
+                try:
+                    out[futures[f]] = f.result()
+                except Exception as err:
+                    out[futures[f]] = on_error(err)
+            if progress:
+                progress(what, done, len(jobs))
+        finished = True
+    finally:
+        if finished:
+            pool.shutdown(wait=True)
+        else:
+            _stop_pool(pool)
+    return out
 
 
 def _stop_pool(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
@@ -159,9 +200,11 @@ class DaskExecutor:
         self.address = address
         self.workers = max(1, int(workers))
 
-    def run(self, prims, settings, tasks, progress=None):
+    @contextmanager
+    def _client(self):
+        """A client of the scheduler at `address`, or of a LocalCluster started (and closed) here."""
         try:
-            from dask.distributed import Client, LocalCluster, as_completed as dask_completed
+            from dask.distributed import Client, LocalCluster
         except ImportError as err:  # pragma: no cover - depends on the installation
             raise UsageError("Dask is not installed; install mpgspec with the 'dask' extra: "
                              "pip install 'mpgspec[dask]'") from err
@@ -173,19 +216,44 @@ class DaskExecutor:
         try:
             if cluster is None:
                 self.workers = max(1, len(client.scheduler_info().get("workers", {})))
-            remote = client.scatter(prims, broadcast=True)
-            futures = client.map(_dask_run, tasks, prims=remote, settings=settings, pure=False)
-            index = {f.key: k for k, f in enumerate(futures)}
-            out: list = [None] * len(tasks)
-            for done, f in enumerate(dask_completed(futures), start=1):
-                out[index[f.key]] = f.result()
-                if progress:
-                    progress(f"oracle on Dask ({self.workers} workers)", done, len(tasks))
-            return out
+            yield client
         finally:
             client.close()
             if cluster is not None:
                 cluster.close()
+
+    def run(self, prims, settings, tasks, progress=None):
+        with self._client() as client:
+            remote = client.scatter(prims, broadcast=True)
+            futures = client.map(_dask_run, tasks, prims=remote, settings=settings, pure=False)
+            return _gather(futures, progress, f"oracle on Dask ({self.workers} workers)")
+
+    def map(self, fn, items, progress=None, label="tasks"):
+        """fn over items on the cluster's workers."""
+        items = list(items)
+        if not items:
+            return []
+        with self._client() as client:
+            futures = client.map(call, [fn] * len(items), items, pure=False)
+            return _gather(futures, progress, f"{label} on Dask ({self.workers} workers)",
+                           lambda err: Failed(f"{type(err).__name__}: {err}"[:500]))
+
+
+def _gather(futures: list, progress, what: str, on_error=None) -> list:
+    """The results of Dask futures in their order; on_error(err) is the result of one that raised
+    (a lost worker), else the error propagates."""
+    from dask.distributed import as_completed as dask_completed
+
+    index = {f.key: k for k, f in enumerate(futures)}
+    out: list = [None] * len(futures)
+    for done, f in enumerate(dask_completed(futures), start=1):
+        if on_error is not None and f.status == "error":
+            out[index[f.key]] = on_error(f.exception())
+        else:
+            out[index[f.key]] = f.result()
+        if progress:
+            progress(what, done, len(futures))
+    return out
 
 
 def make_executor(jobs: int = 1, dask: str | None = None, cache: bool = False) -> Executor:

@@ -1,12 +1,14 @@
-"""What an executor runs: tasks of (target primitive, batch of start points), and the Executor contract.
+"""What an executor runs: tasks of (target primitive, batch of start points), any picklable
+function over a list of items (map), and the Executor contract.
 
-Executors (executors.py) run the tasks where the oracle calls go; the result cache (cache.py)
-wraps any executor and hands it only the start points it has not stored.
+Executors (executors.py) run the tasks where the oracle calls go, and the other per-item work of a
+build (the robust stage's targets, the uncertain sequence's modes) through `map`; the result cache
+(cache.py) wraps any executor and hands it only the start points it has not stored.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Any, Callable, Protocol
 
 import numpy as np
 
@@ -29,12 +31,32 @@ class Task:
         return len(self.t0s)
 
 
+@dataclass(frozen=True)
+class Failed:
+    """The result of a map item whose call raised (or whose worker died): the error, as that item's
+    evidence; the other items still run."""
+
+    error: str
+
+
+def call(fn: Callable[[Any], Any], item: Any) -> Any:
+    """fn(item), or Failed with the error's type and message when it raises an Exception."""
+    try:
+        return fn(item)
+    except Exception as err:
+        return Failed(f"{type(err).__name__}: {err}"[:500])
+
+
 class Executor(Protocol):
-    """Runs tasks and returns each one's evidence, in task order, on `workers` processes."""
+    """Runs tasks and returns each one's evidence, in task order, on `workers` processes; maps a
+    picklable module-level function over items, results in item order (a raising call is Failed)."""
 
     workers: int
 
     def run(self, prims: dict[str, CompiledPrimitive], settings: OracleSettings, tasks: list[Task],
             progress: Progress | None = None) -> list[list[OracleEvidence]]: ...
+
+    def map(self, fn: Callable[[Any], Any], items: list, progress: Progress | None = None,
+            label: str = "tasks") -> list: ...
 
 

@@ -92,7 +92,7 @@ def simulate_uncertain(project, runs: int | None = None, seed: int | None = None
 
         executor = cached_executor()
         cp, vg = rebuild(spec, executor)
-        rob = robust_stage(cp, vg, memo=getattr(executor, "memo", None))
+        rob = robust_stage(cp, vg, memo=getattr(executor, "memo", None), executor=executor)
         graphs = {"graph": (vg.graph, lookup_table(vg.graph)), "robust_graph": (rob.graph, lookup_table(rob.graph))}
     stats = sequence_under_uncertainty(spec, cp.prims, cp.settings, graphs, runs, seed)
     return {"stats": stats, "uncertainty": unc, "runs": runs, "seed": seed}
