@@ -89,23 +89,10 @@ def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResul
                             {"robust_s": time.perf_counter() - t0, "robust_cache_hit": 1.0}, known["sequence"],
                             known["nodes"])
     sys = next(iter(prims.values())).system
-    sc, rollout = _setup(spec, sys, unc, settings)
+    sc, jobs = target_jobs(spec, prims, settings, g)
     among = set(unc.nodes) if unc.nodes is not None else set(prims)
-    by_target = _by_target(g, among)
-    jobs = [TargetJob({n: prims[n] for n in {b, *(a for a, _ in items)}}, b, items, unc, settings, sc, rollout)
-            for b, items in by_target.items()]
     cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
-    done = (executor or InProcess()).map(run_target, jobs, cb, label="robust graph")
-    edges, nodes, n_roll, build_s = [], [], 0, 0.0
-    for job, res in zip(jobs, done):
-        if isinstance(res, Failed):
-            e, node = failed_target(prims, job.target, job.items, unc, res.error)
-            n, s = 0, 0.0
-        else:
-            e, node, n, s = res
-        edges += e
-        nodes.append(node)
-        n_roll, build_s = n_roll + n, build_s + s
+    edges, nodes, n_roll, build_s = check_targets(jobs, prims, unc, executor, cb)
     rg = _robust_graph(g, edges, unc.nodes)
     scen = _scenario_record(unc, sc, among, edges, sys)
     t1 = time.perf_counter()
@@ -115,7 +102,7 @@ def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResul
             progress(spec.name, "sequence under uncertainty", 0, 3)
         seq = sequence_under_uncertainty(spec, prims, settings, {"graph": (g, lookup_table(g)),
                                                                  "robust_graph": (rg, lookup_table(rg))},
-                                         unc.runs, unc.seed)
+                                         unc.runs, unc.seed, executor, cb)
     timing = {"robust_s": time.perf_counter() - t0, "robust_build_s": build_s, "robust_rollouts": n_roll,
               "robust_sequence_s": time.perf_counter() - t1}
     edges.sort(key=lambda e: (e["from"], e["to"]))
@@ -170,6 +157,34 @@ def _setup(spec, sys, unc, settings) -> tuple[Scenarios, RolloutFactory]:
     rng = np.random.default_rng(unc.seed)
     TH, ERR, SG, KIND = scenarios(unc, sys, rng, nominal_values)
     return Scenarios(names, TH, ERR, SG, KIND, bound, K, dist_names, list(sys.state_names)), rollout
+
+
+def check_targets(jobs: list[TargetJob], prims: dict, unc, executor=None, progress=None) -> tuple[list, list, int, float]:
+    """(edge records, own-flow records, rollouts run, seconds building rollouts) of the target jobs,
+    run through the executor's map (in this process when None); a job that raised gets the records
+    of failed_target, with its error as the evidence."""
+    done = (executor or InProcess()).map(run_target, jobs, progress, label="robust graph")
+    edges, nodes, n_roll, build_s = [], [], 0, 0.0
+    for job, res in zip(jobs, done):
+        if isinstance(res, Failed):
+            e, node = failed_target(prims, job.target, job.items, unc, res.error)
+            n, s = 0, 0.0
+        else:
+            e, node, n, s = res
+        edges += e
+        nodes.append(node)
+        n_roll, build_s = n_roll + n, build_s + s
+    return edges, nodes, n_roll, build_s
+
+
+def target_jobs(spec, prims: dict, settings, g: MotionPrimitiveGraph) -> tuple[Scenarios, list[TargetJob]]:
+    """The scenarios every cell runs, and one job per target of a nominal edge among the uncertainty's
+    nodes: the target, its in-edges and the closed loops they need."""
+    unc, sys = spec.project.uncertainty, next(iter(prims.values())).system
+    sc, rollout = _setup(spec, sys, unc, settings)
+    among = set(unc.nodes) if unc.nodes is not None else set(prims)
+    return sc, [TargetJob({n: prims[n] for n in {b, *(a for a, _ in items)}}, b, items, unc, settings, sc, rollout)
+                for b, items in _by_target(g, among).items()]
 
 
 def _by_target(g: MotionPrimitiveGraph, among: set) -> dict[str, list]:

@@ -1,5 +1,6 @@
-"""The robust stage through the executor: one job per target, the same result in a process pool as
-in this process, and a target whose check raises is that target's evidence, not the end of the run."""
+"""The robust stage through the executor: one job per target and the uncertain sequence's modes
+spread over the workers, the same result in a process pool as in this process, and a target (or a
+mode) whose work raises is its own evidence, not the end of the run."""
 from __future__ import annotations
 
 import json
@@ -12,8 +13,10 @@ import pytest
 from mpgspec import api
 from mpgspec.oracle.executors import InProcess, ProcessPool
 from mpgspec.robust import graph as robust_graph
+from mpgspec.robust import sequence
 from mpgspec.robust.cells import run_target
 from mpgspec.robust.graph import robust_stage
+from mpgspec.robust.sequence import sequence_under_uncertainty
 from mpgspec.spec.loader import load_project
 
 PEND = Path(__file__).resolve().parents[2] / "specs" / "pendulum"
@@ -92,3 +95,42 @@ def test_a_target_whose_check_raises_is_its_own_evidence(built, serial, monkeypa
             assert "could not be compiled" in e["worst_case"]["error"]
         else:
             assert e == ref  # the other targets are untouched
+
+
+class TwoInProcess(InProcess):
+    """In this process, but declaring two workers: the modes are split into two jobs."""
+
+    workers = 2
+
+
+def _graphs(built, rob):
+    from mpgspec.plan.planner import lookup_table
+
+    g = built[1].graph
+    return {"graph": (g, lookup_table(g)), "robust_graph": (rob.graph, lookup_table(rob.graph))}
+
+
+def test_sequence_modes_spread_over_a_pool_give_the_same_statistics(built, serial):
+    cp = built[0]
+    graphs = _graphs(built, serial[0])
+    one = sequence_under_uncertainty(cp.spec, cp.prims, cp.settings, graphs, 6, 11)
+    assert list(one["modes"]) == ["naive", "graph", "robust_graph"]
+    assert sequence_under_uncertainty(cp.spec, cp.prims, cp.settings, graphs, 6, 11, ProcessPool(2)) == one
+
+
+def test_a_sequence_mode_that_raises_is_its_own_evidence(built, serial, monkeypatch):
+    cp = built[0]
+    graphs = _graphs(built, serial[0])
+    real = sequence.run_modes
+
+    def refuse_naive(job):
+        if any(m == "naive" for m, _, _ in job.modes):
+            raise RuntimeError("the stepper could not be built")
+        return real(job)
+
+    monkeypatch.setattr(sequence, "run_modes", refuse_naive)
+    out = sequence_under_uncertainty(cp.spec, cp.prims, cp.settings, graphs, 4, 11, TwoInProcess())["modes"]
+    assert out["naive"]["safe_runs"] == 0 and "could not be built" in out["naive"]["first_violation"][0]["error"]
+    monkeypatch.setattr(sequence, "run_modes", real)
+    ref = sequence_under_uncertainty(cp.spec, cp.prims, cp.settings, graphs, 4, 11)["modes"]
+    assert out["graph"] == ref["graph"] and out["naive"] != ref["naive"]
