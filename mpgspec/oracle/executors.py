@@ -77,14 +77,14 @@ class InProcess:
             out.append(evaluate(self.oracles, prims, settings, task))
         return out
 
-    def map(self, fn, items, progress=None, label="tasks"):
+    def map(self, fn, items, progress=None, label="tasks", shared=None):
         """fn over items, one after the other, in this process."""
         items = list(items)
         out = []
         for k, item in enumerate(items):
             if progress:
                 progress(label, k, len(items))
-            out.append(call(fn, item))
+            out.append(call(fn, item, shared))
         return out
 
 
@@ -117,6 +117,15 @@ def _run(task: Task) -> list[OracleEvidence]:
     return evaluate(_worker["oracles"], _worker["prims"], _worker["settings"], task)
 
 
+def _init_shared(shared) -> None:
+    _worker_signals()
+    _worker["shared"] = shared
+
+
+def _call_shared(fn, item):
+    return call(fn, item, _worker["shared"])
+
+
 class ProcessPool:
     """A local pool of `workers` processes; each receives the closed loops once, at start-up."""
 
@@ -127,13 +136,15 @@ class ProcessPool:
         pool = ProcessPoolExecutor(max_workers=self.workers, initializer=_init, initargs=(prims, settings))
         return _collect(pool, [(_run, t) for t in tasks], progress, f"oracle on {self.workers} processes")
 
-    def map(self, fn, items, progress=None, label="tasks"):
-        """fn over items in up to `workers` fresh processes (each item pickled to its worker)."""
+    def map(self, fn, items, progress=None, label="tasks", shared=None):
+        """fn over items in up to `workers` fresh processes: each item is pickled to its worker,
+        `shared` goes to each worker once, at start-up (inherited, not pickled, where they fork)."""
         items = list(items)
         if not items:
             return []
-        pool = ProcessPoolExecutor(max_workers=min(self.workers, len(items)), initializer=_worker_signals)
-        return _collect(pool, [(call, fn, item) for item in items], progress,
+        pool = ProcessPoolExecutor(max_workers=min(self.workers, len(items)), initializer=_init_shared,
+                                   initargs=(shared,))
+        return _collect(pool, [(_call_shared, fn, item) for item in items], progress,
                         f"{label} on {min(self.workers, len(items))} processes",
                         lambda err: Failed(f"{type(err).__name__}: {err}"[:500]))
 
@@ -228,13 +239,14 @@ class DaskExecutor:
             futures = client.map(_dask_run, tasks, prims=remote, settings=settings, pure=False)
             return _gather(futures, progress, f"oracle on Dask ({self.workers} workers)")
 
-    def map(self, fn, items, progress=None, label="tasks"):
-        """fn over items on the cluster's workers."""
+    def map(self, fn, items, progress=None, label="tasks", shared=None):
+        """fn over items on the cluster's workers; `shared` is scattered to every worker once."""
         items = list(items)
         if not items:
             return []
         with self._client() as client:
-            futures = client.map(call, [fn] * len(items), items, pure=False)
+            remote = client.scatter([shared], broadcast=True)[0] if shared is not None else None  # as one datum
+            futures = client.map(call, [fn] * len(items), items, shared=remote, pure=False)
             return _gather(futures, progress, f"{label} on Dask ({self.workers} workers)",
                            lambda err: Failed(f"{type(err).__name__}: {err}"[:500]))
 

@@ -39,24 +39,25 @@ class Failed:
     error: str
 
 
-def call(fn: Callable[[Any], Any], item: Any) -> Any:
-    """fn(item), or Failed with the error's type and message when it raises an Exception."""
+def call(fn: Callable[..., Any], item: Any, shared: Any = None) -> Any:
+    """fn(item), or fn(shared, item) when shared is given; Failed with the error's type and message
+    when it raises an Exception."""
     try:
-        return fn(item)
+        return fn(item) if shared is None else fn(shared, item)
     except Exception as err:
         return Failed(f"{type(err).__name__}: {err}"[:500])
 
 
 class Executor(Protocol):
     """Runs tasks and returns each one's evidence, in task order, on `workers` processes; maps a
-    picklable module-level function over items, results in item order (a raising call is Failed)."""
+    picklable module-level function over items, results in item order (a raising call is Failed).
+    With `shared`, each call is fn(shared, item) and shared reaches each worker once (the closed
+    loops: tens of megabytes each, not to be sent with every item)."""
 
     workers: int
 
     def run(self, prims: dict[str, CompiledPrimitive], settings: OracleSettings, tasks: list[Task],
             progress: Progress | None = None) -> list[list[OracleEvidence]]: ...
 
-    def map(self, fn: Callable[[Any], Any], items: list, progress: Progress | None = None,
-            label: str = "tasks") -> list: ...
-
-
+    def map(self, fn: Callable[..., Any], items: list, progress: Progress | None = None,
+            label: str = "tasks", shared: Any = None) -> list: ...

@@ -5,7 +5,7 @@ x_A*(t_A) (and from samples of E_A's boundary, with `start_in_roa`) for every sc
 scenario of each cell is then pushed by `search` rounds of an adversarial bang-bang disturbance.
 B's own flow is checked under the same scenarios (_node_check). graph.py builds the robust graph
 from the records made here. Each target is independent of the others: TargetJob carries what one
-needs to a worker process (run_target), and a target whose check raised gets the records of
+needs to a worker process (run_target, with the closed loops shared), and a target whose check raised gets the records of
 failed_target, its error as the evidence of every cell.
 """
 from __future__ import annotations
@@ -54,11 +54,10 @@ def check_target(prims: dict, B, items: list, unc, settings, sc: Scenarios, roll
 
 @dataclass
 class TargetJob:
-    """One target's robust check, picklable: the closed loops it needs (B and the sources of its
-    in-edges), B's name, its nominal in-edges [(A, transition)], the uncertainty, the settings,
-    the scenarios and the rollout factory (rollout(B, horizon), picklable)."""
+    """One target's robust check, picklable and small: B's name, its nominal in-edges [(A,
+    transition)], the uncertainty, the settings, the scenarios and the rollout factory
+    (rollout(B, horizon), picklable). The closed loops travel apart, once per worker."""
 
-    prims: dict
     target: str
     items: list
     unc: object
@@ -67,9 +66,10 @@ class TargetJob:
     rollout: object
 
 
-def run_target(job: TargetJob) -> tuple[list, dict, int, float]:
-    """check_target of the job (the function an executor maps over targets)."""
-    return check_target(job.prims, job.prims[job.target], job.items, job.unc, job.settings, job.sc, job.rollout)
+def run_target(prims: dict, job: TargetJob) -> tuple[list, dict, int, float]:
+    """check_target of the job with the project's closed loops (the function an executor maps
+    over targets, the closed loops shared)."""
+    return check_target(prims, prims[job.target], job.items, job.unc, job.settings, job.sc, job.rollout)
 
 
 def failed_target(prims: dict, b: str, items: list, unc, error: str) -> tuple[list, dict]:

@@ -163,7 +163,7 @@ def check_targets(jobs: list[TargetJob], prims: dict, unc, executor=None, progre
     """(edge records, own-flow records, rollouts run, seconds building rollouts) of the target jobs,
     run through the executor's map (in this process when None); a job that raised gets the records
     of failed_target, with its error as the evidence."""
-    done = (executor or InProcess()).map(run_target, jobs, progress, label="robust graph")
+    done = (executor or InProcess()).map(run_target, jobs, progress, label="robust graph", shared=prims)
     edges, nodes, n_roll, build_s = [], [], 0, 0.0
     for job, res in zip(jobs, done):
         if isinstance(res, Failed):
@@ -179,12 +179,11 @@ def check_targets(jobs: list[TargetJob], prims: dict, unc, executor=None, progre
 
 def target_jobs(spec, prims: dict, settings, g: MotionPrimitiveGraph) -> tuple[Scenarios, list[TargetJob]]:
     """The scenarios every cell runs, and one job per target of a nominal edge among the uncertainty's
-    nodes: the target, its in-edges and the closed loops they need."""
+    nodes: the target and its in-edges."""
     unc, sys = spec.project.uncertainty, next(iter(prims.values())).system
     sc, rollout = _setup(spec, sys, unc, settings)
     among = set(unc.nodes) if unc.nodes is not None else set(prims)
-    return sc, [TargetJob({n: prims[n] for n in {b, *(a for a, _ in items)}}, b, items, unc, settings, sc, rollout)
-                for b, items in _by_target(g, among).items()]
+    return sc, [TargetJob(b, items, unc, settings, sc, rollout) for b, items in _by_target(g, among).items()]
 
 
 def _by_target(g: MotionPrimitiveGraph, among: set) -> dict[str, list]:

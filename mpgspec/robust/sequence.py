@@ -309,21 +309,20 @@ def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], lis
 
 @dataclass
 class ModeJob:
-    """Some modes of the uncertain sequence, picklable: the spec (without its locators), the closed
-    loops, the settings, the runs and seed of the draws, and (mode, graph, lookup table) per mode
-    (graph None: naive)."""
+    """Some modes of the uncertain sequence, picklable: the spec (without its locators), the
+    settings, the runs and seed of the draws, and (mode, graph, lookup table) per mode (graph None:
+    naive). The closed loops travel apart, once per worker."""
 
     spec: object
-    prims: dict
     settings: object
     runs: int
     seed: int
     modes: list
 
 
-def run_modes(job: ModeJob) -> dict:
+def run_modes(prims: dict, job: ModeJob) -> dict:
     """mode -> statistics of the job's modes, on the same seeded draws (the function an executor maps)."""
-    spec, prims, settings = job.spec, job.prims, job.settings
+    spec, settings = job.spec, job.settings
     fns, names, nd, bound = steppers(spec, prims, settings, job.runs)
     ds = DisturbedSequences(prims, fns, names, nd, bound, spec.project.uncertainty, settings,
                             spec.project.sequence, job.runs, job.seed)
@@ -339,12 +338,12 @@ def sequence_under_uncertainty(spec, prims, settings, graphs: dict, runs: int, s
     the draws depend on the seed only); a mode whose job raised records the error as its evidence."""
     modes = [("naive", None, {})] + [(m, g, table) for m, (g, table) in graphs.items()]
     workers = max(1, min(getattr(executor, "workers", 1), len(modes)))
-    jobs = [ModeJob(_portable(spec) if workers > 1 else spec, prims, settings, runs, seed, modes[k::workers])
+    jobs = [ModeJob(_portable(spec) if workers > 1 else spec, settings, runs, seed, modes[k::workers])
             for k in range(workers)]
     if workers == 1:
-        done = [run_modes(jobs[0])]
+        done = [run_modes(prims, jobs[0])]
     else:
-        done = executor.map(run_modes, jobs, progress, label="sequence under uncertainty")
+        done = executor.map(run_modes, jobs, progress, label="sequence under uncertainty", shared=prims)
     out = {}
     for job, res in zip(jobs, done):
         out.update({m: _failed_mode(runs, res.error) for m, _, _ in job.modes} if isinstance(res, Failed) else res)

@@ -1,5 +1,5 @@
-"""Executor.map: results in item order on every executor, and a raising call (or a dying worker) is
-that item's Failed result while the other items still run."""
+"""Executor.map: results in item order on every executor, what is shared reaches every call, and a
+raising call (or a dying worker) is that item's Failed result while the other items still run."""
 from __future__ import annotations
 
 import os
@@ -22,6 +22,10 @@ def _refuse_two(x: int) -> int:
     if x == 2:
         raise ValueError("no input for item 2")
     return -x
+
+
+def _scaled(shared: dict, x: int) -> int:
+    return shared["scale"] * x
 
 
 def _die_on_one(x: int) -> int:
@@ -56,6 +60,10 @@ def test_a_raising_call_is_that_items_failure(executor):
     out = executor.map(_refuse_two, [0, 1, 2, 3])
     assert out[:2] == [0, -1] and out[3] == -3
     assert isinstance(out[2], Failed) and out[2].error == "ValueError: no input for item 2"
+
+
+def test_shared_reaches_every_call(executor):
+    assert executor.map(_scaled, [1, 2, 3], shared={"scale": 10}) == [10, 20, 30]
 
 
 def test_map_of_nothing_is_empty(executor):
