@@ -268,13 +268,21 @@ def _gather(futures: list, progress, what: str, on_error=None) -> list:
     return out
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity), else all the machine's."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # no affinity on this platform
+        return os.cpu_count() or 1
+
+
 def make_executor(jobs: int = 1, dask: str | None = None, cache: bool = False) -> Executor:
     """In-process for one job, a process pool for more; Dask when asked ('local' or a scheduler
     address); with `cache`, wrapped so that stored results are reused (mpgspec.oracle.cache)."""
     if dask:
         ex: Executor = DaskExecutor(None if dask == "local" else dask, workers=max(jobs, 2) if dask == "local" else jobs)
     else:
-        jobs = min(int(jobs), os.cpu_count() or 1) if jobs > 1 else 1
+        jobs = min(int(jobs), usable_cores()) if jobs > 1 else 1
         ex = ProcessPool(jobs) if jobs > 1 else InProcess()
     if cache:
         ex = CachedExecutor(ex)

@@ -79,7 +79,9 @@ def simulate_uncertain(project, runs: int | None = None, seed: int | None = None
     seed = unc.seed if seed is None else seed
     if not 1 <= runs <= 100000:
         raise UsageError(f"--runs must be between 1 and 100000; got {runs}")
-    executor = cached_executor()
+    from ..oracle.executors import usable_cores
+
+    executor = cached_executor(usable_cores())  # the modes (and a rebuild) on every usable core
     if report is not None and report.get("robust"):
         from ..report.read import ReportGraph
         from ..robust.plan import report_lookup_table, robust_report_graph
