@@ -7,7 +7,7 @@ from .. import __version__
 from .plan import cmd_plan
 from .simulate import cmd_simulate
 from .tools import cmd_cache, cmd_gait, cmd_schema
-from .verify import cmd_verify
+from .verify import cmd_verify, default_jobs
 
 
 def _sub(sub, name: str, help: str, examples: str):
@@ -26,7 +26,7 @@ def _verify_args(sub) -> None:
     """`mpgspec verify PATH...`: what to verify, where reports go, how oracle calls run."""
     v = _sub(sub, "verify", "build the motion primitive graph, check assertions, write reports",
              "  mpgspec verify specs/                      every project below specs/\n"
-             "  mpgspec verify specs/pendulum -j 2         oracle calls in 2 processes\n"
+             "  mpgspec verify specs/pendulum -j 1         everything in this process\n"
              "  mpgspec verify specs/ --format github      annotations and a step summary in GitHub Actions\n"
              "  mpgspec verify specs/cart --format json --no-write > result.json")
     v.add_argument("paths", nargs="+", metavar="PATH", help="a project.yaml, a project folder, or a folder of projects")
@@ -37,8 +37,9 @@ def _verify_args(sub) -> None:
                    help="human: text (default); json: the whole result on stdout; github: workflow annotations "
                         "at the spec lines, plus a table in $GITHUB_STEP_SUMMARY when it is set")
     v.add_argument("--method", metavar="NAME", help="oracle backend, e.g. rk4 or scipy (default: the project's)")
-    v.add_argument("-j", "--jobs", type=int, default=1, metavar="N",
-                   help="local worker processes for oracle calls (default 1)")
+    v.add_argument("-j", "--jobs", type=int, default=None, metavar="N",
+                   help="local worker processes for oracle calls and the robust stage's targets and uncertain "
+                        f"runs (default: the number of usable cores, here {default_jobs()}; 1: in this process)")
     v.add_argument("--dask", metavar="local|ADDRESS",
                    help="run oracle calls on Dask: 'local' starts a LocalCluster of max(jobs, 2) workers, "
                         "or the address of a running scheduler (needs the 'dask' extra)")

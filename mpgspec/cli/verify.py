@@ -99,6 +99,14 @@ def _human(res: VerifyResult, fmt: str):
         _print_errors(p.errors, fmt)
 
 
+def default_jobs() -> int:
+    """The default of --jobs: the cores this process may run on (its CPU affinity), else all."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # no affinity on this platform
+        return os.cpu_count() or 1
+
+
 def _check_jobs(jobs: int) -> None:
     cores = os.cpu_count() or 1
     if not 1 <= jobs <= JOBS_PER_CORE * cores:
@@ -112,6 +120,8 @@ def cmd_verify(args) -> int:
         overrides["method"] = args.method
     from ..progress import summary
 
+    if args.jobs is None:
+        args.jobs = default_jobs()
     _check_jobs(args.jobs)
     t0 = time.perf_counter()
     show = None if args.quiet else _progress(sys.stderr, args.format)

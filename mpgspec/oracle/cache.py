@@ -124,6 +124,10 @@ class CachedExecutor:
     def workers(self) -> int:
         return self.inner.workers
 
+    def map(self, fn, items, progress=None, label="tasks", shared=None) -> list:
+        """The inner executor's map (its results are not stored here: the stages memoise their own)."""
+        return self.inner.map(fn, items, progress, label, shared)
+
     def run(self, prims, settings, tasks: list[Task], progress=None):
         base = {t: hashlib.sha256(f"{prims[t].digest()}|{settings!r}|{code_version()}".encode()).hexdigest()
                 for t in {task.target for task in tasks}}

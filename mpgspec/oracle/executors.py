@@ -6,12 +6,18 @@ workers once (pickled through CasADi's serialisation; each worker rebuilds its c
 from the on-disk cache) and results come back in task order. Every rollout is computed in its own
 batch slot, independently of its neighbours, so the graph does not depend on the executor or the
 number of workers.
+
+Any other per-item work of a build (the robust stage's targets, the uncertain sequence's modes)
+goes through `map(fn, items)`: a picklable module-level function, results in item order, a call
+that raises (or whose worker dies) is that item's Failed result, never the end of the run.
 """
 from __future__ import annotations
 
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
+
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
@@ -20,7 +26,8 @@ from ..settings import OracleSettings
 from .cache import CachedExecutor
 from .evidence import OracleEvidence, Reason
 from .oracle import SafetyOracle
-from .tasks import Executor, Task
+from .tasks import Executor, Failed, Task, call
+
 TASKS_PER_WORKER = 4
 MIN_BATCH = 16
 
@@ -70,6 +77,16 @@ class InProcess:
             out.append(evaluate(self.oracles, prims, settings, task))
         return out
 
+    def map(self, fn, items, progress=None, label="tasks", shared=None):
+        """fn over items, one after the other, in this process."""
+        items = list(items)
+        out = []
+        for k, item in enumerate(items):
+            if progress:
+                progress(label, k, len(items))
+            out.append(call(fn, item, shared))
+        return out
+
 
 _worker: dict = {}
 
@@ -100,6 +117,15 @@ def _run(task: Task) -> list[OracleEvidence]:
     return evaluate(_worker["oracles"], _worker["prims"], _worker["settings"], task)
 
 
+def _init_shared(shared) -> None:
+    _worker_signals()
+    _worker["shared"] = shared
+
+
+def _call_shared(fn, item):
+    return call(fn, item, _worker["shared"])
+
+
 class ProcessPool:
     """A local pool of `workers` processes; each receives the closed loops once, at start-up."""
 
@@ -107,22 +133,48 @@ class ProcessPool:
         self.workers = max(1, int(workers))
 
     def run(self, prims, settings, tasks, progress=None):
-        out: list = [None] * len(tasks)
         pool = ProcessPoolExecutor(max_workers=self.workers, initializer=_init, initargs=(prims, settings))
-        finished = False
-        try:
-            futures = {pool.submit(_run, t): k for k, t in enumerate(tasks)}
-            for done, f in enumerate(as_completed(futures), start=1):
+        return _collect(pool, [(_run, t) for t in tasks], progress, f"oracle on {self.workers} processes")
+
+    def map(self, fn, items, progress=None, label="tasks", shared=None):
+        """fn over items in up to `workers` fresh processes: each item is pickled to its worker,
+        `shared` goes to each worker once, at start-up (inherited, not pickled, where they fork)."""
+        items = list(items)
+        if not items:
+            return []
+        pool = ProcessPoolExecutor(max_workers=min(self.workers, len(items)), initializer=_init_shared,
+                                   initargs=(shared,))
+        return _collect(pool, [(_call_shared, fn, item) for item in items], progress,
+                        f"{label} on {min(self.workers, len(items))} processes",
+                        lambda err: Failed(f"{type(err).__name__}: {err}"[:500]))
+
+
+def _collect(pool: ProcessPoolExecutor, jobs: list[tuple], progress, what: str, on_error=None) -> list:
+    """The results of jobs (function, *args) submitted to the pool, in job order; on_error(err) is
+    the result of a job whose future raised (a dead worker, a result that does not pickle), else the
+    error propagates. The pool is shut down after; on an error, SIGINT or SIGTERM (raised by the
+    CLI's handler) its workers are stopped, so none outlives us."""
+    out: list = [None] * len(jobs)
+    finished = False
+    try:
+        futures = {pool.submit(*job): k for k, job in enumerate(jobs)}
+        for done, f in enumerate(as_completed(futures), start=1):
+            if on_error is None:
                 out[futures[f]] = f.result()
-                if progress:
-                    progress(f"oracle on {self.workers} processes", done, len(tasks))
-            finished = True
-        finally:
-            if finished:
-                pool.shutdown(wait=True)
-            else:  # an error, SIGINT or SIGTERM (raised by the CLI's handler): no worker outlives us
-                _stop_pool(pool)
-        return out
+            else:
+                try:
+                    out[futures[f]] = f.result()
+                except Exception as err:
+                    out[futures[f]] = on_error(err)
+            if progress:
+                progress(what, done, len(jobs))
+        finished = True
+    finally:
+        if finished:
+            pool.shutdown(wait=True)
+        else:
+            _stop_pool(pool)
+    return out
 
 
 def _stop_pool(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
@@ -159,9 +211,11 @@ class DaskExecutor:
         self.address = address
         self.workers = max(1, int(workers))
 
-    def run(self, prims, settings, tasks, progress=None):
+    @contextmanager
+    def _client(self):
+        """A client of the scheduler at `address`, or of a LocalCluster started (and closed) here."""
         try:
-            from dask.distributed import Client, LocalCluster, as_completed as dask_completed
+            from dask.distributed import Client, LocalCluster
         except ImportError as err:  # pragma: no cover - depends on the installation
             raise UsageError("Dask is not installed; install mpgspec with the 'dask' extra: "
                              "pip install 'mpgspec[dask]'") from err
@@ -173,19 +227,53 @@ class DaskExecutor:
         try:
             if cluster is None:
                 self.workers = max(1, len(client.scheduler_info().get("workers", {})))
-            remote = client.scatter(prims, broadcast=True)
-            futures = client.map(_dask_run, tasks, prims=remote, settings=settings, pure=False)
-            index = {f.key: k for k, f in enumerate(futures)}
-            out: list = [None] * len(tasks)
-            for done, f in enumerate(dask_completed(futures), start=1):
-                out[index[f.key]] = f.result()
-                if progress:
-                    progress(f"oracle on Dask ({self.workers} workers)", done, len(tasks))
-            return out
+            yield client
         finally:
             client.close()
             if cluster is not None:
                 cluster.close()
+
+    def run(self, prims, settings, tasks, progress=None):
+        with self._client() as client:
+            remote = client.scatter(prims, broadcast=True)
+            futures = client.map(_dask_run, tasks, prims=remote, settings=settings, pure=False)
+            return _gather(futures, progress, f"oracle on Dask ({self.workers} workers)")
+
+    def map(self, fn, items, progress=None, label="tasks", shared=None):
+        """fn over items on the cluster's workers; `shared` is scattered to every worker once."""
+        items = list(items)
+        if not items:
+            return []
+        with self._client() as client:
+            remote = client.scatter([shared], broadcast=True)[0] if shared is not None else None  # as one datum
+            futures = client.map(call, [fn] * len(items), items, shared=remote, pure=False)
+            return _gather(futures, progress, f"{label} on Dask ({self.workers} workers)",
+                           lambda err: Failed(f"{type(err).__name__}: {err}"[:500]))
+
+
+def _gather(futures: list, progress, what: str, on_error=None) -> list:
+    """The results of Dask futures in their order; on_error(err) is the result of one that raised
+    (a lost worker), else the error propagates."""
+    from dask.distributed import as_completed as dask_completed
+
+    index = {f.key: k for k, f in enumerate(futures)}
+    out: list = [None] * len(futures)
+    for done, f in enumerate(dask_completed(futures), start=1):
+        if on_error is not None and f.status == "error":
+            out[index[f.key]] = on_error(f.exception())
+        else:
+            out[index[f.key]] = f.result()
+        if progress:
+            progress(what, done, len(futures))
+    return out
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity), else all the machine's."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # no affinity on this platform
+        return os.cpu_count() or 1
 
 
 def make_executor(jobs: int = 1, dask: str | None = None, cache: bool = False) -> Executor:
@@ -194,7 +282,7 @@ def make_executor(jobs: int = 1, dask: str | None = None, cache: bool = False) -
     if dask:
         ex: Executor = DaskExecutor(None if dask == "local" else dask, workers=max(jobs, 2) if dask == "local" else jobs)
     else:
-        jobs = min(int(jobs), os.cpu_count() or 1) if jobs > 1 else 1
+        jobs = min(int(jobs), usable_cores()) if jobs > 1 else 1
         ex = ProcessPool(jobs) if jobs > 1 else InProcess()
     if cache:
         ex = CachedExecutor(ex)

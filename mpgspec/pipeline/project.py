@@ -39,7 +39,7 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
         return res
     res.mpg = vg.graph
     try:
-        ch = check(cp, vg, progress, getattr(executor, "memo", None))
+        ch = check(cp, vg, progress, getattr(executor, "memo", None), executor=executor)
         return _finish_project(res, cp, vg, ch, out_dir, formats)
     except MpgError as err:  # e.g. the reports could not be written: this project's error
         res.status = "error"

@@ -54,11 +54,11 @@ def verified(spec, out, rebuild: bool, notify: Notify | None = None) -> dict | N
     return report
 
 
-def cached_executor():
-    """One process, oracle results from and into the cache."""
+def cached_executor(jobs: int = 1):
+    """`jobs` processes (one: this process), oracle results from and into the cache."""
     from ..oracle.executors import make_executor
 
-    return make_executor(1, None, cache=True)
+    return make_executor(jobs, None, cache=True)
 
 
 def rebuild(spec, executor=None):

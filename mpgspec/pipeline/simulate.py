@@ -79,6 +79,9 @@ def simulate_uncertain(project, runs: int | None = None, seed: int | None = None
     seed = unc.seed if seed is None else seed
     if not 1 <= runs <= 100000:
         raise UsageError(f"--runs must be between 1 and 100000; got {runs}")
+    from ..oracle.executors import usable_cores
+
+    executor = cached_executor(usable_cores())  # the modes (and a rebuild) on every usable core
     if report is not None and report.get("robust"):
         from ..report.read import ReportGraph
         from ..robust.plan import report_lookup_table, robust_report_graph
@@ -90,9 +93,8 @@ def simulate_uncertain(project, runs: int | None = None, seed: int | None = None
     else:
         from ..robust.graph import robust_stage
 
-        executor = cached_executor()
         cp, vg = rebuild(spec, executor)
-        rob = robust_stage(cp, vg, memo=getattr(executor, "memo", None))
+        rob = robust_stage(cp, vg, memo=getattr(executor, "memo", None), executor=executor)
         graphs = {"graph": (vg.graph, lookup_table(vg.graph)), "robust_graph": (rob.graph, lookup_table(rob.graph))}
-    stats = sequence_under_uncertainty(spec, cp.prims, cp.settings, graphs, runs, seed)
+    stats = sequence_under_uncertainty(spec, cp.prims, cp.settings, graphs, runs, seed, executor)
     return {"stats": stats, "uncertainty": unc, "runs": runs, "seed": seed}

@@ -118,8 +118,10 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     return VerifiedGraph(g, edges, failures, timing)
 
 
-def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | None = None, memo=None) -> Checks:
-    """Plans, the goal sequence naive and through the graph, assertions and assumptions."""
+def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | None = None, memo=None,
+                executor: Executor | None = None) -> Checks:
+    """Plans, the goal sequence naive and through the graph, assertions and assumptions; the robust
+    stage's per-target work runs through the executor (in this process when omitted)."""
     spec, prims, settings, g = cp.spec, cp.prims, cp.settings, vg.graph
     t0 = time.perf_counter()
     names = list(prims)
@@ -142,7 +144,7 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
         if xcs.require_agreement:
             checks += agreement_assertions(xc, start=len(checks))
     t1 = time.perf_counter()
-    robust = robust_stage(cp, vg, progress, memo)
+    robust = robust_stage(cp, vg, progress, memo, executor)
     if robust is not None:
         for a in robust.assertions:
             a.index = len(checks)

@@ -4,11 +4,15 @@ For a target B and its nominal in-edges A -> B, each cell (a t_A row at its best
 x_A*(t_A) (and from samples of E_A's boundary, with `start_in_roa`) for every scenario; the worst
 scenario of each cell is then pushed by `search` rounds of an adversarial bang-bang disturbance.
 B's own flow is checked under the same scenarios (_node_check). graph.py builds the robust graph
-from the records made here.
+from the records made here. Each target is independent of the others: TargetJob carries what one
+needs to a worker process (run_target, with the closed loops shared), and a target whose check raised gets the records of
+failed_target, its error as the evidence of every cell.
 """
 from __future__ import annotations
 
+import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -46,6 +50,41 @@ def check_target(prims: dict, B, items: list, unc, settings, sc: Scenarios, roll
     per_edge = _cell_records(prims, B, cells, worst, node, sc, unc, settings)
     edges = [_edge_record(a, B.name, tr, per_edge.get(a, []), node, prims, unc) for a, tr in items]
     return edges, node, n_roll, build_s
+
+
+@dataclass
+class TargetJob:
+    """One target's robust check, picklable and small: B's name, its nominal in-edges [(A,
+    transition)], the uncertainty, the settings, the scenarios and the rollout factory
+    (rollout(B, horizon), picklable). The closed loops travel apart, once per worker."""
+
+    target: str
+    items: list
+    unc: object
+    settings: object
+    sc: Scenarios
+    rollout: object
+
+
+def run_target(prims: dict, job: TargetJob) -> tuple[list, dict, int, float]:
+    """check_target of the job with the project's closed loops (the function an executor maps
+    over targets, the closed loops shared)."""
+    return check_target(prims, prims[job.target], job.items, job.unc, job.settings, job.sc, job.rollout)
+
+
+def failed_target(prims: dict, b: str, items: list, unc, error: str) -> tuple[list, dict]:
+    """(edge records, own-flow record) of a target whose check raised: the error is the evidence of
+    each of its cells and of its own flow, none robust-safe (as a rollout that blew up is unsafe)."""
+    node = {"node": b, "t_B": [], "scenarios": 0, "robust_safe": False, "worst_margin": -math.inf,
+            "worst_case": {"error": error}}
+    edges = []
+    for a, tr in items:
+        checked = [{"t_A": float(tr.t_A[i]), "t_B": float(tr.best_t_B[i]), "robust_safe": False,
+                    "worst_margin": -math.inf, "worst_case": {"kind": "error", "error": error},
+                    "_ij": (i, int(np.argmin(np.abs(tr.t_B - tr.best_t_B[i])))), "starts_kept": 0}
+                   for i in _rows(tr, unc.cells)]
+        edges.append(_edge_record(a, b, tr, checked, node, prims, unc))
+    return edges, node
 
 
 def _cells(prims: dict, items: list, unc) -> list[tuple]:

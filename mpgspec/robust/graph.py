@@ -13,6 +13,8 @@ region of attraction E_A (starts.py), and the search continues from the worst st
 A cell is robust-safe when every scenario from every start is safe; the robust transition keeps
 only those cells and is classified like the nominal one. This is falsification: a robust edge withstood every
 scenario tried, it is not proven to withstand the whole set.
+The targets are checked independently through the executor's map (in this process, a process pool
+or Dask), each from the same seeded scenarios, so the result does not depend on where they ran.
 """
 from __future__ import annotations
 
@@ -25,7 +27,9 @@ import numpy as np
 from ..check.assertions import AssertionResult, evaluate_assertions
 from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
-from .cells import check_target
+from ..oracle.executors import InProcess
+from ..oracle.tasks import Failed
+from .cells import TargetJob, failed_target, run_target
 from .rigid import RigidRobustRollout
 from .rollout import RobustRollout, plant
 from .scenarios import Scenarios, scenarios
@@ -61,11 +65,12 @@ class RobustResult:
                 "timing": self.timing}
 
 
-def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
+def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResult | None:
     """Build the robust graph of a compiled project and its nominal graph; None without `uncertainty`.
 
     memo (optional, mpgspec.oracle.cache.Memo) keeps the cell verdicts and sequence statistics by the
     content hash of the closed loops, the system, the uncertainty, the sequence and the settings.
+    executor (mpgspec.oracle.executors; in this process when omitted) runs the targets' checks.
     """
     spec, prims, settings, g = cp.spec, cp.prims, cp.settings, vg.graph
     unc = spec.project.uncertainty
@@ -84,17 +89,10 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
                             {"robust_s": time.perf_counter() - t0, "robust_cache_hit": 1.0}, known["sequence"],
                             known["nodes"])
     sys = next(iter(prims.values())).system
-    sc, rollout = _setup(spec, sys, unc, settings)
+    sc, jobs = target_jobs(spec, prims, settings, g)
     among = set(unc.nodes) if unc.nodes is not None else set(prims)
-    edges, nodes, n_roll, build_s = [], [], 0, 0.0
-    by_target = _by_target(g, among)
-    for bi, (b, items) in enumerate(by_target.items()):
-        if progress:
-            progress(spec.name, "robust graph", bi, len(by_target))
-        e, node, n, s = check_target(prims, prims[b], items, unc, settings, sc, rollout)
-        edges += e
-        nodes.append(node)
-        n_roll, build_s = n_roll + n, build_s + s
+    cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
+    edges, nodes, n_roll, build_s = check_targets(jobs, prims, unc, executor, cb)
     rg = _robust_graph(g, edges, unc.nodes)
     scen = _scenario_record(unc, sc, among, edges, sys)
     t1 = time.perf_counter()
@@ -104,7 +102,7 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
             progress(spec.name, "sequence under uncertainty", 0, 3)
         seq = sequence_under_uncertainty(spec, prims, settings, {"graph": (g, lookup_table(g)),
                                                                  "robust_graph": (rg, lookup_table(rg))},
-                                         unc.runs, unc.seed)
+                                         unc.runs, unc.seed, executor, cb)
     timing = {"robust_s": time.perf_counter() - t0, "robust_build_s": build_s, "robust_rollouts": n_roll,
               "robust_sequence_s": time.perf_counter() - t1}
     edges.sort(key=lambda e: (e["from"], e["to"]))
@@ -113,10 +111,31 @@ def robust_stage(cp, vg, progress=None, memo=None) -> RobustResult | None:
     return RobustResult(rg, edges, _assertions(unc, rg), scen, timing, seq, nodes)
 
 
-def _setup(spec, sys, unc, settings) -> tuple[Scenarios, object]:
-    """The scenarios of every cell, and rollout(B, horizon): B's robust rollout on the perturbed plant
-    (the rigid body's uncertain plant with a push on its base, or the analytic plant with input
-    disturbances)."""
+@dataclass(frozen=True)
+class RolloutFactory:
+    """rollout(B, horizon): B's robust rollout on the perturbed plant, picklable so that a worker
+    process builds it (the rigid body's uncertain plant with a push on its base, or the analytic
+    plant P with input disturbances on the inputs dist_idx)."""
+
+    settings: object
+    K: int
+    names: tuple = ()
+    rigid: bool = False
+    frame: str | None = None
+    push: bool = False
+    duration: float | None = None
+    P: object = None
+    dist_idx: tuple = ()
+
+    def __call__(self, B, horizon):
+        if self.rigid:
+            return RigidRobustRollout(B, list(self.names), self.frame, self.push, self.K, self.settings, horizon,
+                                      self.duration)
+        return RobustRollout(B, self.P, list(self.dist_idx), self.K, self.settings, horizon)
+
+
+def _setup(spec, sys, unc, settings) -> tuple[Scenarios, RolloutFactory]:
+    """The scenarios of every cell, and the factory of each target's robust rollout."""
     names = list(unc.parameters)
     dist = unc.disturbance
     force = dist.force if dist is not None else None
@@ -126,23 +145,45 @@ def _setup(spec, sys, unc, settings) -> tuple[Scenarios, object]:
         frame = force.frame if force is not None else sys.base_frames()[0]
         dist_names = [f"force_{a}" for a in "xyz"] if force is not None else []
         bound = np.asarray(force.bound, float) if force is not None else np.zeros(0)
-
-        def rollout(B, horizon):
-            return RigidRobustRollout(B, names, frame, force is not None, K, settings, horizon,
-                                      force.duration if force is not None else None)
+        rollout = RolloutFactory(settings, K, tuple(names), True, frame, force is not None,
+                                 force.duration if force is not None else None)
     else:
         nominal_values = dict(sys.parameters)
-        P = plant(spec, names)
         dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
         dist_names = list(dist.inputs) if dist is not None else []
         bound = (np.broadcast_to(np.asarray(dist.bound, float), (len(dist_idx),)).copy() if dist is not None
                  else np.zeros(0))
-
-        def rollout(B, horizon):
-            return RobustRollout(B, P, dist_idx, K, settings, horizon)
+        rollout = RolloutFactory(settings, K, P=plant(spec, names), dist_idx=tuple(dist_idx))
     rng = np.random.default_rng(unc.seed)
     TH, ERR, SG, KIND = scenarios(unc, sys, rng, nominal_values)
     return Scenarios(names, TH, ERR, SG, KIND, bound, K, dist_names, list(sys.state_names)), rollout
+
+
+def check_targets(jobs: list[TargetJob], prims: dict, unc, executor=None, progress=None) -> tuple[list, list, int, float]:
+    """(edge records, own-flow records, rollouts run, seconds building rollouts) of the target jobs,
+    run through the executor's map (in this process when None); a job that raised gets the records
+    of failed_target, with its error as the evidence."""
+    done = (executor or InProcess()).map(run_target, jobs, progress, label="robust graph", shared=prims)
+    edges, nodes, n_roll, build_s = [], [], 0, 0.0
+    for job, res in zip(jobs, done):
+        if isinstance(res, Failed):
+            e, node = failed_target(prims, job.target, job.items, unc, res.error)
+            n, s = 0, 0.0
+        else:
+            e, node, n, s = res
+        edges += e
+        nodes.append(node)
+        n_roll, build_s = n_roll + n, build_s + s
+    return edges, nodes, n_roll, build_s
+
+
+def target_jobs(spec, prims: dict, settings, g: MotionPrimitiveGraph) -> tuple[Scenarios, list[TargetJob]]:
+    """The scenarios every cell runs, and one job per target of a nominal edge among the uncertainty's
+    nodes: the target and its in-edges."""
+    unc, sys = spec.project.uncertainty, next(iter(prims.values())).system
+    sc, rollout = _setup(spec, sys, unc, settings)
+    among = set(unc.nodes) if unc.nodes is not None else set(prims)
+    return sc, [TargetJob(b, items, unc, settings, sc, rollout) for b, items in _by_target(g, among).items()]
 
 
 def _by_target(g: MotionPrimitiveGraph, among: set) -> dict[str, list]:

@@ -12,6 +12,9 @@ a sampled law held between solves).
 """
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
+
 import casadi as ca
 import numpy as np
 
@@ -19,6 +22,7 @@ from ..compile.contacts import grid_clock
 from ..compile.primitive import CompiledPrimitive
 from ..oracle.flow import rk4
 from ..oracle.jit import compile_many, cse
+from ..oracle.tasks import Failed
 from ..spec.models import PrimitiveClass
 
 HOLD = 0.5
@@ -303,13 +307,61 @@ def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], lis
     return out, names, len(dist_idx), bound
 
 
-def sequence_under_uncertainty(spec, prims, settings, graphs: dict, runs: int, seed: int) -> dict:
+@dataclass
+class ModeJob:
+    """Some modes of the uncertain sequence, picklable: the spec (without its locators), the
+    settings, the runs and seed of the draws, and (mode, graph, lookup table) per mode (graph None:
+    naive). The closed loops travel apart, once per worker."""
+
+    spec: object
+    settings: object
+    runs: int
+    seed: int
+    modes: list
+
+
+def run_modes(prims: dict, job: ModeJob) -> dict:
+    """mode -> statistics of the job's modes, on the same seeded draws (the function an executor maps)."""
+    spec, settings = job.spec, job.settings
+    fns, names, nd, bound = steppers(spec, prims, settings, job.runs)
+    ds = DisturbedSequences(prims, fns, names, nd, bound, spec.project.uncertainty, settings,
+                            spec.project.sequence, job.runs, job.seed)
+    return {m: ds.run(g, table, "naive" if g is None else "graph") for m, g, table in job.modes}
+
+
+def sequence_under_uncertainty(spec, prims, settings, graphs: dict, runs: int, seed: int, executor=None,
+                               progress=None) -> dict:
     """The project's goal sequence in `runs` seeded draws of its uncertainty, run naive and through
     each graph of `graphs` (mode -> (graph, lookup table)) on the same draws; per mode the safe
-    fraction, the safe runs, the safe runs that end in the last goal and the first violations."""
-    fns, names, nd, bound = steppers(spec, prims, settings, runs)
-    ds = DisturbedSequences(prims, fns, names, nd, bound, spec.project.uncertainty, settings,
-                            spec.project.sequence, runs, seed)
-    modes = {"naive": ds.run(None, {}, "naive")}
-    modes.update({m: ds.run(g, table, "graph") for m, (g, table) in graphs.items()})
-    return {"runs": runs, "seed": seed, "disturbance_hold_s": HOLD, "modes": modes}
+    fraction, the safe runs, the safe runs that end in the last goal and the first violations.
+    With an executor of several workers the modes are spread over them (each builds the steppers;
+    the draws depend on the seed only); a mode whose job raised records the error as its evidence."""
+    modes = [("naive", None, {})] + [(m, g, table) for m, (g, table) in graphs.items()]
+    workers = max(1, min(getattr(executor, "workers", 1), len(modes)))
+    jobs = [ModeJob(_portable(spec) if workers > 1 else spec, settings, runs, seed, modes[k::workers])
+            for k in range(workers)]
+    if workers == 1:
+        done = [run_modes(prims, jobs[0])]
+    else:
+        done = executor.map(run_modes, jobs, progress, label="sequence under uncertainty", shared=prims)
+    out = {}
+    for job, res in zip(jobs, done):
+        out.update({m: _failed_mode(runs, res.error) for m, _, _ in job.modes} if isinstance(res, Failed) else res)
+    return {"runs": runs, "seed": seed, "disturbance_hold_s": HOLD, "modes": {m: out[m] for m, _, _ in modes}}
+
+
+def _failed_mode(runs: int, error: str) -> dict:
+    """The statistics of a mode whose runs raised: none counted safe, the error as the evidence."""
+    return {"safe_fraction": 0.0, "safe_runs": 0, "runs": runs, "reached_goal": 0,
+            "first_violation": [{"error": error}], "final": [], "switches": []}
+
+
+def _nowhere(loc, offset=None):
+    """The locator of a spec sent to a worker: positions are not needed there."""
+    return None
+
+
+def _portable(spec):
+    """The spec without its locators (closures over the YAML positions), so that it pickles."""
+    return dataclasses.replace(spec, system_locate=_nowhere, locate=_nowhere,
+                               primitives=[dataclasses.replace(p, locate=_nowhere) for p in spec.primitives])
