@@ -110,7 +110,8 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     pairs = [(a, b) for a in names for b in names if a != b]
     if progress:
         progress(spec.name, "traces of the edges and failed pairs", 0, 0)
-    edges, failures = edge_traces(g, prims, settings), failure_traces(g, prims, settings, pairs)
+    memo = getattr(executor, "memo", None)
+    edges, failures = edge_traces(g, prims, settings, memo), failure_traces(g, prims, settings, pairs, memo)
     calls = sum(len(tr.t_A) * len(tr.t_B) for tr in g.transitions.values())
     timing = {"graph_s": t1 - t0, "oracle_calls": calls, "oracle_calls_per_s": calls / max(t1 - t0, 1e-9),
               "traces_s": time.perf_counter() - t1,
