@@ -3,7 +3,7 @@ nothing changed; per project and phase, with what gcc cost.
 
     python bench/bench_cold.py                        # specs/, the working tree only
     python bench/bench_cold.py --baseline main~3      # the same run of another commit first, then ratios
-    options: PATH ... (projects or folders, default specs/), -j N (passed to verify), --no-write
+    options: PATH ... (projects or folders, default specs/), -j N (passed to verify), --keep DIR, --no-write
 
 Each side runs `python -m mpgspec verify PATH ... -q` in a subprocess with a fresh MPGSPEC_CACHE,
 so nothing compiled or stored before is reused, then once more with nothing changed. CC points at a
@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -136,6 +137,7 @@ def main(argv=None) -> int:
     ap.add_argument("paths", nargs="*", default=["specs/"])
     ap.add_argument("--baseline", metavar="REF", help="a commit to run first, for ratios")
     ap.add_argument("-j", "--jobs", type=int, help="passed to mpgspec verify")
+    ap.add_argument("--keep", metavar="DIR", help="copy each side's reports to DIR/<side>/ (to compare verdicts)")
     ap.add_argument("--no-write", action="store_true", help="do not touch bench/RESULTS.md")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
@@ -149,6 +151,10 @@ def main(argv=None) -> int:
                 sides[f"baseline {args.baseline}"] = run_side(tree, args.paths, args.jobs, tmp / "b")
             (tmp / "a").mkdir()
             sides["now"] = run_side(ROOT, args.paths, args.jobs, tmp / "a")
+            if args.keep:
+                for side, sub in (("baseline", "b"), ("now", "a")):
+                    if (tmp / sub / "reports").exists():
+                        shutil.copytree(tmp / sub / "reports", Path(args.keep) / side, dirs_exist_ok=True)
         finally:
             if args.baseline:
                 subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tmp / "baseline")],
