@@ -49,6 +49,10 @@ def _fail(args, errors: list[dict], plain: str | None = None, code: int = EXIT_U
     return code
 
 
+_stopped: list = []
+"""The signals that ended commands of this process (entry() then exits without exit hooks)."""
+
+
 def _run(args) -> int:
     try:
         return args.fn(args)
@@ -61,8 +65,10 @@ def _run(args) -> int:
     except BrokenPipeError:
         raise
     except KeyboardInterrupt:
+        _stopped.append("SIGINT")
         return _fail(args, [{"code": "MPG002", "message": "interrupted"}], "mpgspec: interrupted")
     except Terminated as e:
+        _stopped.append(e.code)
         return _fail(args, [{"code": "MPG002", "message": "terminated by a signal"}], "mpgspec: terminated", e.code)
     except Exception as e:  # a bug, not the user's mistake: say so, keep the details
         import traceback
@@ -91,4 +97,22 @@ def main(argv=None) -> int:
         _silence_stdout()
         return getattr(args, "exit_code", EXIT_OK)
     except Terminated as e:  # a signal while an error was being reported
+        _stopped.append(e.code)
         return e.code
+
+
+def entry() -> None:
+    """The console script and `python -m`: main(), then exit with its code. A run ended by a signal
+    or Ctrl-C (its reports' temporaries already removed, its workers terminated) exits at once,
+    without the interpreter's exit hooks: a process pool's thread that was reading a result from a
+    worker killed mid-write would never return, and the exit would hang."""
+    rc = main()
+    if _stopped:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(rc)
+    sys.exit(rc)
+

@@ -1,6 +1,4 @@
 """`python -m mpgspec.cli`: the command line."""
-import sys
+from . import entry
 
-from . import main
-
-sys.exit(main())
+entry()
