@@ -44,6 +44,7 @@ from common import markdown_table, rounds, stamp, write_section  # noqa: E402
 from mpgspec.api import settings_for  # noqa: E402
 from mpgspec.certify.hybrid_orbit import HybridFlow  # noqa: E402
 from mpgspec.check.assumptions import HYBRID_DT  # noqa: E402
+from mpgspec.cores import usable_cores  # noqa: E402
 from mpgspec.oracle import integrator, jit  # noqa: E402
 from mpgspec.oracle.integrator import build_chunk, initial_state  # noqa: E402
 from mpgspec.pipeline.stages import compile_project  # noqa: E402
@@ -201,13 +202,13 @@ def main(argv=None) -> int:
     robust = [f for k, f in built[True][0].items() if k.startswith("robust")]
     for label, fns, R in (("robust first + chunk (similar sizes)", robust[:2], 3),
                           ("robust first + chunk (+ gradient)", robust, 1)):
-        walls = {1: [], jit.jobs(): []}  # interleaved rounds: one at a time, then side by side
+        walls = {1: [], usable_cores(): []}  # interleaved rounds: one at a time, then side by side
         for _ in range(R):
             for n in walls:
                 walls[n].append(compile_logged(fns, st.jit_flags, n_jobs=n)[2])
-        seq, par = statistics.median(walls[1]), statistics.median(walls[jit.jobs()])
-        ratio = statistics.median(a / b for a, b in zip(walls[1], walls[jit.jobs()]))
-        rows.append((f"{label}, cse, gcc wall: one at a time / {jit.jobs()} at once",
+        seq, par = statistics.median(walls[1]), statistics.median(walls[usable_cores()])
+        ratio = statistics.median(a / b for a, b in zip(walls[1], walls[usable_cores()]))
+        rows.append((f"{label}, cse, gcc wall: one at a time / {usable_cores()} at once",
                      f"{seq:.1f} / {par:.1f} s ({ratio:.2f}x; {R} round{'s' if R > 1 else ''})"))
         log(rows[-1][1])
     gcc0 = sum(r["cpu_s"] for r in recs[False].values())

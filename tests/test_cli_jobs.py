@@ -8,7 +8,8 @@ import pytest
 
 from mpgspec import api
 from mpgspec.cli import main
-from mpgspec.oracle.executors import InProcess, ProcessPool, make_executor, usable_cores
+from mpgspec.cores import usable_cores
+from mpgspec.oracle.executors import InProcess, ProcessPool, make_executor
 
 TINY = Path(__file__).parent / "fixtures" / "cli_tiny" / "project.yaml"
 

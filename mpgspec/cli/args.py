@@ -4,10 +4,11 @@ from __future__ import annotations
 import argparse
 
 from .. import __version__
+from ..cores import usable_cores
 from .plan import cmd_plan
 from .simulate import cmd_simulate
 from .tools import cmd_cache, cmd_gait, cmd_schema
-from .verify import cmd_verify, default_jobs
+from .verify import cmd_verify
 
 
 def _sub(sub, name: str, help: str, examples: str):
@@ -39,7 +40,7 @@ def _verify_args(sub) -> None:
     v.add_argument("--method", metavar="NAME", help="oracle backend, e.g. rk4 or scipy (default: the project's)")
     v.add_argument("-j", "--jobs", type=int, default=None, metavar="N",
                    help="local worker processes for oracle calls and the robust stage's targets and uncertain "
-                        f"runs (default: the number of usable cores, here {default_jobs()}; 1: in this process)")
+                        f"runs (default: the number of usable cores, here {usable_cores()}; 1: in this process)")
     v.add_argument("--dask", metavar="local|ADDRESS",
                    help="run oracle calls on Dask: 'local' starts a LocalCluster of max(jobs, 2) workers, "
                         "or the address of a running scheduler (needs the 'dask' extra)")

@@ -8,6 +8,7 @@ import time
 from typing import TYPE_CHECKING
 
 from .. import api
+from ..cores import usable_cores
 from ..errors import UsageError
 from ..streams import stdout_to_stderr
 from .output import MARK, _annotation, _json_doc, _line, _num, _print_errors, _progress
@@ -99,14 +100,6 @@ def _human(res: VerifyResult, fmt: str):
         _print_errors(p.errors, fmt)
 
 
-def default_jobs() -> int:
-    """The default of --jobs: the cores this process may run on (its CPU affinity), else all."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # no affinity on this platform
-        return os.cpu_count() or 1
-
-
 def _check_jobs(jobs: int) -> None:
     cores = os.cpu_count() or 1
     if not 1 <= jobs <= JOBS_PER_CORE * cores:
@@ -121,7 +114,7 @@ def cmd_verify(args) -> int:
     from ..progress import summary
 
     if args.jobs is None:
-        args.jobs = default_jobs()
+        args.jobs = usable_cores()
     _check_jobs(args.jobs)
     t0 = time.perf_counter()
     show = None if args.quiet else _progress(sys.stderr, args.format)

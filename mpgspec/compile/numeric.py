@@ -23,18 +23,8 @@ class NumericFunction:
         self._lock = threading.Lock()
         self.shapes = [fn.size_out(i) for i in range(fn.n_out())]
         self._buf, self._ev = fn.buffer()
-        self._args, self._gather = [], []
-        for i in range(fn.n_in()):
-            sp = fn.sparsity_in(i)
-            self._args.append(np.zeros(sp.nnz()))
-            self._gather.append(None if sp.is_dense() else np.asarray(sp.find(), int))
-            self._buf.set_arg(i, memoryview(self._args[i]))
-        self._res, self._scatter = [], []
-        for i in range(fn.n_out()):
-            sp = fn.sparsity_out(i)
-            self._res.append(np.zeros(sp.nnz()))
-            self._scatter.append(None if sp.is_dense() else np.asarray(sp.find(), int))
-            self._buf.set_res(i, memoryview(self._res[i]))
+        self._args, self._gather = _bound([fn.sparsity_in(i) for i in range(fn.n_in())], self._buf.set_arg)
+        self._res, self._scatter = _bound([fn.sparsity_out(i) for i in range(fn.n_out())], self._buf.set_res)
 
     def __call__(self, *args) -> list[np.ndarray]:
         with self._lock:
@@ -59,6 +49,15 @@ class NumericFunction:
 
     def __reduce__(self):
         return NumericFunction, (self.fn,)
+
+
+def _bound(sparsities: list, bind) -> tuple[list[np.ndarray], list]:
+    """One array of nonzeros per sparsity, bound to the buffer by bind(i, memoryview), and the
+    positions of those nonzeros in the dense column-major vector (None when dense)."""
+    arrays = [np.zeros(sp.nnz()) for sp in sparsities]
+    for i, a in enumerate(arrays):
+        bind(i, memoryview(a))
+    return arrays, [None if sp.is_dense() else np.asarray(sp.find(), int) for sp in sparsities]
 
 
 def numeric(fn: ca.Function) -> NumericFunction:

@@ -37,24 +37,23 @@ def _traces(g, prims, settings, cells: list[tuple[str, str, int, int]], memo) ->
     at clock t_B[j]. Series traced before with the same closed loop, start, horizon and settings
     come from the memo (a run with nothing changed simulates nothing); the trace chunks of the rest
     are compiled side by side first. An error is the trace's content, never remembered."""
-    keys, series = [], []
+    keys, series, horizons = [], [], []
     for a, b, i, j in cells:
         tr = g.transitions[(a, b)]
+        horizons.append(_horizon(prims, settings, tr, b, i, j))
         x0 = prims[a].x_star(float(tr.t_A[i]))
         key = memo.key("trace", TRACE_RECORD, prims[b].digest(),
                        hashlib.sha256(np.ascontiguousarray(x0, float).tobytes()).hexdigest(),
-                       repr(float(tr.t_B[j])), repr(_horizon(prims, settings, tr, b, i, j)),
-                       repr(settings)) if memo is not None else None
+                       repr(float(tr.t_B[j])), repr(horizons[-1]), repr(settings)) if memo is not None else None
         keys.append(key)
         series.append(memo.get(key) if key is not None else None)
     prebuild(list({id(prims[c[1]]): prims[c[1]] for c, s in zip(cells, series) if s is None}.values()), settings)
     out = []
-    for (a, b, i, j), key, known in zip(cells, keys, series):
+    for (a, b, i, j), key, known, horizon in zip(cells, keys, series, horizons):
         tr = g.transitions[(a, b)]
         if known is None:
             try:
-                known = trace(prims[b], prims[a].x_star(float(tr.t_A[i])), float(tr.t_B[j]),
-                              _horizon(prims, settings, tr, b, i, j), settings)
+                known = trace(prims[b], prims[a].x_star(float(tr.t_A[i])), float(tr.t_B[j]), horizon, settings)
                 if key is not None and "failed" not in known:
                     memo.put(key, known)
             except Exception as err:

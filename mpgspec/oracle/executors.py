@@ -13,7 +13,6 @@ that raises (or whose worker dies) is that item's Failed result, never the end o
 """
 from __future__ import annotations
 
-import os
 import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -21,6 +20,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
+from ..cores import usable_cores
 from ..errors import UsageError
 from ..settings import OracleSettings
 from .cache import CachedExecutor
@@ -146,7 +146,7 @@ class ProcessPool:
                                    initargs=(shared,))
         return _collect(pool, [(_call_shared, fn, item) for item in items], progress,
                         f"{label} on {min(self.workers, len(items))} processes",
-                        lambda err: Failed(f"{type(err).__name__}: {err}"[:500]))
+                        Failed.of)
 
 
 def _collect(pool: ProcessPoolExecutor, jobs: list[tuple], progress, what: str, on_error=None) -> list:
@@ -248,7 +248,7 @@ class DaskExecutor:
             remote = client.scatter([shared], broadcast=True)[0] if shared is not None else None  # as one datum
             futures = client.map(call, [fn] * len(items), items, shared=remote, pure=False)
             return _gather(futures, progress, f"{label} on Dask ({self.workers} workers)",
-                           lambda err: Failed(f"{type(err).__name__}: {err}"[:500]))
+                           Failed.of)
 
 
 def _gather(futures: list, progress, what: str, on_error=None) -> list:
@@ -266,14 +266,6 @@ def _gather(futures: list, progress, what: str, on_error=None) -> list:
         if progress:
             progress(what, done, len(futures))
     return out
-
-
-def usable_cores() -> int:
-    """The cores this process may run on (its CPU affinity), else all the machine's."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # no affinity on this platform
-        return os.cpu_count() or 1
 
 
 def make_executor(jobs: int = 1, dask: str | None = None, cache: bool = False) -> Executor:

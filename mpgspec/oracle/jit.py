@@ -35,6 +35,8 @@ from pathlib import Path
 
 import casadi as ca
 
+from ..cores import usable_cores
+
 try:
     import fcntl
 except ImportError:  # not on POSIX: concurrent processes may compile the same library twice
@@ -55,14 +57,6 @@ _LOG_LOCK = threading.Lock()
 def cache_dir() -> Path:
     """Where compiled libraries are kept between runs (MPGSPEC_CACHE, else ~/.cache/mpgspec)."""
     return Path(os.environ.get("MPGSPEC_CACHE", Path.home() / ".cache" / "mpgspec")) / "jit"
-
-
-def jobs() -> int:
-    """gcc processes run at once: the cores this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
 
 
 def with_cse(fn: ca.Function) -> ca.Function:
@@ -157,8 +151,8 @@ def compile_many(fns: list[ca.Function], flags: tuple[str, ...], n_jobs: int | N
     for j in work:  # the same code twice in one batch is compiled once
         if not j.hit and j.lib not in todo:
             todo[j.lib] = j
-    if len(todo) > 1 and (n_jobs or jobs()) > 1:
-        with ThreadPoolExecutor(max_workers=min(len(todo), n_jobs or jobs())) as pool:
+    if len(todo) > 1 and (n_jobs or usable_cores()) > 1:
+        with ThreadPoolExecutor(max_workers=min(len(todo), n_jobs or usable_cores())) as pool:
             list(pool.map(_gcc, todo.values()))
     else:
         for j in todo.values():

@@ -38,6 +38,11 @@ class Failed:
 
     error: str
 
+    @classmethod
+    def of(cls, err: BaseException) -> "Failed":
+        """The error's type and message (at most 500 characters)."""
+        return cls(f"{type(err).__name__}: {err}"[:500])
+
 
 def call(fn: Callable[..., Any], item: Any, shared: Any = None) -> Any:
     """fn(item), or fn(shared, item) when shared is given; Failed with the error's type and message
@@ -45,7 +50,7 @@ def call(fn: Callable[..., Any], item: Any, shared: Any = None) -> Any:
     try:
         return fn(item) if shared is None else fn(shared, item)
     except Exception as err:
-        return Failed(f"{type(err).__name__}: {err}"[:500])
+        return Failed.of(err)
 
 
 class Executor(Protocol):
