@@ -71,6 +71,17 @@ class RigidRobustRollout(RobustRollout):
         return rigid_step(prim, plant_fn, self.names, self.frame, self.push, dt)
 
 
+def robust_h(prim: CompiledPrimitive, rows: dict) -> tuple[ca.Function, list[int]]:
+    """(the primitive's safety functions without the no-slip `rows` the perturbed plant replaces,
+    the rows kept): the same expressions of the closed loop's inputs, without the nominal contact
+    dynamics that only the replaced rows need (most of a rigid body's loop and of its derivative)."""
+    loop = prim.loop_u if prim.sampled is not None else prim.loop_raw
+    ins = loop.sx_in() if loop.is_a("SXFunction") else loop.mx_in()
+    h = loop.call(ins)[1]
+    kept = [j for j in range(h.shape[0]) if j not in rows]
+    return ca.Function(f"h_{loop.name()}", ins, [h[kept]], loop.name_in(), ["h"]), kept
+
+
 def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str], frame: str, push: bool, dt: float):
     """(step (z, d) -> (z next, [h; RoA margin]), first (x0, t0, s0, theta, d) -> ([h; margin], hold), nth,
     nd, hold size) of one oracle step on the perturbed plant, z = [x; t; s; x_sw; theta; hold]."""
@@ -90,7 +101,8 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     gated = prim.contacts.varies  # contact conditions bind while held
     # the SX pieces the step calls, each generated once, with common subexpressions eliminated
     plant_fn, jump = cse_sx(plant_fn), cse_sx(robust_jump(prim, frame))
-    ctrl, loop = cse_sx(prim.control), cse_sx(prim.loop_u if law is not None else prim.loop_raw)
+    h_fn, kept = robust_h(prim, rows)
+    ctrl, loop = cse_sx(prim.control), cse_sx(h_fn)
     held = hold[1:1 + nu] if law is not None else None
 
     def control(xx, tt, ss, u_held):  # (u_raw, u) at a state; a sampled law holds its input
@@ -98,15 +110,16 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
             return u_held, saturate(u_held, sys.u_lo, sys.u_hi)
         return ctrl(xx, tt, ss, xsw)
 
-    def raw_h(xx, tt, ss, ur):  # every safety function, unwindowed, under the nominal model
-        return (loop(xx, tt, ss, xsw, ur) if law is not None else loop(xx, tt, ss, xsw))[1]
+    def raw_h(xx, tt, ss, ur):  # the safety functions the plant does not replace, unwindowed
+        return loop(xx, tt, ss, xsw, ur) if law is not None else loop(xx, tt, ss, xsw)
 
     def h_of(xx, tt, ss, ur, lam, c):
         h = raw_h(xx, tt, ss, ur)
         parts = []
-        for j in range(h.shape[0]):
-            v = h[j]
-            if j in rows:
+        for j in range(len(prim.h_names)):
+            if j not in rows:
+                v = h[kept.index(j)]
+            else:
                 i, kind = rows[j]
                 v = no_slip(lam[3 * i], lam[3 * i + 1], lam[3 * i + 2], mu)[kind]
                 v = ca.if_else(c[i] > 0.5, v, 1e3) if gated else v

@@ -218,3 +218,23 @@ def test_a_push_needs_a_rigid_body(tmp_path):
     with pytest.raises(SpecErrors) as ei:
         check_uncertainty(load_project(dst / "project.yaml"))
     assert ei.value.errors[0].key == "uncertainty.disturbance.force"
+
+
+def test_robust_h_keeps_every_other_row_without_the_nominal_dynamics(built):
+    """The robust step evaluates only the h rows the perturbed plant does not replace: the same
+    values as the closed loop's, without the nominal contact dynamics (a fraction of its size)."""
+    import casadi as ca
+
+    from mpgspec.robust.rigid import robust_h
+
+    prim = built[0].prims["Lie"]
+    rows = no_slip_rows(prim)
+    h_fn, kept = robust_h(prim, rows)
+    assert rows and sorted(kept + list(rows)) == list(range(len(prim.h_names)))
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        x = prim.system.default_state() + 0.05 * rng.standard_normal(prim.system.nx)
+        t, s = rng.uniform(0, 1, 2)
+        full = np.array(prim.loop_raw(x, t, s, x)[1]).ravel()
+        np.testing.assert_array_equal(np.array(h_fn(x, t, s, x)).ravel(), full[kept])
+    assert h_fn.n_nodes() < prim.loop_raw.n_nodes() / 5
