@@ -9,6 +9,11 @@ private temporary folder and moved into the cache with os.replace, so concurrent
 load a half-written one. When the compiler is missing or fails, the Function is returned
 uncompiled (CasADi's virtual machine) with a warning.
 
+compile_library(name, fns, flags) compiles several Functions and their reverse derivatives into one
+library (a robot's dynamics, built once); compile_many(fns, flags, libs=[...]) links Functions that
+call it (casadi.external of the library) against it. The library's path, which the dependents' C
+code names through its symbols, carries the hash of its code.
+
 with_cse(fn) rebuilds a Function with CasADi's common-subexpression elimination (`cse`): for the
 robot's generated loops smaller C, less gcc time and faster steps (bench/bench_jit.py). cse(fn) does
 so unless CSE is off (only to measure what it saves).
@@ -77,26 +82,32 @@ def cse_sx(fn: ca.Function) -> ca.Function:
 
 @dataclass
 class _Job:
-    """One Function to compile: its C code, the flags and the library it goes to."""
+    """One library to compile: its name, C code, the flags, the libraries it links and its path."""
 
-    fn: ca.Function
+    name: str
+    fn: ca.Function | None
     code: str
     flags: tuple[str, ...]
     lib: Path
     hit: bool
+    links: tuple[str, ...] = ()
     gcc_s: float = 0.0
     error: str | None = None
 
 
-def _job(fn: ca.Function, flags: tuple[str, ...]) -> _Job:
+def _job(fn: ca.Function, flags: tuple[str, ...], libs: tuple[Path, ...] = ()) -> _Job:
     cg = ca.CodeGenerator(f"{fn.name()}.c", {"with_header": False})
     cg.add(fn)
-    code = cg.dump()
+    return _library_job(fn.name(), fn, cg.dump(), flags, libs)
+
+
+def _library_job(name: str, fn, code: str, flags: tuple[str, ...], libs: tuple[Path, ...] = ()) -> _Job:
     if len(code) > LARGE_CODE:
         flags = (*flags, *LARGE_CODE_FLAGS)
-    key = hashlib.sha256((code + " ".join(flags) + ca.__version__).encode()).hexdigest()[:24]
-    lib = cache_dir() / f"{fn.name()}_{key}.so"
-    return _Job(fn, code, tuple(flags), lib, lib.exists())
+    links = tuple(a for lib in libs for a in (str(lib), f"-Wl,-rpath,{lib.parent}"))
+    key = hashlib.sha256((code + " ".join(flags + links) + ca.__version__).encode()).hexdigest()[:24]
+    lib = cache_dir() / f"{name}_{key}.so"
+    return _Job(name, fn, code, tuple(flags), lib, lib.exists(), links)
 
 
 def _gcc(job: _Job) -> None:
@@ -118,12 +129,12 @@ def _gcc(job: _Job) -> None:
 
 def _compile(job: _Job, folder: Path) -> None:
     with tempfile.TemporaryDirectory(dir=folder) as tmp:
-        src = Path(tmp) / f"{job.fn.name()}.c"
+        src = Path(tmp) / f"{job.name}.c"
         src.write_text(job.code)
         out = Path(tmp) / job.lib.name
         cc = os.environ.get("CC", "gcc")
         try:
-            subprocess.run([cc, *job.flags, "-fPIC", "-shared", str(src), "-o", str(out), "-lm"], check=True,
+            subprocess.run([cc, *job.flags, "-fPIC", "-shared", str(src), "-o", str(out), *job.links, "-lm"], check=True,
                            capture_output=True, text=True)
             os.replace(out, job.lib)  # atomic: concurrent processes never load a half-written library
         except (OSError, subprocess.CalledProcessError) as err:
@@ -134,7 +145,7 @@ def _log(job: _Job) -> None:
     path = os.environ.get("MPGSPEC_JIT_LOG")
     if not path:
         return
-    rec = {"name": job.fn.name(), "c_bytes": len(job.code), "gcc_s": round(job.gcc_s, 4), "hit": job.hit,
+    rec = {"name": job.name, "c_bytes": len(job.code), "gcc_s": round(job.gcc_s, 4), "hit": job.hit,
            "flags": list(job.flags)}
     if job.error is not None:
         rec["failed"] = True
@@ -142,11 +153,13 @@ def _log(job: _Job) -> None:
         f.write(json.dumps(rec) + "\n")
 
 
-def compile_many(fns: list[ca.Function], flags: tuple[str, ...], n_jobs: int | None = None) -> list[ca.Function]:
-    """fns compiled (in their order), up to n_jobs gcc at once (default: the usable cores); each
-    library reused when its code and flags are unchanged. A Function whose compile fails comes back
+def compile_many(fns: list[ca.Function], flags: tuple[str, ...], n_jobs: int | None = None,
+                 libs: tuple[Path, ...] = ()) -> list[ca.Function]:
+    """fns compiled (in their order), up to n_jobs gcc at once (default: the usable cores), linked
+    against the libraries `libs` (of compile_library) whose Functions they call; each library
+    reused when its code and flags are unchanged. A Function whose compile fails comes back
     uncompiled, with a warning."""
-    work = [_job(fn, tuple(flags)) for fn in fns]
+    work = [_job(fn, tuple(flags), tuple(libs)) for fn in fns]
     todo = {}
     for j in work:  # the same code twice in one batch is compiled once
         if not j.hit and j.lib not in todo:
@@ -164,7 +177,7 @@ def compile_many(fns: list[ca.Function], flags: tuple[str, ...], n_jobs: int | N
             j.error = done.error
         _log(j)
         if j.error is not None:  # no compiler: CasADi's virtual machine
-            warnings.warn(f"compiling {j.fn.name()} failed, running it uncompiled: {j.error[:300]}")
+            warnings.warn(f"compiling {j.name} failed, running it uncompiled: {j.error[:300]}")
             out.append(j.fn)
         else:
             out.append(ca.external(j.fn.name(), str(j.lib)))
@@ -175,3 +188,21 @@ def compile_cached(fn: ca.Function, flags: tuple[str, ...]) -> ca.Function:
     """fn compiled to a shared library with the system C compiler, reused when the generated C
     code and the flags are unchanged (the library's name is the hash of both)."""
     return compile_many([fn], flags)[0]
+
+
+def compile_library(name: str, fns: list[ca.Function], flags: tuple[str, ...]) -> Path | None:
+    """The path of one library holding fns and each one's reverse derivative (adj1_<name>, what a
+    gradient through casadi.external of it calls), compiled once and reused while its code is
+    unchanged; None when the compiler fails (with a warning)."""
+    cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+    for fn in fns:
+        cg.add(fn)
+        cg.add(fn.reverse(1))
+    job = _library_job(name, None, cg.dump(), tuple(flags))
+    if not job.hit:
+        _gcc(job)
+    _log(job)
+    if job.error is not None:
+        warnings.warn(f"compiling {name} failed: {job.error[:300]}")
+        return None
+    return job.lib

@@ -19,6 +19,7 @@ from ..compile.primitive import INACTIVE, CompiledPrimitive, saturate
 from ..compile.rigidbody.system import no_slip
 from ..oracle.flow import LEFT, active, jump_of, rk4, solve_or_keep, wrap
 from ..oracle.jit import cse, cse_sx
+from .library import RobotLibrary, library_jump, library_plant, library_schedule_jump, robot_library
 from .rollout import RobustRollout
 
 
@@ -28,15 +29,31 @@ def plant_feet(prim: CompiledPrimitive) -> list[str]:
     return list(frames) if prim.contacts.varies else list(prim.contacts.feet)
 
 
-def robust_plant(prim: CompiledPrimitive, frame: str) -> ca.Function:
-    """(x, u, k, F, t) -> (xdot, lam, c) of the primitive's dynamics perturbed (uncertain_plant)."""
+def library_for(prim: CompiledPrimitive, settings) -> RobotLibrary | None:
+    """The robot's compiled library when the primitive's plant is the masked one (a contact schedule
+    or contact events) and loops are compiled; None: the dynamics are inlined."""
+    if not settings.jit or not (prim.contacts.by_clock or prim.system.events):
+        return None
+    return robot_library(prim.system, tuple(settings.jit_flags))
+
+
+def robust_plant(prim: CompiledPrimitive, frame: str, lib: RobotLibrary | None = None) -> ca.Function:
+    """(x, u, k, F, t) -> (xdot, lam, c) of the primitive's dynamics perturbed (uncertain_plant),
+    the dynamics called from the robot's library when given."""
+    if lib is not None:
+        return library_plant(prim, lib, frame)
     return prim.system.uncertain_plant(prim.contacts, frame)
 
 
-def robust_jump(prim: CompiledPrimitive, frame: str) -> ca.Function:
+def robust_jump(prim: CompiledPrimitive, frame: str, lib: RobotLibrary | None = None) -> ca.Function:
     """(x, u, t, s, k, F) -> x after a step's discrete update; with contact events and no schedule,
-    lift-offs are decided on the perturbed plant (touchdowns and impacts do not depend on k or F)."""
+    lift-offs are decided on the perturbed plant (touchdowns and impacts do not depend on k or F),
+    by the robot's library when given."""
     sys = prim.system
+    if lib is not None and sys.events and not prim.contacts.by_clock:
+        return library_jump(prim, lib, frame)
+    if lib is not None and prim.contacts.by_clock:
+        return library_schedule_jump(prim, lib)
     x, u, t, s = sys.x, ca.SX.sym("u", sys.nu), ca.SX.sym("t"), ca.SX.sym("s")
     k, F = ca.SX.sym("k"), ca.SX.sym("F", 3)
     if sys.events and not prim.contacts.by_clock:
@@ -64,11 +81,13 @@ class RigidRobustRollout(RobustRollout):
     def __init__(self, prim: CompiledPrimitive, names: list[str], frame: str, push: bool, segments: int,
                  settings, horizon: float, duration: float | None = None):
         self.names, self.push, self.frame = list(names), push, frame
-        self.plant_fn = robust_plant(prim, frame)
+        self.lib = library_for(prim, settings)
+        self.libs = (self.lib.path,) if self.lib is not None else ()
+        self.plant_fn = robust_plant(prim, frame, self.lib)
         super().__init__(prim, self.plant_fn, [], segments, settings, horizon, duration)
 
     def _loop(self, prim, plant_fn, dist_inputs, dt):
-        return rigid_step(prim, plant_fn, self.names, self.frame, self.push, dt)
+        return rigid_step(prim, plant_fn, self.names, self.frame, self.push, dt, self.lib)
 
 
 def robust_h(prim: CompiledPrimitive, rows: dict) -> tuple[ca.Function, list[int]]:
@@ -82,9 +101,11 @@ def robust_h(prim: CompiledPrimitive, rows: dict) -> tuple[ca.Function, list[int
     return ca.Function(f"h_{loop.name()}", ins, [h[kept]], loop.name_in(), ["h"]), kept
 
 
-def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str], frame: str, push: bool, dt: float):
+def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str], frame: str, push: bool, dt: float,
+               lib: RobotLibrary | None = None):
     """(step (z, d) -> (z next, [h; RoA margin]), first (x0, t0, s0, theta, d) -> ([h; margin], hold), nth,
-    nd, hold size) of one oracle step on the perturbed plant, z = [x; t; s; x_sw; theta; hold]."""
+    nd, hold size) of one oracle step on the perturbed plant, z = [x; t; s; x_sw; theta; hold]; lib:
+    the robot's library the plant and the contact events are called from (inlined without)."""
     sys = prim.system
     nx, nu = sys.nx, sys.nu
     nth, nd = len(names), 3 if push else 0
@@ -100,7 +121,7 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     rows = no_slip_rows(prim)
     gated = prim.contacts.varies  # contact conditions bind while held
     # the SX pieces the step calls, each generated once, with common subexpressions eliminated
-    plant_fn, jump = cse_sx(plant_fn), cse_sx(robust_jump(prim, frame))
+    plant_fn, jump = cse_sx(plant_fn), cse_sx(robust_jump(prim, frame, lib))
     h_fn, kept = robust_h(prim, rows)
     ctrl, loop = cse_sx(prim.control), cse_sx(h_fn)
     held = hold[1:1 + nu] if law is not None else None

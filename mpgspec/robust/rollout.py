@@ -71,6 +71,7 @@ class RobustRollout:
 
     BATCH = 128
     CHUNK = 100  # steps per compiled call; rollouts stop once decided
+    libs: tuple = ()  # compiled libraries the step calls (the robot's dynamics), linked in
 
     def __init__(self, prim: CompiledPrimitive, plant_fn, dist_inputs: list[int], segments: int,
                  settings: OracleSettings, horizon: float, duration: float | None = None):
@@ -106,7 +107,7 @@ class RobustRollout:
             fns.append(ca.Function(name + "_grad", [x0, t0, TH, D, w], [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))]))
         fns = [cse(fn) for fn in fns]
         if settings.jit:  # the three libraries compile side by side
-            fns = compile_many(fns, settings.jit_flags)
+            fns = compile_many(fns, settings.jit_flags, libs=self.libs)
         self.first, self.chunk = fns[:2]
         self.grad = fns[2] if len(fns) > 2 else None
         self._maps: dict[tuple, ca.Function] = {}

@@ -274,10 +274,11 @@ class _Runs:
         return None
 
 
-def _compiled(built: dict, runs: int, rigid: bool, settings) -> dict[str, _Stepper]:
-    """Steppers of the (step, first) pairs of every primitive, all compiled side by side."""
+def _compiled(built: dict, runs: int, rigid: bool, settings, libs: tuple = ()) -> dict[str, _Stepper]:
+    """Steppers of the (step, first) pairs of every primitive, all compiled side by side (linked
+    against `libs`, the libraries they call)."""
     fns = [f for pair in built.values() for f in pair if f is not None]
-    fns = iter(compile_many(fns, settings.jit_flags) if settings.jit else fns)
+    fns = iter(compile_many(fns, settings.jit_flags, libs=libs) if settings.jit else fns)
     return {name: _Stepper(next(fns), next(fns) if first is not None else None, runs, rigid)
             for name, (_step_fn, first) in built.items()}
 
@@ -285,7 +286,7 @@ def _compiled(built: dict, runs: int, rigid: bool, settings) -> dict[str, _Stepp
 def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], list[str], int, np.ndarray]:
     """Each primitive's mapped step over `runs` on the perturbed plant, the uncertain parameters'
     names, the disturbance's size and bound."""
-    from .rigid import rigid_step, robust_plant
+    from .rigid import library_for, rigid_step, robust_plant
     from .rollout import plant
 
     unc, sys = spec.project.uncertainty, next(iter(prims.values())).system
@@ -293,9 +294,10 @@ def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], lis
     if sys.is_rigid_body:
         force = dist.force if dist is not None else None
         frame = force.frame if force is not None else sys.base_frames()[0]
-        built = {name: rigid_step(p, robust_plant(p, frame), names, frame, force is not None, settings.dt)[:2]
-                 for name, p in prims.items()}
-        out = _compiled(built, runs, True, settings)
+        libs = {name: library_for(p, settings) for name, p in prims.items()}
+        built = {name: rigid_step(p, robust_plant(p, frame, libs[name]), names, frame, force is not None, settings.dt,
+                                  libs[name])[:2] for name, p in prims.items()}
+        out = _compiled(built, runs, True, settings, tuple({lib.path for lib in libs.values() if lib is not None}))
         return out, names, 3 if force is not None else 0, np.asarray(force.bound if force else [], float)
     dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
     bound = np.broadcast_to(np.asarray(dist.bound, float), (len(dist_idx),)) if dist is not None else np.zeros(0)

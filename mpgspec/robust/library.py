@@ -1,0 +1,136 @@
+"""One compiled library per robot: its perturbed contact dynamics and contact events, shared by
+every robust rollout, gradient and uncertain-sequence stepper of its primitives.
+
+Inlined, each target's robust step, its gradient and each primitive's sequence stepper carry their
+own copy of the constrained rigid-body dynamics and of its reverse derivative (most of their C code
+and gcc time). Here they are compiled once per robot:
+- dyn(q, v, u, c, k, w) -> (a, lam): masked_contact_dynamics with the contact mode c, the mass
+  scale k and a generalized force w as inputs, so one function serves every primitive and mode;
+- events(x, u, s, k, w) -> x+: the discrete update after a step with contact events (touchdown,
+  impact, lift-off on the perturbed plant, event clocks);
+- touchdown(q, v, j, c) -> (q+, v+): feet flagged in j put on the ground by their legs and a plastic
+  impact with the feet of c (a contact schedule's update at a step's end),
+each with its reverse derivative. The step's own Functions call them through casadi.external and are
+linked against the library; its path and symbols carry the hash of its code, so what is compiled
+against it changes when the robot does. The values are those of the inlined plant (the same
+expressions, evaluated in the same order).
+"""
+from __future__ import annotations
+
+import hashlib
+import weakref
+from dataclasses import dataclass
+from pathlib import Path
+
+import casadi as ca
+
+from ..compile.events import clock_rate
+from ..compile.rigidbody.hybrid import contact_events, masked_contact_dynamics, masked_impact, touchdown_projection
+from ..compile.rigidbody.liegroup import normalize_quaternion, qdot
+from ..oracle.jit import compile_library
+
+_BUILT: dict[tuple, tuple] = {}
+"""(id of the system, flags) -> (a weak reference to the system, its library): built once per
+process and system; an id reused by another system after the first is freed is not mistaken for it."""
+
+
+@dataclass(frozen=True)
+class RobotLibrary:
+    """The compiled library of one robot and its Functions, called through casadi.external."""
+
+    path: Path
+    dyn: ca.Function
+    events: ca.Function | None
+    touchdown: ca.Function
+
+
+def robot_library(sys, flags: tuple[str, ...]) -> RobotLibrary | None:
+    """The robot's library, built once per process and system (None when gcc fails: the caller
+    inlines the dynamics)."""
+    key = (id(sys), tuple(flags))
+    ref, lib = _BUILT.get(key, (None, None))
+    if ref is None or ref() is not sys:
+        lib = _build(sys, tuple(flags))
+        _BUILT[key] = (weakref.ref(sys), lib)
+    return lib
+
+
+def _build(sys, flags: tuple[str, ...]) -> RobotLibrary | None:
+    m = sys.model
+    q, v, u = ca.SX.sym("q", m.nq), ca.SX.sym("v", m.nv), ca.SX.sym("u", m.nu)
+    c, k, w = ca.SX.sym("c", len(m.contact_frames)), ca.SX.sym("k"), ca.SX.sym("w", m.nv)
+    a, lam = masked_contact_dynamics(sys, q, v, u, c, k, w)
+    j = ca.SX.sym("j", len(m.contact_frames))
+    q_new = touchdown_projection(sys, q, ca.vertsplit(j))
+    v_new = ca.if_else(ca.sum1(j) > 0, masked_impact(sys, q_new, v, c), v)
+    parts = {"dyn": ([q, v, u, c, k, w], [a, lam]), "touchdown": ([q, v, j, c], [q_new, v_new])}
+    if sys.events:
+        x, s = sys.x, ca.SX.sym("s")
+        x_new = ca.vertcat(normalize_quaternion(m, x[:m.nq]), x[m.nq:])
+        parts["events"] = ([x, u, s, k, w], [contact_events(sys, x_new, u, s, k, w)])
+    digest = hashlib.sha256()
+    for name, (ins, outs) in parts.items():
+        digest.update(ca.Function(name, ins, outs).serialize().encode())
+    tag = f"robot_{digest.hexdigest()[:16]}"
+    fns = [ca.Function(f"{tag}_{name}", ins, outs, {"cse": True}) for name, (ins, outs) in parts.items()]
+    path = compile_library(tag, fns, flags)
+    if path is None:
+        return None
+    ext = {name: ca.external(f"{tag}_{name}", str(path)) for name in parts}
+    return RobotLibrary(path, ext["dyn"], ext.get("events"), ext["touchdown"])
+
+
+def library_plant(prim, lib: RobotLibrary, frame: str) -> ca.Function:
+    """(x, u, k, F, t) -> (xdot, lam, c) as the system's uncertain_plant with a contact schedule or
+    contact events, the dynamics called from the robot's library."""
+    sys, m = prim.system, prim.system.model
+    feet, plan = m.contact_frames, prim.contacts
+    xs, ts, Fs = sys.x, ca.SX.sym("t"), ca.SX.sym("F", 3)
+    xq, xv = xs[:m.nq], xs[m.nq:m.nq + m.nv]
+    if plan.by_clock:
+        mode = plan.mode(feet, ts)
+        cs = ca.vertcat(*[mode[f] for f in feet])
+    else:
+        cs = xs[m.nq + m.nv:m.nq + m.nv + len(feet)]
+    pre = ca.Function("plant_in", [xs, ts, Fs], [xq, xv, cs, sys.push_wrench(frame, xq, Fs)])
+    a_s = ca.SX.sym("a", m.nv)
+    xdot = ca.vertcat(qdot(m, xq, xv), a_s, ca.DM.zeros(sys.nx - m.nq - m.nv - len(sys.event_clocks)),
+                      *[clock_rate(xs[i]) for i in sys.event_clocks])
+    post = ca.Function("plant_out", [xs, a_s], [xdot])
+    x, u, k = ca.MX.sym("x", sys.nx), ca.MX.sym("u", sys.nu), ca.MX.sym("k")
+    F, t = ca.MX.sym("F", 3), ca.MX.sym("t")
+    q, v, c, w = pre(x, t, F)
+    a, lam = lib.dyn(q, v, u, c, k, w)
+    return ca.Function("uncertain_plant", [x, u, k, F, t], [post(x, a), lam, c],
+                       ["x", "u", "k", "F", "t"], ["xdot", "lam", "c"])
+
+
+def library_jump(prim, lib: RobotLibrary, frame: str) -> ca.Function:
+    """(x, u, t, s, k, F) -> x after a step's contact events on the perturbed plant, from the
+    robot's library (robust_jump with contact events and no schedule)."""
+    sys, m = prim.system, prim.system.model
+    Fs = ca.SX.sym("F", 3)
+    xs = sys.x
+    wrench = ca.Function("push", [xs, Fs], [sys.push_wrench(frame, xs[:m.nq], Fs)])
+    x, u, t, s = ca.MX.sym("x", sys.nx), ca.MX.sym("u", sys.nu), ca.MX.sym("t"), ca.MX.sym("s")
+    k, F = ca.MX.sym("k"), ca.MX.sym("F", 3)
+    return ca.Function("robust_jump", [x, u, t, s, k, F], [lib.events(x, u, s, k, wrench(x, F))])
+
+
+def library_schedule_jump(prim, lib: RobotLibrary) -> ca.Function:
+    """(x, u, t, s, k, F) -> x after a step under a contact schedule (Schedule.jump: the clock decides,
+    not k or F), the touchdown and impact called from the robot's library."""
+    sys, m = prim.system, prim.system.model
+    feet, plan = m.contact_frames, prim.contacts
+    xs, ts = sys.x, ca.SX.sym("t")
+    nq, nv = m.nq, m.nv
+    mode, before = plan.mode(feet, ts), plan.mode(feet, ts, before=True)
+    c = ca.vertcat(*[mode[f] for f in feet])
+    joins = ca.vertcat(*[ca.logic_and(mode[f] > 0.5, before[f] < 0.5) for f in feet])
+    tail = ca.vertcat(c, xs[nq + nv + len(feet):]) if sys.events else xs[nq + nv:]
+    pre = ca.Function("jump_in", [xs, ts], [sys.project(xs)[:nq], xs[nq:nq + nv], joins, c, tail])
+    x, u, t, s = ca.MX.sym("x", sys.nx), ca.MX.sym("u", sys.nu), ca.MX.sym("t"), ca.MX.sym("s")
+    k, F = ca.MX.sym("k"), ca.MX.sym("F", 3)
+    q, v, j, cc, rest = pre(x, t)
+    q_new, v_new = lib.touchdown(q, v, j, cc)
+    return ca.Function("robust_jump", [x, u, t, s, k, F], [ca.vertcat(q_new, v_new, rest)])
