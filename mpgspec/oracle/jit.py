@@ -101,8 +101,10 @@ def _job(fn: ca.Function, flags: tuple[str, ...], libs: tuple[Path, ...] = ()) -
     return _library_job(fn.name(), fn, cg.dump(), flags, libs)
 
 
-def _library_job(name: str, fn, code: str, flags: tuple[str, ...], libs: tuple[Path, ...] = ()) -> _Job:
-    if len(code) > LARGE_CODE:
+def _library_job(name: str, fn, code: str, flags: tuple[str, ...], libs: tuple[Path, ...] = (),
+                 large: bool = True) -> _Job:
+    """`large`: drop the superlinear passes (LARGE_CODE_FLAGS) when the code is large."""
+    if large and len(code) > LARGE_CODE:
         flags = (*flags, *LARGE_CODE_FLAGS)
     links = tuple(a for lib in libs for a in (str(lib), f"-Wl,-rpath,{lib.parent}"))
     key = hashlib.sha256((code + " ".join(flags + links) + ca.__version__).encode()).hexdigest()[:24]
@@ -192,13 +194,13 @@ def compile_cached(fn: ca.Function, flags: tuple[str, ...]) -> ca.Function:
 
 def compile_library(name: str, fns: list[ca.Function], flags: tuple[str, ...]) -> Path | None:
     """The path of one library holding fns and each one's reverse derivative (adj1_<name>, what a
-    gradient through casadi.external of it calls), compiled once and reused while its code is
-    unchanged; None when the compiler fails (with a warning)."""
+    gradient through casadi.external of it calls), compiled once with exactly `flags` and reused
+    while its code is unchanged; None when the compiler fails (with a warning)."""
     cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
     for fn in fns:
         cg.add(fn)
         cg.add(fn.reverse(1))
-    job = _library_job(name, None, cg.dump(), tuple(flags))
+    job = _library_job(name, None, cg.dump(), tuple(flags), large=False)
     if not job.hit:
         _gcc(job)
     _log(job)

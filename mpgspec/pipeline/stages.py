@@ -25,7 +25,7 @@ from ..oracle.registry import get_backend
 from ..plan.planner import lookup_table, shortest_plan
 from ..progress import Progress
 from ..spec.uncertainty_refs import check_uncertainty, check_uncertainty_compiled
-from ..robust.graph import RobustResult, robust_stage
+from ..robust.graph import RobustResult, prefetch_robust, robust_stage
 from ..settings import OracleSettings
 from ..spec.loader import ProjectSpec
 
@@ -86,6 +86,7 @@ def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progres
     for p in prims.values():  # a control period must be a whole number of oracle steps
         if p.sampled is not None:
             p.sampled.steps(settings.dt)
+    prefetch_robust(spec, prims, settings, memo)
     t1 = time.perf_counter()
     if progress:
         progress(spec.name, "regions of attraction", 0, len(prims))

@@ -30,7 +30,8 @@ from ..plan.planner import lookup_table
 from ..oracle.executors import InProcess
 from ..oracle.tasks import Failed
 from .cells import TargetJob, failed_target, run_target
-from .rigid import RigidRobustRollout
+from .library import prefetch
+from .rigid import RigidRobustRollout, uses_library
 from .rollout import RobustRollout, plant
 from .scenarios import Scenarios, scenarios
 from .sequence import sequence_under_uncertainty
@@ -77,10 +78,7 @@ def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResul
     if unc is None:
         return None
     t0 = time.perf_counter()
-    seq_spec = spec.project.sequence
-    key = memo.key("robust", RECORD, *(p.digest() for p in prims.values()), spec.system.model_dump_json(),
-                   unc.model_dump_json(), seq_spec.model_dump_json() if seq_spec else None,
-                   sorted(dataclasses.asdict(settings).items())) if memo is not None else None
+    key = _key(spec, prims, settings, memo)
     known = memo.get(key) if memo is not None else None
     if known is not None:
         edges = known["edges"]
@@ -109,6 +107,29 @@ def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResul
     if memo is not None:
         memo.put(key, {"edges": edges, "nodes": nodes, "scenarios": scen, "sequence": seq, "rollouts": n_roll})
     return RobustResult(rg, edges, _assertions(unc, rg), scen, timing, seq, nodes)
+
+
+def _key(spec, prims: dict, settings, memo) -> str | None:
+    """The memo key of the robust record: the closed loops, the system, the uncertainty, the sequence
+    and the settings."""
+    if memo is None:
+        return None
+    seq_spec = spec.project.sequence
+    return memo.key("robust", RECORD, *(p.digest() for p in prims.values()), spec.system.model_dump_json(),
+                    spec.project.uncertainty.model_dump_json(), seq_spec.model_dump_json() if seq_spec else None,
+                    sorted(dataclasses.asdict(settings).items()))
+
+
+def prefetch_robust(spec, prims: dict, settings, memo=None) -> None:
+    """Start compiling the robot's library in the background when the robust stage will need it
+    (uncertainty, a rigid body with a masked plant, no stored record): its gcc then runs beside
+    the stages before."""
+    if spec.project.uncertainty is None or not prims:
+        return
+    prim = next((p for p in prims.values() if uses_library(p, settings)), None)
+    if prim is None or (memo is not None and memo.get(_key(spec, prims, settings, memo)) is not None):
+        return
+    prefetch(prim.system)
 
 
 @dataclass(frozen=True)

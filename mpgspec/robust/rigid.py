@@ -32,9 +32,15 @@ def plant_feet(prim: CompiledPrimitive) -> list[str]:
 def library_for(prim: CompiledPrimitive, settings) -> RobotLibrary | None:
     """The robot's compiled library when the primitive's plant is the masked one (a contact schedule
     or contact events) and loops are compiled; None: the dynamics are inlined."""
-    if not settings.jit or not (prim.contacts.by_clock or prim.system.events):
+    if not uses_library(prim, settings):
         return None
-    return robot_library(prim.system, tuple(settings.jit_flags))
+    return robot_library(prim.system)
+
+
+def uses_library(prim: CompiledPrimitive, settings) -> bool:
+    """Whether the robust step calls the robot's library: compiled loops and a masked plant."""
+    sys = prim.system
+    return bool(settings.jit) and sys.is_rigid_body and (prim.contacts.by_clock or sys.events)
 
 
 def robust_plant(prim: CompiledPrimitive, frame: str, lib: RobotLibrary | None = None) -> ca.Function:

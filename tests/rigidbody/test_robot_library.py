@@ -68,3 +68,30 @@ def test_one_library_for_every_target_and_its_gradient(a1):
     g, g0 = rr.gradients(*args), rr0.gradients(*args)
     assert np.abs(g).max() > 0
     np.testing.assert_allclose(g, g0, rtol=1e-9, atol=1e-12)
+
+
+def test_prefetch_and_requests_build_once(monkeypatch):
+    """A background prefetch and requests that arrive while it builds share one build; another
+    system gets its own."""
+    import time
+
+    from mpgspec.robust import library
+
+    calls = []
+
+    def build(sys, flags):
+        calls.append(sys)
+        time.sleep(0.2)
+        return f"library of {sys.name}"
+
+    class System:
+        def __init__(self, name):
+            self.name = name
+
+    monkeypatch.setattr(library, "_build", build)
+    a, b = System("a"), System("b")
+    library.prefetch(a)
+    time.sleep(0.05)
+    assert [library.robot_library(a) for _ in range(3)] == ["library of a"] * 3
+    assert library.robot_library(b) == "library of b"
+    assert calls == [a, b]
