@@ -192,15 +192,18 @@ def compile_cached(fn: ca.Function, flags: tuple[str, ...]) -> ca.Function:
     return compile_many([fn], flags)[0]
 
 
-def compile_library(name: str, fns: list[ca.Function], flags: tuple[str, ...]) -> Path | None:
-    """The path of one library holding fns and each one's reverse derivative (adj1_<name>, what a
-    gradient through casadi.external of it calls), compiled once with exactly `flags` and reused
-    while its code is unchanged; None when the compiler fails (with a warning)."""
+def compile_library(name: str, fns: list[ca.Function], flags: tuple[str, ...], reverse: bool = True,
+                    large: bool = False, libs: tuple[Path, ...] = ()) -> Path | None:
+    """The path of one library holding fns and (`reverse`) each one's reverse derivative (adj1_<name>,
+    what a gradient through casadi.external of it calls), linked against `libs`, compiled once with
+    `flags` (and LARGE_CODE_FLAGS when `large` and the code is large) and reused while its code is
+    unchanged; None when the compiler fails (with a warning)."""
     cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
     for fn in fns:
         cg.add(fn)
-        cg.add(fn.reverse(1))
-    job = _library_job(name, None, cg.dump(), tuple(flags), large=False)
+        if reverse:
+            cg.add(fn.reverse(1))
+    job = _library_job(name, None, cg.dump(), tuple(flags), tuple(libs), large=large)
     if not job.hit:
         _gcc(job)
     _log(job)

@@ -14,6 +14,9 @@ each with its reverse derivative. The step's own Functions call them through cas
 linked against the library; its path and symbols carry the hash of its code, so what is compiled
 against it changes when the robot does. The values are those of the inlined plant (the same
 expressions, evaluated in the same order).
+
+step_library compiles one primitive's robust step and first sample the same way, once: its robust
+rollouts (chunks and gradient) and its uncertain-sequence stepper call the same library.
 """
 from __future__ import annotations
 
@@ -161,3 +164,23 @@ def library_schedule_jump(prim, lib: RobotLibrary) -> ca.Function:
     q, v, j, cc, rest = pre(x, t)
     q_new, v_new = lib.touchdown(q, v, j, cc)
     return ca.Function("robust_jump", [x, u, t, s, k, F], [ca.vertcat(q_new, v_new, rest)])
+
+
+def step_library(step: ca.Function, first: ca.Function, reverse: bool, flags: tuple[str, ...],
+                 libs: tuple[Path, ...]) -> tuple[ca.Function, ca.Function, Path] | None:
+    """(step, first, library path): one primitive's robust step and first sample compiled into one
+    library linked against `libs` (the robot's), with their reverse derivatives when a gradient is
+    taken through them; the names carry the hash of both. None when gcc fails."""
+    digest = hashlib.sha256((step.serialize() + first.serialize()).encode()).hexdigest()[:16]
+    tag = f"rstep_{digest}"
+    named = [_renamed(fn, f"{tag}_{kind}") for fn, kind in ((step, "step"), (first, "first"))]
+    path = compile_library(tag, named, flags, reverse=reverse, large=True, libs=libs)
+    if path is None:
+        return None
+    return ca.external(f"{tag}_step", str(path)), ca.external(f"{tag}_first", str(path)), path
+
+
+def _renamed(fn: ca.Function, name: str) -> ca.Function:
+    """fn under another name (a call of it, its inputs and outputs named as fn's)."""
+    a = fn.mx_in()
+    return ca.Function(name, a, fn.call(a), fn.name_in(), fn.name_out())

@@ -13,13 +13,16 @@ compiled one.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import casadi as ca
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive, saturate
 from ..compile.rigidbody.system import no_slip
 from ..oracle.flow import LEFT, active, jump_of, rk4, solve_or_keep, wrap
 from ..oracle.jit import cse, cse_sx
-from .library import RobotLibrary, library_jump, library_plant, library_schedule_jump, robot_library
+from .library import (RobotLibrary, library_jump, library_plant, library_schedule_jump, robot_library,
+                      step_library)
 from .rollout import RobustRollout
 
 
@@ -93,7 +96,21 @@ class RigidRobustRollout(RobustRollout):
         super().__init__(prim, self.plant_fn, [], segments, settings, horizon, duration)
 
     def _loop(self, prim, plant_fn, dist_inputs, dt):
-        return rigid_step(prim, plant_fn, self.names, self.frame, self.push, dt, self.lib)
+        parts = rigid_step(prim, plant_fn, self.names, self.frame, self.push, dt, self.lib)
+        step, first, path = shared_step(parts, self.lib, self.settings)
+        self.libs += (path,) if path is not None else ()
+        return (step, first, *parts[2:])
+
+
+def shared_step(parts: tuple, lib: RobotLibrary | None, settings) -> tuple[ca.Function, ca.Function, Path | None]:
+    """(step, first, library path) of rigid_step's parts: with the robot's library, compiled once per
+    primitive into one library (with reverse derivatives where a push gradient is taken) that its
+    robust rollouts and its sequence stepper share; else as they are (path None)."""
+    step, first, _nth, nd, nhold = parts
+    if lib is None:
+        return step, first, None
+    shared = step_library(step, first, bool(nd) and nhold == 0, tuple(settings.jit_flags), (lib.path,))
+    return shared if shared is not None else (step, first, None)
 
 
 def robust_h(prim: CompiledPrimitive, rows: dict) -> tuple[ca.Function, list[int]]:

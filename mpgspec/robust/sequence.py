@@ -274,11 +274,10 @@ class _Runs:
         return None
 
 
-def _compiled(built: dict, runs: int, rigid: bool, settings, libs: tuple = ()) -> dict[str, _Stepper]:
-    """Steppers of the (step, first) pairs of every primitive, all compiled side by side (linked
-    against `libs`, the libraries they call)."""
+def _compiled(built: dict, runs: int, rigid: bool, settings) -> dict[str, _Stepper]:
+    """Steppers of the (step, first) pairs of every primitive, all compiled side by side."""
     fns = [f for pair in built.values() for f in pair if f is not None]
-    fns = iter(compile_many(fns, settings.jit_flags, libs=libs) if settings.jit else fns)
+    fns = iter(compile_many(fns, settings.jit_flags) if settings.jit else fns)
     return {name: _Stepper(next(fns), next(fns) if first is not None else None, runs, rigid)
             for name, (_step_fn, first) in built.items()}
 
@@ -286,7 +285,7 @@ def _compiled(built: dict, runs: int, rigid: bool, settings, libs: tuple = ()) -
 def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], list[str], int, np.ndarray]:
     """Each primitive's mapped step over `runs` on the perturbed plant, the uncertain parameters'
     names, the disturbance's size and bound."""
-    from .rigid import library_for, rigid_step, robust_plant
+    from .rigid import library_for, rigid_step, robust_plant, shared_step
     from .rollout import plant
 
     unc, sys = spec.project.uncertainty, next(iter(prims.values())).system
@@ -294,10 +293,15 @@ def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], lis
     if sys.is_rigid_body:
         force = dist.force if dist is not None else None
         frame = force.frame if force is not None else sys.base_frames()[0]
-        libs = {name: library_for(p, settings) for name, p in prims.items()}
-        built = {name: rigid_step(p, robust_plant(p, frame, libs[name]), names, frame, force is not None, settings.dt,
-                                  libs[name])[:2] for name, p in prims.items()}
-        out = _compiled(built, runs, True, settings, tuple({lib.path for lib in libs.values() if lib is not None}))
+        built, shared = {}, {}
+        for name, p in prims.items():
+            lib = library_for(p, settings)
+            parts = rigid_step(p, robust_plant(p, frame, lib), names, frame, force is not None, settings.dt, lib)
+            step, first, path = shared_step(parts, lib, settings)
+            (built if path is None else shared)[name] = (step, first)
+        out = {**_compiled(built, runs, True, settings),
+               **{name: _Stepper(step, first, runs, True) for name, (step, first) in shared.items()}}
+        out = {name: out[name] for name in prims}
         return out, names, 3 if force is not None else 0, np.asarray(force.bound if force else [], float)
     dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
     bound = np.broadcast_to(np.asarray(dist.bound, float), (len(dist_idx),)) if dist is not None else np.zeros(0)

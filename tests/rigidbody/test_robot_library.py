@@ -1,5 +1,6 @@
 """The A1's robot library: robust steps that call it equal the inlined ones, bit for bit, and their
-gradients agree; one library serves every target."""
+gradients agree; one library serves every target, and each target's step is compiled once for its
+rollouts and its sequence stepper."""
 import numpy as np
 import pytest
 
@@ -61,7 +62,8 @@ def test_one_library_for_every_target_and_its_gradient(a1):
     short = dict(segments=4, settings=settings, horizon=0.05, duration=0.04)
     rr = RigidRobustRollout(prims["Walk(slow)"], NAMES, "trunk", True, **short)
     rr_jump = RigidRobustRollout(prims["Jump"], NAMES, "trunk", True, **short)
-    assert rr.libs and rr.libs == rr_jump.libs
+    assert rr.lib is not None and rr.lib.path == rr_jump.lib.path  # one robot library
+    assert rr.libs[0] == rr.lib.path and len(set(rr.libs + rr_jump.libs)) == 3  # and a step library per target
     rr0 = RigidRobustRollout(prims["Walk(slow)"], NAMES, "trunk", True, **{**short, "settings": settings.replace(jit=False)})
     x0 = prims["Walk(slow)"].system.default_state()[None, :]
     args = (x0, np.zeros(1), np.array([[1.05, 0.5]]), np.full((1, 3, 4), 2.0), [0], [rr.N])
@@ -95,3 +97,28 @@ def test_prefetch_and_requests_build_once(monkeypatch):
     assert [library.robot_library(a) for _ in range(3)] == ["library of a"] * 3
     assert library.robot_library(b) == "library of b"
     assert calls == [a, b]
+
+
+def test_the_sequence_stepper_shares_the_rollouts_step_library(a1, monkeypatch):
+    """The uncertain sequence's stepper of a primitive calls the library its robust rollouts
+    compiled: no second compile of the same step."""
+    from mpgspec.robust import library, sequence
+
+    spec, prims, settings = a1
+    paths = []
+    real = library.step_library
+
+    def spy(*a, **kw):
+        out = real(*a, **kw)
+        paths.append(out[2])
+        return out
+
+    monkeypatch.setattr(library, "step_library", spy)
+    import mpgspec.robust.rigid as rigid
+
+    monkeypatch.setattr(rigid, "step_library", spy)
+    rr = RigidRobustRollout(prims["Walk(slow)"], NAMES, "trunk", True, 4, settings, 0.05, 0.04)
+    few = {"Walk(slow)": prims["Walk(slow)"]}
+    steppers = sequence.steppers(spec, few, settings, 2)[0]
+    assert paths[0] == paths[1] == rr.libs[1]
+    assert steppers["Walk(slow)"].step is not None
