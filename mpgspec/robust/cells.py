@@ -24,9 +24,6 @@ from .starts import Start, boundary_starts
 
 ROLLOUTS = 4096
 """At most this many rollouts are run (and their samples held) at once."""
-NODE_STARTS = 2
-"""A target's own flow is checked from x_B*(t_B) at this many of its cells' switch-in clocks (the
-first and the last)."""
 SETTLED = NEVER / 2
 """Time since switch-in at the start of a target's own-flow check: long settled, yet below the clock
 of an event that has not happened (NEVER), which stays at rest."""
@@ -169,10 +166,8 @@ def _search(rr, worst: list[dict], sc: Scenarios, nsteps: np.ndarray, tol: float
 
 
 def _node_clocks(cells: list) -> list[float]:
-    """At most NODE_STARTS of the cells' switch-in clocks, spread from the first to the last."""
-    tbs = sorted({round(c[5], 9) for c in cells})
-    tbs = [tbs[int(round(k))] for k in np.linspace(0, len(tbs) - 1, min(NODE_STARTS, len(tbs)))]
-    return sorted(set(tbs))
+    """Every clock the cells switch in at: the own flow is checked from each."""
+    return sorted({round(c[5], 9) for c in cells})
 
 
 def _cell_records(prims: dict, B, cells: list, worst: list[dict], node: dict, sc: Scenarios, unc,
