@@ -21,6 +21,7 @@ from .sampling import Simulator, search
 
 class FloquetVerifier:
     name = "floquet"
+    simulates = True  # rollouts only: sized on the executor's workers (certify/roa.py)
     description = "Floquet multipliers of the tracked orbit (monodromy by RK4 on the variational equation); " \
                   "tube radius by rollouts at random phases"
 

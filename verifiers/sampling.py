@@ -106,6 +106,7 @@ def defaults(A: np.ndarray, o: dict) -> tuple[float, float]:
 
 class SamplingVerifier:
     name = "sampling"
+    simulates = True  # rollouts only: sized on the executor's workers (certify/roa.py)
     description = "empirical radius: RK4 rollouts from W-spheres around x*, bisection on r"
 
     @staticmethod

@@ -19,6 +19,8 @@ from pydantic import ValidationError
 
 from ..compile.primitive import CompiledPrimitive
 from ..errors import SpecError, SpecErrors
+from ..oracle.executors import InProcess
+from ..oracle.tasks import Failed
 from ..spec.loader import ProjectSpec
 from .level_set import level_set_of, use_level_set
 from .problem import RoAResult, from_primitive
@@ -108,15 +110,20 @@ def check_roa_specs(spec: ProjectSpec) -> None:
         raise SpecErrors(list(errors.values()))
 
 
-def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=None) -> dict[str, RoARecord]:
+def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=None, executor=None,
+                 progress=None) -> dict[str, RoARecord]:
     """Run each primitive's RoA method; recompile primitives whose radius changed (in place).
 
     The methods and options are checked first (check_roa_specs). memo (optional, with
     key/get/put) keeps records by the primitive's content hash, method and options, so an
-    unchanged primitive is not sized again.
+    unchanged primitive is not sized again. Primitives whose method only simulates (its verifier says
+    `simulates = True`: no solver threads, which a forked worker could inherit mid-use) are spread
+    over the executor's workers (mpgspec.oracle.executors; in this process when omitted), the others
+    sized here; each method is seeded by its options, so the records do not depend on where they
+    ran. A primitive whose result could not come back from a worker is sized again here.
     """
     check_roa_specs(spec)
-    records = {}
+    records, todo, keys = {}, [], {}
     for inst in spec.primitives:
         roa = inst.spec.roa
         prim = prims[inst.name]
@@ -124,37 +131,62 @@ def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=No
             records[inst.name] = RoARecord(inst.name, "given", "given", float(roa.radius), roa.radius,
                                            "radius chosen by the spec author")
             continue
-        key = memo.key("roa", prim.digest(), roa.method, sorted(roa.options.items()), roa.radius) if memo else None
-        known = memo.get(key) if memo else None
+        keys[inst.name] = memo.key("roa", prim.digest(), roa.method, sorted(roa.options.items()), roa.radius) \
+            if memo else None
+        known = memo.get(keys[inst.name]) if memo else None
         if known is not None:
             records[inst.name] = RoARecord(**known)
             continue
-        t0 = time.perf_counter()
-        try:
-            res = _estimate(roa.method, prim, roa.options)
-            level, r, msg, ev = res.level, float(res.radius), res.message, res.evidence
-        except Exception as err:  # a verifier crash is this primitive's evidence
-            level, r, msg, ev = "failed", 0.0, f"{type(err).__name__}: {err}", {}
-        if level not in RANK or not np.isfinite(r):  # a plug-in's answer must be a level and a finite radius
-            msg = f"{msg}; the verifier answered level {str(level)[:40]!r} and radius {r!r}"
-            level, r = "failed", 0.0
-        rec = RoARecord(inst.name, roa.method, level, r, roa.radius, msg, ev, time.perf_counter() - t0)
-        if level == "failed" or r <= 0:
-            rec.radius = float(roa.radius or 0.0)
-            rec.level = "given" if roa.radius else "failed"
-            rec.message = f"{roa.method} failed ({msg}); " + ("using the spec's radius" if roa.radius else "E is empty")
-        elif roa.radius is not None and roa.radius > r:
-            rec.message = f"the spec's radius {roa.radius:g} exceeds the {level} radius {r:.4g}; using {r:.4g}. " + msg
-        elif roa.radius is not None:
-            rec.radius = float(roa.radius)
-            rec.message = f"the spec's radius {roa.radius:g} lies within the {level} radius {r:.4g}. " + msg
-            rec.level = level
+        todo.append(inst)
+    jobs = [(inst.name, inst.spec.roa.method, dict(inst.spec.roa.options)) for inst in todo]
+    methods = roa_methods()
+    pooled = [j for j in jobs if getattr(methods.get(j[1]), "simulates", False)]
+    done = dict(zip((j[0] for j in pooled), (executor or InProcess()).map(
+        _sized, pooled, progress, label="regions of attraction", shared=prims)))
+    for inst, job in zip(todo, jobs):
+        res = done.get(inst.name)
+        if res is None or isinstance(res, Failed):  # a solver's method, or a result lost on its way back
+            res = _sized(prims, job)
+        rec = _record(inst, *res)
         records[inst.name] = rec
         if memo and rec.level != "failed":
-            memo.put(key, rec.to_dict())
+            memo.put(keys[inst.name], rec.to_dict())
     apply_radii(prims, {n: r.radius for n, r in records.items()})
     _regions(spec, prims, records)
     return records
+
+
+def _sized(prims: dict, job: tuple) -> tuple:
+    """(level, radius, message, evidence, seconds) of one primitive's RoA method (the function the
+    executor maps); a verifier crash is this primitive's evidence."""
+    name, method, options = job
+    t0 = time.perf_counter()
+    try:
+        res = _estimate(method, prims[name], options)
+        level, r, msg, ev = res.level, float(res.radius), res.message, res.evidence
+    except Exception as err:  # a verifier crash is this primitive's evidence
+        level, r, msg, ev = "failed", 0.0, f"{type(err).__name__}: {err}", {}
+    return level, r, msg, ev, time.perf_counter() - t0
+
+
+def _record(inst, level, r: float, msg: str, ev: dict, seconds: float) -> RoARecord:
+    """The record of a primitive's RoA method, with the spec's own radius weighed against it."""
+    roa = inst.spec.roa
+    if level not in RANK or not np.isfinite(r):  # a plug-in's answer must be a level and a finite radius
+        msg = f"{msg}; the verifier answered level {str(level)[:40]!r} and radius {r!r}"
+        level, r = "failed", 0.0
+    rec = RoARecord(inst.name, roa.method, level, r, roa.radius, msg, ev, seconds)
+    if level == "failed" or r <= 0:
+        rec.radius = float(roa.radius or 0.0)
+        rec.level = "given" if roa.radius else "failed"
+        rec.message = f"{roa.method} failed ({msg}); " + ("using the spec's radius" if roa.radius else "E is empty")
+    elif roa.radius is not None and roa.radius > r:
+        rec.message = f"the spec's radius {roa.radius:g} exceeds the {level} radius {r:.4g}; using {r:.4g}. " + msg
+    elif roa.radius is not None:
+        rec.radius = float(roa.radius)
+        rec.message = f"the spec's radius {roa.radius:g} lies within the {level} radius {r:.4g}. " + msg
+        rec.level = level
+    return rec
 
 
 def _regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], records: dict[str, RoARecord]) -> None:

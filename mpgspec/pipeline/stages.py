@@ -72,9 +72,10 @@ class Checks:
 
 
 def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
-                  memo=None) -> CompiledProject:
+                  memo=None, executor: Executor | None = None) -> CompiledProject:
     """Closed loops of every primitive, refused early when the backend cannot run them; E sized
-    (memo: mpgspec.oracle.cache.Memo, to reuse the sizing of unchanged primitives)."""
+    (memo: mpgspec.oracle.cache.Memo, to reuse the sizing of unchanged primitives) on the
+    executor's workers (in this process when omitted)."""
     t0 = time.perf_counter()
     check_uncertainty(spec)
     crosscheck_settings(spec)  # a cross-check that cannot run is a spec error before anything is built
@@ -90,7 +91,8 @@ def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progres
     t1 = time.perf_counter()
     if progress:
         progress(spec.name, "regions of attraction", 0, len(prims))
-    roa = size_regions(spec, prims, memo)
+    cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
+    roa = size_regions(spec, prims, memo, executor, cb)
     return CompiledProject(spec, settings, prims, roa,
                            {"compile_s": t1 - t0, "roa_s": time.perf_counter() - t1})
 
@@ -165,7 +167,7 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
 def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
           executor: Executor | None = None) -> tuple[CompiledProject, VerifiedGraph]:
     """Compile and run Algorithm 1; a caching executor also lends its memo to the sizing of E."""
-    cp = compile_stage(spec, settings, progress, getattr(executor, "memo", None))
+    cp = compile_stage(spec, settings, progress, getattr(executor, "memo", None), executor)
     return cp, graph_stage(cp, progress, executor)
 
 
