@@ -7,6 +7,7 @@ would get alone.
 """
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 
 from ..compile.numeric import numeric, numeric_map
@@ -49,8 +50,17 @@ def h_many(p: CompiledPrimitive, X: np.ndarray, t) -> np.ndarray:
     functions at INACTIVE."""
     X = np.atleast_2d(X)
     T = np.broadcast_to(np.asarray(t, float).reshape(-1, 1), (X.shape[0], 1))
-    fn = _cached(p, ("numeric_map", "h"), lambda: numeric_map(p.h, shared=(2,)))
+    fn = _cached(p, ("numeric_map", "h"), lambda: numeric_map(_merged(p.h), shared=(2,)))
     return fn(X, T, S_SETTLED, X)[0]
+
+
+def _merged(fn: ca.Function) -> ca.Function:
+    """An SX Function with its common subexpressions merged (a third fewer instructions for a
+    robot's h; each value is still the same operation on the same operands, so the same bits)."""
+    if not fn.is_a("SXFunction"):
+        return fn
+    a = fn.sx_in()
+    return ca.Function(fn.name(), a, fn.call(a, True, False), fn.name_in(), fn.name_out(), {"cse": True})
 
 
 def least(V: np.ndarray) -> np.ndarray:
