@@ -65,7 +65,7 @@ def _merged(fn: ca.Function) -> ca.Function:
 
 def least(V: np.ndarray) -> np.ndarray:
     """Each row's least active h (n,): NaN where a row has NaN, inf where none is active."""
-    return np.where(np.abs(V) < INACTIVE / 2, V, np.inf).min(axis=1)
+    return np.where(np.abs(V) < INACTIVE / 2, V, np.inf).min(axis=1, initial=np.inf)
 
 
 def active_rows(V: np.ndarray) -> np.ndarray:

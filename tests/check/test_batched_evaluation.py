@@ -49,6 +49,7 @@ def test_map_pickles():
 def test_least_and_fold_min_read_h_as_the_single_point_checks_do():
     V = np.array([[1.0, INACTIVE, -2.0], [np.nan, 3.0, INACTIVE], [INACTIVE, INACTIVE, INACTIVE]])
     assert least(V).tolist() == [-2.0, 3.0, np.inf]  # NaN and INACTIVE are not active
+    assert least(np.zeros((2, 0))).tolist() == [np.inf, np.inf]  # no safety functions at all
     assert fold_min(0.5, np.array([np.nan, 0.25, 1.0])) == 0.25
     assert fold_min(0.5, np.array([np.nan])) == 0.5
     with pytest.raises(ValueError):
