@@ -39,6 +39,12 @@ def f_cl(p: CompiledPrimitive, x: np.ndarray, t: float) -> np.ndarray:
     return numeric_fn(p, "f_cl")(x, t, S_SETTLED, x)[0]
 
 
+def f_cl_many(p: CompiledPrimitive, X: np.ndarray, t: float) -> np.ndarray:
+    """The closed loop's xdot at every row of X (n, nx), at clock t: (n, nx)."""
+    fn = _cached(p, ("numeric_map", "f_cl"), lambda: numeric_map(p.f_cl, shared=(1, 2)))
+    return fn(X, t, S_SETTLED, X)[0]
+
+
 def h_active(p: CompiledPrimitive, x: np.ndarray, t: float) -> np.ndarray:
     """The safety functions active at (x, t) (those not parked at INACTIVE)."""
     v = numeric_fn(p, "h")(x, t, S_SETTLED, x)[0]

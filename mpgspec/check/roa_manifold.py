@@ -85,7 +85,7 @@ class _Search:
         e = max(1e-7, 1e-4 * self.r)
         steps = (Z[:, None, :] + e * np.eye(k)).reshape(-1, k)
         H = self.hv(steps).reshape(Z.shape[0], k, -1)
-        return [((Hj - h0) / e).T for Hj, h0 in zip(H, H0)]
+        return [np.ascontiguousarray(((Hj - h0) / e).T) for Hj, h0 in zip(H, H0)]  # rows: the gradients of h_i
 
     def to_boundary(self, g: np.ndarray) -> np.ndarray | None:
         n = np.linalg.norm(g)
