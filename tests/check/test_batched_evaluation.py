@@ -1,5 +1,5 @@
 """Points evaluated in batches give the bits they get one by one: NumericMap against NumericFunction,
-h of many points against h of each, the setpoint and E checks of the pendulum."""
+h and f_cl of many points against those of each, and how h is read (active functions, NaN)."""
 from __future__ import annotations
 
 import pickle
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mpgspec.api import compile_project
-from mpgspec.check.closed_loop import active_rows, fold_min, h_active, h_many, least
+from mpgspec.check.closed_loop import active_rows, f_cl, f_cl_many, fold_min, h_active, h_many, least
 from mpgspec.compile.numeric import numeric, numeric_map
 from mpgspec.compile.primitive import INACTIVE
 from mpgspec.spec.loader import load_project
@@ -67,3 +67,4 @@ def test_h_of_many_points_is_h_of_each():
         for x, t, v in zip(X, ts, V):
             assert np.array_equal(v[np.abs(v) < INACTIVE / 2], h_active(p, x, t))
         assert np.array_equal(h_many(p, X, ts[2]), np.array([h_many(p, x, ts[2])[0] for x in X]))
+        assert np.array_equal(f_cl_many(p, X, ts[1]), np.array([f_cl(p, x, ts[1]) for x in X]))
