@@ -33,7 +33,7 @@ from common import machine, med_ratio, rounds  # noqa: E402  (bench/common.py)
 
 from mpgspec.api import compile_project  # noqa: E402
 from mpgspec.check import assumptions as A  # noqa: E402
-from mpgspec.check.closed_loop import S_SETTLED, clock, numeric_fn  # noqa: E402
+from mpgspec.check.evaluate import S_SETTLED, clock, numeric_fn  # noqa: E402
 from mpgspec.compile.numeric import numeric  # noqa: E402
 from mpgspec.compile.primitive import INACTIVE  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402

@@ -3,7 +3,7 @@
 Points of E are projected onto the contact manifold (feet on the ground and still) before h is
 evaluated, and a local search looks for the worst boundary point. Every set of points the search
 needs at once (the samples of a clock time, a forward-difference Jacobian, the steps of all starts)
-is projected and evaluated in one batch (compile/rigidbody/projection.py, closed_loop.h_many).
+is projected and evaluated in one batch (compile/rigidbody/projection.py, evaluate.h_many).
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import numpy as np
 
 from ..compile.contacts import held_feet
 from ..compile.primitive import CompiledPrimitive
-from .closed_loop import active_rows, clock, fold_min, h_active, h_many, least, offsets
+from .evaluate import active_rows, clock, fold_min, h_active, h_many, least, offsets
 
 
 def contact_projection(p: CompiledPrimitive, W: np.ndarray):

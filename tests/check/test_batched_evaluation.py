@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mpgspec.api import compile_project
-from mpgspec.check.closed_loop import active_rows, f_cl, f_cl_many, fold_min, h_active, h_many, least
+from mpgspec.check.evaluate import active_rows, f_cl, f_cl_many, fold_min, h_active, h_many, least
 from mpgspec.compile.numeric import numeric, numeric_map
 from mpgspec.compile.primitive import INACTIVE
 from mpgspec.spec.loader import load_project
