@@ -24,9 +24,9 @@ from .dynamics import RigidBodyDynamics
 from .frames import center_of_mass
 from .legs import Leg, resolve_legs
 from .linalg import dense_ldl_solve
-from .projection import ContactProjection
 from .liegroup import normalize_quaternion, qdot, quat_to_rotation
 from .model import RigidBodyModel, find_urdf
+from .projection import ContactProjection
 
 BASE_Q = ["base_x", "base_y", "base_z", "base_qx", "base_qy", "base_qz", "base_qw"]
 BASE_V = ["base_vx", "base_vy", "base_vz", "base_wx", "base_wy", "base_wz"]
