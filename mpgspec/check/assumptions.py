@@ -32,9 +32,10 @@ from ..compile.contacts import held_feet
 from ..compile.primitive import CompiledPrimitive
 from ..compile.rigidbody.symmetry import NEUTRAL
 from ..spec.models import PrimitiveClass
-from .evaluate import S_SETTLED, clock, f_cl, f_cl_many, h_active, h_many, least, offsets
+from .evaluate import clock, f_cl, f_cl_many, h_active, h_many, least, offsets
 from .roa_manifold import contact_projection as _contact_projection
 from .roa_manifold import roa_on_contact_manifold
+
 PLACEHOLDER_EFFORT = 1000.0  # N m: an input bound at least this large bounds nothing a leg can do
 PLACEHOLDER_VELOCITY = 1000.0  # rad/s
 PLACEHOLDER_POSITION = 9.0  # rad: beyond about 1.4 turns either way (URDFs write +-10 for "no limit")
