@@ -29,12 +29,13 @@ from ..certify.hybrid_orbit import monodromy as hybrid_monodromy
 from ..certify.monodromy import monodromy
 from ..certify.problem import from_primitive
 from ..compile.contacts import held_feet
-from ..compile.numeric import numeric
-from ..compile.primitive import INACTIVE, CompiledPrimitive
+from ..compile.primitive import CompiledPrimitive
 from ..compile.rigidbody.symmetry import NEUTRAL
 from ..spec.models import PrimitiveClass
+from .evaluate import clock, f_cl, f_cl_many, h_active, h_many, least, offsets
+from .roa_manifold import contact_projection as _contact_projection
+from .roa_manifold import roa_on_contact_manifold
 
-S_SETTLED = 1e3  # time since switch-in at which every motion profile has finished
 PLACEHOLDER_EFFORT = 1000.0  # N m: an input bound at least this large bounds nothing a leg can do
 PLACEHOLDER_VELOCITY = 1000.0  # rad/s
 PLACEHOLDER_POSITION = 9.0  # rad: beyond about 1.4 turns either way (URDFs write +-10 for "no limit")
@@ -53,28 +54,6 @@ class AssumptionCheck:
 
     def to_dict(self) -> dict:
         return asdict(self)
-
-
-def _clock(p: CompiledPrimitive, n: int) -> np.ndarray:
-    a, b = p.t_range
-    return np.zeros(1) if p.cls is PrimitiveClass.FIXED else np.linspace(a, b, n, endpoint=False)
-
-
-def _numeric(p: CompiledPrimitive, name: str):
-    """p's Function `name` on numpy arrays, kept with p's compiled chunks (compile/numeric.py)."""
-    key = ("numeric", name)
-    if key not in p.cache:
-        p.cache[key] = numeric(getattr(p, name))
-    return p.cache[key]
-
-
-def _f(p, x, t):
-    return _numeric(p, "f_cl")(x, t, S_SETTLED, x)[0]
-
-
-def _h(p, x, t):
-    v = _numeric(p, "h")(x, t, S_SETTLED, x)[0]
-    return v[np.abs(v) < INACTIVE / 2]
 
 
 HYBRID_DT = 0.001
@@ -141,10 +120,10 @@ def setpoint_dynamics(p: CompiledPrimitive, tol: float, n: int = 40) -> Assumpti
                                {"orbit_defect": d if np.isfinite(d) else None, "tolerance": tol, "dt": HYBRID_DT})
     worst, at = 0.0, 0.0
     eps = 1e-6
-    for t in _clock(p, n):
+    for t in clock(p, n):
         xs = p.x_star(t)
         dx = np.zeros_like(xs) if p.cls is PrimitiveClass.FIXED else (p.x_star(t + eps) - p.x_star(t - eps)) / (2 * eps)
-        r = float(np.max(np.abs(dx - _f(p, xs, t))))
+        r = float(np.max(np.abs(dx - f_cl(p, xs, t))))
         if not np.isfinite(r) or r > worst:
             worst, at = r, float(t)
     ok = np.isfinite(worst) and worst <= tol
@@ -155,30 +134,16 @@ def setpoint_dynamics(p: CompiledPrimitive, tol: float, n: int = 40) -> Assumpti
 
 def setpoint_safe(p: CompiledPrimitive, tol: float, n: int = 40) -> AssumptionCheck:
     """min_t min_i h_i(x*(t), t) over the domain."""
+    ts = clock(p, n)
+    mins = least(h_many(p, np.array([p.x_star(t) for t in ts]), ts))
     worst, at = np.inf, 0.0
-    for t in _clock(p, n):
-        h = _h(p, p.x_star(t), t)
-        if h.size and h.min() < worst:
-            worst, at = float(h.min()), float(t)
+    for t, m in zip(ts, mins):
+        if m < worst:
+            worst, at = float(m), float(t)
     ok = worst >= -tol
     return AssumptionCheck(p.name, "setpoint_safe", "pass" if ok else "fail", "empirical",
                            f"least h on the setpoint {worst:.3g} at t = {at:.3g}",
                            {"min_h": worst if np.isfinite(worst) else None, "t": at})
-
-
-def _contact_projection(p: CompiledPrimitive, W: np.ndarray):
-    """(x, x*, t) -> (x on the contact manifold of the primitive's contact mode at x*, or of the
-    feet its contact schedule holds at clock t; that mode), or None for systems without contacts."""
-    sys = p.system
-    if not sys.is_rigid_body or not sys.model.contact_frames:
-        return None
-    held = held_feet(p.contacts)
-
-    def project(x, xs, t=0.0):
-        feet = held(t) if held is not None else sys.contact_mode(xs, p.contacts.feet)
-        return sys.project_to_contacts(x, feet, W), feet
-
-    return project
 
 
 def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: int = 0,
@@ -198,23 +163,22 @@ def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: 
     r = (p.radius if radius is None else radius) * (1 - 1e-9)
     project = _contact_projection(p, W)
     if project is not None:
-        return _roa_on_contact_manifold(p, tol, samples, rng, W, L, r, project)
+        return _manifold_check(p, tol, samples, r, **roa_on_contact_manifold(p, samples, rng, W, L, r, project))
     worst, arg = np.inf, None
-    for t in _clock(p, 8):
+    for t in clock(p, 8):
         xs = p.x_star(t)
         d = rng.normal(size=(samples, L.shape[1]))
         d = r * d / np.linalg.norm(d, axis=1, keepdims=True)
-        for k in range(samples):
-            h = _h(p, xs + L @ d[k], t)
-            if h.size and h.min() < worst:
-                worst, arg = float(h.min()), (t, d[k])
+        for k, m in enumerate(least(h_many(p, offsets(xs, L, d), t))):
+            if m < worst:
+                worst, arg = float(m), (t, d[k])
     if arg is not None:
         t, d0 = arg
         xs = p.x_star(t)
 
         def obj(z):
             z = r * z / max(np.linalg.norm(z), 1e-12)
-            h = _h(p, xs + L @ z, t)
+            h = h_active(p, xs + L @ z, t)
             return float(h.min()) if h.size else 0.0
 
         res = minimize(obj, d0, method="Nelder-Mead", options={"maxiter": 400, "xatol": 1e-6, "fatol": 1e-9})
@@ -223,81 +187,6 @@ def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: 
     return AssumptionCheck(p.name, "roa_in_safe_set", "pass" if ok else "fail", "empirical",
                            f"least h on the boundary of E {worst:.3g} ({samples} samples per clock time + local search)",
                            {"min_h": worst if np.isfinite(worst) else None, "samples": samples})
-
-
-def _roa_on_contact_manifold(p, tol, samples, rng, W, L, r, project, starts: int = 3,
-                             steps: int = 8) -> AssumptionCheck:
-    """roa_in_safe_set on the contact manifold.
-
-    Per clock time: `samples` points on E's boundary and as many inside (uniform in radius), each
-    projected onto the manifold before h is evaluated; then a local worst-case search on E's
-    boundary. The search linearises every h_i(project(x* + L z)) in the ball coordinates z (forward
-    differences), steps to the boundary point z = -r grad h_i / |grad h_i| and repeats, from the
-    `starts` points (those steps and the samples) nearest to leaving C. Nearness is the least
-    h_i / h_i(x*): on the manifold the contact functions sit at their tolerance while forces (in
-    newtons) vary, so the relative margin, unlike h itself, finds the functions that can fail.
-    Distances are in E's norm ||.||_W.
-    """
-    k = L.shape[1]
-    worst, raw_worst = np.inf, np.inf
-    dist, spread, feet = [], [], set()
-
-    def wnorm(dx):
-        return float(np.sqrt(max(dx @ W @ dx, 0.0)))
-
-    for t in _clock(p, 8):
-        xs = p.x_star(t)
-        scale = np.maximum(_h(p, xs, t), 1e-9)
-        if not scale.size:
-            continue
-
-        def hv(z):
-            nonlocal worst
-            h = _h(p, project(xs + L @ z, xs, t)[0], t)
-            worst = min(worst, float(h.min()))
-            return h
-
-        def rel(z):
-            return float((hv(z) / scale).min())
-
-        def jac(z):
-            e = max(1e-7, 1e-4 * r)
-            h0 = hv(z)
-            return h0, np.stack([(hv(z + e * c) - h0) / e for c in np.eye(k)], axis=1)
-
-        def to_boundary(g):
-            n = np.linalg.norm(g)
-            return -r * g / n if n > 0 else None
-
-        d = rng.normal(size=(2 * samples, k))
-        d = d / np.linalg.norm(d, axis=1, keepdims=True)
-        d *= r * np.r_[np.ones(samples), rng.uniform(size=samples)][:, None]
-        cands = []
-        for z in d:
-            x0 = xs + L @ z
-            x, mode = project(x0, xs, t)
-            feet.update(mode)
-            dist.append(wnorm(x - x0))
-            spread.append(wnorm(x - xs))
-            raw_worst = min(raw_worst, float(_h(p, x0, t).min()))
-            cands.append((rel(z), z))
-        if r > 0:
-            for g in jac(np.zeros(k))[1]:
-                z = to_boundary(g)
-                if z is not None:
-                    cands.append((rel(z), z))
-        cands.sort(key=lambda c: c[0])
-        for m, z in cands[:starts]:
-            for _ in range(steps):
-                h0, G = jac(z)
-                z_new = to_boundary(G[int(np.argmin(h0 / scale))])
-                if z_new is None:
-                    break
-                m_new = rel(z_new)
-                if m_new >= m - 1e-12:
-                    break
-                z, m = z_new, m_new
-    return _manifold_check(p, tol, samples, r, worst, raw_worst, dist, spread, feet)
 
 
 def _manifold_check(p, tol, samples, r, worst, raw_worst, dist, spread, feet) -> AssumptionCheck:
@@ -350,11 +239,9 @@ def local_stability(p: CompiledPrimitive, rel_tol: float = 1e-6) -> AssumptionCh
                                "no stability test for transient primitives (finite domain)", {})
     xs = p.x_star(0.0)
     nx = xs.size
-    A = np.zeros((nx, nx))
-    for i in range(nx):
-        e = np.zeros(nx)
-        e[i] = 1e-6
-        A[:, i] = (_f(p, xs + e, 0.0) - _f(p, xs - e, 0.0)) / 2e-6
+    E = np.diag(np.full(nx, 1e-6))  # row i: the step along x_i
+    F = f_cl_many(p, np.concatenate([xs + E, xs - E]), 0.0)
+    A = np.ascontiguousarray(((F[:nx] - F[nx:]) / 2e-6).T)  # row-major, as norms and eigvals read it
     if not np.isfinite(A).all():
         return AssumptionCheck(p.name, "local_stability", "fail", "computed",
                                "closed-loop Jacobian at x* is not finite (inf/NaN)", {"max_real": None, "eigenvalues": []})

@@ -23,7 +23,8 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from ..spec.models import PrimitiveClass
-from .assumptions import S_SETTLED, AssumptionCheck
+from .assumptions import AssumptionCheck
+from .evaluate import S_SETTLED
 
 COLLAPSE = 0.1
 """E is collapsed below this fraction of its typical size."""

@@ -2,24 +2,49 @@
 from __future__ import annotations
 
 from ..compile.primitive import CompiledPrimitive
+from ..oracle.executors import InProcess
+from ..oracle.tasks import Failed
 from .assumptions import AssumptionCheck, check_primitive
 from .region_size import region_size
 
 
+def primitive_checks(prims: dict[str, CompiledPrimitive], name: str) -> list[dict]:
+    """check_primitive of prims[name], as dicts: one map item of the executor."""
+    return [c.to_dict() for c in check_primitive(prims[name])]
+
+
+def _checks_by_name(prims: dict[str, CompiledPrimitive], memo, executor, progress) -> dict[str, list[dict]]:
+    """Every primitive's checks: from the memo (by content hash) or computed through the executor's
+    map, one primitive per item (each primitive's checks depend on it alone, so the results are
+    the same on any executor). A primitive whose checks raised raises here, as it would in place."""
+    keys = {n: memo.key("assumptions", p.digest()) for n, p in prims.items()} if memo else {}
+    known = {n: memo.get(k) for n, k in keys.items()}
+    todo = [n for n in prims if known.get(n) is None]
+    if todo:
+        done = (executor or InProcess()).map(primitive_checks, todo, progress, label="assumptions (Definition 1)",
+                                             shared=prims)
+        for n, res in zip(todo, done):
+            if isinstance(res, Failed):
+                raise RuntimeError(f"the Definition 1 checks of {n}: {res.error}")
+            known[n] = res
+            if memo:
+                memo.put(keys[n], res)
+    return known
+
+
 def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict, memo=None,
-                      roa: dict | None = None) -> list[AssumptionCheck]:
+                      roa: dict | None = None, executor=None, progress=None) -> list[AssumptionCheck]:
     """Definition-1 checks of every primitive; a failure counts as the project's severity says
     ('fail', 'warn' or 'off').
 
     memo (optional) keeps the checks of each primitive by its content hash. roa (optional, name ->
-    RoARecord of mpgspec.certify.roa) adds `roa_size` where E is empty (fail) or collapsed (warn)."""
+    RoARecord of mpgspec.certify.roa) adds `roa_size` where E is empty (fail) or collapsed (warn).
+    executor (optional, in this process when omitted) runs the primitives' checks through its map,
+    with progress(label, i, n)."""
+    known = _checks_by_name(prims, memo, executor, progress)
     out = []
     for p in prims.values():
-        key = memo.key("assumptions", p.digest()) if memo else None
-        known = memo.get(key) if memo else None
-        checks = [AssumptionCheck(**c) for c in known] if known is not None else check_primitive(p)
-        if memo and known is None:
-            memo.put(key, [c.to_dict() for c in checks])
+        checks = [AssumptionCheck(**c) for c in known[p.name]]
         size = region_size(p, roa[p.name], memo) if roa and p.name in roa else None
         for c in checks + ([size] if size else []):
             sev = severity.get(c.name, "fail")

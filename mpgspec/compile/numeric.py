@@ -1,4 +1,5 @@
-"""CasADi Functions called on numpy arrays through one bound FunctionBuffer.
+"""CasADi Functions called on numpy arrays through one bound FunctionBuffer, point by point or
+mapped over many points.
 
 `Function.__call__` converts every argument and result through DM, about 50 us per call; checks
 that evaluate a small function hundreds of thousands of times (projections onto the contact
@@ -62,3 +63,47 @@ def _bound(sparsities: list, bind) -> tuple[list[np.ndarray], list]:
 
 def numeric(fn: ca.Function) -> NumericFunction:
     return NumericFunction(fn)
+
+
+class NumericMap:
+    """fn over many points at once: m(*args) -> list of (n, numel) arrays, row i the column-major vec
+    of each output at point i (the bits NumericFunction gives point by point).
+
+    Inputs listed in `shared` take one value for all points; every other input is an (n, numel)
+    array, one point a row. The points go through CasADi maps of fn (serial: the same compiled
+    expression graph per point), of power-of-two sizes so that a handful of maps serves any n."""
+
+    def __init__(self, fn: ca.Function, shared: tuple[int, ...] = ()):
+        self.fn, self.shared = fn, tuple(shared)
+        self._maps: dict[int, NumericFunction] = {}
+        self._lock = threading.Lock()
+        self.sizes = [int(np.prod(fn.size_out(i))) for i in range(fn.n_out())]
+
+    def _map(self, n: int) -> NumericFunction:
+        with self._lock:
+            if n not in self._maps:
+                m = self.fn.map(f"{self.fn.name()}_map{n}", "serial", n, list(self.shared), [])
+                self._maps[n] = NumericFunction(m)
+            return self._maps[n]
+
+    def __call__(self, *args) -> list[np.ndarray]:
+        rows = [None if i in self.shared else np.atleast_2d(np.asarray(a, float)) for i, a in enumerate(args)]
+        n = next(r.shape[0] for r in rows if r is not None)
+        out = [np.empty((n, s)) for s in self.sizes]
+        start = 0
+        for bit in reversed(range(n.bit_length())):
+            size = 1 << bit
+            if not n & size:
+                continue
+            part = [a if r is None else r[start:start + size].T for a, r in zip(args, rows)]
+            for o, v in zip(out, self._map(size)(*part)):
+                o[start:start + size] = v.reshape(size, -1)
+            start += size
+        return out
+
+    def __reduce__(self):
+        return NumericMap, (self.fn, self.shared)
+
+
+def numeric_map(fn: ca.Function, shared: tuple[int, ...] = ()) -> NumericMap:
+    return NumericMap(fn, shared)

@@ -125,7 +125,8 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
 def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | None = None, memo=None,
                 executor: Executor | None = None) -> Checks:
     """Plans, the goal sequence naive and through the graph, assertions and assumptions; the robust
-    stage's per-target work runs through the executor (in this process when omitted)."""
+    stage's per-target work and the primitives' Definition 1 checks run through the executor (in
+    this process when omitted)."""
     spec, prims, settings, g = cp.spec, cp.prims, cp.settings, vg.graph
     t0 = time.perf_counter()
     names = list(prims)
@@ -156,7 +157,8 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     t2 = time.perf_counter()
     if progress:
         progress(spec.name, "assumptions (Definition 1)", 0, len(prims))
-    assumed = check_assumptions(prims, spec.project.assumptions, memo, cp.roa)
+    cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
+    assumed = check_assumptions(prims, spec.project.assumptions, memo, cp.roa, executor, cb)
     st = [c.status for c in checks] + [a.status for a in assumed]
     status = "error" if "error" in st else "fail" if "fail" in st else "pass"
     return Checks(plans, table, runs, checks, assumed, status,

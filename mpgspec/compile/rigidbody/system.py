@@ -18,7 +18,6 @@ from ...errors import SpecError
 from ...spec.models import ContactEvent
 from ..contacts import ContactPlan, Fixed
 from ..events import NEVER, clock_name, clock_rate
-from ..numeric import numeric
 from ..system import CompiledSystem, OpenLoop
 from .constrained import Baumgarte, ContactDynamics
 from .dynamics import RigidBodyDynamics
@@ -27,6 +26,7 @@ from .legs import Leg, resolve_legs
 from .linalg import dense_ldl_solve
 from .liegroup import normalize_quaternion, qdot, quat_to_rotation
 from .model import RigidBodyModel, find_urdf
+from .projection import ContactProjection
 
 BASE_Q = ["base_x", "base_y", "base_z", "base_qx", "base_qy", "base_qz", "base_qw"]
 BASE_V = ["base_vx", "base_vy", "base_vz", "base_wx", "base_wy", "base_wz"]
@@ -158,17 +158,8 @@ class RigidBodyCompiledSystem(CompiledSystem):
         return ca.Function("manifold_kinematics", [dyn.q], [ca.vertcat(z, ca.vec(J), ca.vec(G))])
 
     @cached_property
-    def _numeric(self) -> dict:
-        """The Functions each Gauss-Newton step of project_to_contacts evaluates, on numpy arrays."""
-        return {"kinematics": numeric(self._manifold_kinematics), "normalize": numeric(self.dyn.normalize),
-                "integrate": numeric(self.dyn.integrate)}
-
-    def _kinematics_at(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        m = self.model
-        nc, nv, nq = len(m.contact_frames), m.nv, m.nq
-        out = self._numeric["kinematics"](q)[0]
-        z, J, G = out[:nc], out[nc:nc + 3 * nc * nv], out[nc + 3 * nc * nv:]
-        return z, J.reshape((nv, 3 * nc)).T, G.reshape((nv, nq)).T
+    def _projection(self) -> ContactProjection:
+        return ContactProjection(self)
 
     def project_to_contacts(self, x: np.ndarray, contacts: tuple[str, ...] | list[str], W: np.ndarray | None = None,
                             tol: float = 1e-12, max_iter: int = 50) -> np.ndarray:
@@ -182,37 +173,13 @@ class RigidBodyCompiledSystem(CompiledSystem):
         on flat ground) are used only where weighted ones do not help. With contact events the
         flags are set to `contacts`.
         """
-        m = self.model
-        nq, nv = m.nq, m.nv
-        x = np.array(x, float).ravel()
-        W = np.eye(self.nx) if W is None else np.asarray(W, float)
-        rows = [m.contact_frames.index(f) for f in contacts]
-        rows3 = [3 * i + k for i in rows for k in range(3)]
+        return self._projection(np.ravel(x)[None], contacts, W, tol, max_iter)[0]
 
-        def inverse_metric(block: np.ndarray) -> np.ndarray:
-            return np.linalg.inv(block + 1e-3 * max(1e-12, float(np.abs(block).max())) * np.eye(block.shape[0]))
-
-        q = self._numeric["normalize"](x[:nq])[0]
-        Wq = W[:nq, :nq]
-        for _ in range(max_iter):
-            z, J, G = self._kinematics_at(q)
-            r = z[rows]
-            if not rows or np.abs(r).max() <= tol:
-                break
-            A = J[[3 * i + 2 for i in rows]]
-            Minv = inverse_metric(G.T @ Wq @ G)
-            dv = -Minv @ A.T @ np.linalg.lstsq(A @ Minv @ A.T, r, rcond=None)[0]
-            q = self._numeric["integrate"](q, dv, 1.0)[0]
-        v = x[nq:nq + nv]
-        if rows:
-            J = self._kinematics_at(q)[1][rows3]
-            Minv = inverse_metric(W[nq:nq + nv, nq:nq + nv])
-            v = v - Minv @ J.T @ np.linalg.lstsq(J @ Minv @ J.T, J @ v, rcond=None)[0]
-        out = np.concatenate([q, v, x[nq + nv:]])
-        if self.events:
-            for f in m.contact_frames:
-                out[self.state_names.index(f"contact_{f}")] = float(f in contacts)
-        return out
+    def project_to_contacts_many(self, X: np.ndarray, contacts: tuple[str, ...] | list[str],
+                                 W: np.ndarray | None = None, tol: float = 1e-12, max_iter: int = 50) -> np.ndarray:
+        """project_to_contacts of every row of X (n, nx) at once (projection.py): the same points,
+        each after the same Gauss-Newton steps it would take alone."""
+        return self._projection(X, contacts, W, tol, max_iter)
 
     def base_frames(self) -> list[str]:
         """Frames rigidly attached to the floating base (where a push on the trunk may act)."""
