@@ -1,9 +1,10 @@
-"""The compiled A1 shared by the modules that test the unedited specs/a1, and the order in which the
-test modules are handed to pytest-xdist's workers.
+"""The compiled A1 and the verified examples shared by the modules that test them unedited, and the
+order in which the test modules are handed to pytest-xdist's workers.
 
 a1_project: specs/a1 loaded and compiled once per test process (its eight closed loops); the oracle
 chunks compiled for it are remembered on the primitives, so each later module reuses them instead
-of generating the same C code again.
+of generating the same C code again. example(name): the in-process verify of specs/<name> that several
+modules read (the pendulum's report, its edges, the cart's radii), run once per test process.
 
 Scheduling (pyproject.toml runs `--dist loadfile --no-loadscope-reorder`): every module is one unit
 of work, so its module-scoped fixtures are built on one worker only, and the modules that use
@@ -22,7 +23,8 @@ import pytest
 from mpgspec.api import compile_project, settings_for
 from mpgspec.spec.loader import load_project
 
-A1 = Path(__file__).parents[1] / "specs" / "a1" / "project.yaml"
+SPECS = Path(__file__).parents[1] / "specs"
+A1 = SPECS / "a1" / "project.yaml"
 A1_GROUP = "a1"
 A1_MODULES = frozenset({
     "tests/gait/test_jump_land.py", "tests/gait/test_walk.py", "tests/gait/test_walk_edges.py",
@@ -53,6 +55,22 @@ def a1_project():
     """(spec, primitives, settings) of specs/a1; callers that edit the primitives' dict copy it."""
     spec = load_project(A1)
     return spec, compile_project(spec), settings_for(spec)
+
+
+@pytest.fixture(scope="session")
+def example():
+    """name -> api.verify([specs/<name>], out_dir=None), run once per test process for every module
+    that checks the unedited example in this process (callers only read the result)."""
+    from mpgspec import api
+
+    runs: dict = {}
+
+    def verified(name: str):
+        if name not in runs:
+            runs[name] = api.verify([SPECS / name], out_dir=None)
+        return runs[name]
+
+    return verified
 
 
 def _unit(nodeid: str) -> str:
