@@ -9,23 +9,23 @@ SPECS = Path(__file__).parents[1] / "specs"
 
 
 @pytest.mark.parametrize("name", ["pendulum", "cart"])
-def test_example_project_passes(name):
-    res = api.verify([SPECS / name], out_dir=None)
+def test_example_project_passes(example, name):
+    res = example(name)
     p = res.projects[0]
     assert p.status == "pass", [a for a in p.report["assertions"] if a["status"] != "pass"]
     assert res.exit_code == 0
 
 
-def test_cart_radii_are_certified():
-    p = api.verify([SPECS / "cart"], out_dir=None).projects[0]
+def test_cart_radii_are_certified(example):
+    p = example("cart").projects[0]
     levels = {q["name"]: (q["roa_level"], q["roa_radius"]) for q in p.report["primitives"]}
     assert levels["ParkA"][0] == levels["ParkB"][0] == "certified"
     assert levels["ParkA"][1] > 0.3
     assert levels["Shuttle"][0] == "empirical"
 
 
-def test_every_edge_has_its_verified_switch_over_time():
-    r = api.verify([SPECS / "pendulum"], out_dir=None).projects[0].report
+def test_every_edge_has_its_verified_switch_over_time(example):
+    r = example("pendulum").projects[0].report
     assert len(r["edge_traces"]) == len(r["edges"])
     for e in r["edge_traces"]:
         s = e["series"]

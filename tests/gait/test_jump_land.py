@@ -1,24 +1,18 @@
 """The A1's Jump and Land against physics they must obey: in flight the centre of mass falls at g
 and keeps its horizontal velocity, the feet leave the ground at T_t, the takeoff speed follows the
 profile, and Land catches the robot from Jump's end and settles it into its E."""
-from pathlib import Path
-
 import casadi as ca
 import numpy as np
 import pytest
 
-from mpgspec.api import compile_project, settings_for
 from mpgspec.oracle import SafetyOracle
-from mpgspec.spec.loader import load_project
 
-A1 = Path(__file__).parents[2] / "specs" / "a1" / "project.yaml"
 G = 9.81
 
 
 @pytest.fixture(scope="module")
-def a1():
-    spec = load_project(A1)
-    return spec, compile_project(spec), settings_for(spec)
+def a1(a1_project):
+    return a1_project
 
 
 def _com(sys):

@@ -5,7 +5,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpgspec.api import compile_project
 from mpgspec.compile.rigidbody.system import feet_on_ground
 from mpgspec.compile.system import compile_system
 from mpgspec.robots.quadruped.gait.library import compare, generate, load_gait_file
@@ -17,8 +16,8 @@ SPEEDS = {"Walk(in_place)": 0.0, "Walk(slow)": 0.2, "Walk(medium)": 0.4, "Walk(f
 
 
 @pytest.fixture(scope="module")
-def spec():
-    return load_project(A1 / "project.yaml")
+def spec(a1_project):
+    return a1_project[0]
 
 
 @pytest.fixture(scope="module")
@@ -27,8 +26,8 @@ def system(spec):
 
 
 @pytest.fixture(scope="module")
-def prims(spec):
-    return compile_project(spec)
+def prims(a1_project):
+    return a1_project[1]
 
 
 def _stand(sys, ctrl):

@@ -3,26 +3,19 @@ error estimate against a reference integrated eight times finer.
 
 Walk(in_place) is sized by its own verifier (floquet on the discrete flow, as `mpgspec verify`
 does); Stand's E is given by the spec."""
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from mpgspec.api import compile_project, settings_for
 from mpgspec.certify.roa import _estimate
 from mpgspec.oracle import SafetyOracle
 from mpgspec.oracle.integrator import build_chunk
-from mpgspec.spec.loader import load_project
-
-A1 = Path(__file__).parents[2] / "specs" / "a1" / "project.yaml"
 
 
 @pytest.fixture(scope="module")
-def setup():
-    spec = load_project(A1)
-    settings = settings_for(spec)
+def setup(a1_project):
+    spec, prims, settings = a1_project
     assert settings.error == "doubling"
-    prims = compile_project(spec)
+    prims = dict(prims)  # Walk(in_place) is replaced by its sized copy below
     inst = next(i for i in spec.primitives if i.name == "Walk(in_place)")
     res = _estimate(inst.spec.roa.method, prims["Walk(in_place)"], inst.spec.roa.options)
     assert res.level == "empirical" and 0.002 < res.radius < 0.05

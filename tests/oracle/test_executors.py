@@ -35,8 +35,8 @@ def report_text(res) -> str:
 
 
 @pytest.fixture(scope="module")
-def pendulum_serial():
-    return report_text(api.verify([ROOT / "specs" / "pendulum"], out_dir=None, executor=InProcess()))
+def pendulum_serial(example):
+    return report_text(example("pendulum"))  # api.verify's executor is InProcess() when none is given
 
 
 def test_split_gives_every_worker_several_tasks():

@@ -50,8 +50,8 @@ def test_runs_and_series_round_trip():
 
 
 @pytest.fixture(scope="module")
-def pendulum() -> dict:
-    return api.verify([SPECS / "pendulum"], out_dir=None).projects[0].report
+def pendulum(example) -> dict:
+    return example("pendulum").projects[0].report
 
 
 def test_pendulum_report_is_a_quarter_of_v1(pendulum):

@@ -5,29 +5,25 @@ no-slip functions take the scenario's friction only for the feet held."""
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 import pytest
 
-from mpgspec.api import compile_project, settings_for
 from mpgspec.execute.sequence import simulate_sequence
 from mpgspec.oracle.flow import switched_flow
 from mpgspec.robust.rigid import no_slip_rows, plant_feet, rigid_step, robust_plant
 from mpgspec.robust.sequence import sequence_under_uncertainty
-from mpgspec.spec.loader import load_project
 from mpgspec.spec.project import Sequence
 
-A1 = Path(__file__).resolve().parents[2] / "specs" / "a1" / "project.yaml"
 NAMES = ["mass_scale", "friction"]
 G = 9.81
 
 
 @pytest.fixture(scope="module")
-def a1():
-    spec = load_project(A1)
-    return spec, compile_project(spec), dataclasses.replace(settings_for(spec), jit=False)
+def a1(a1_project):
+    spec, prims, settings = a1_project
+    return spec, prims, dataclasses.replace(settings, jit=False)
 
 
 def _steps(prim, x0, t0, theta, F, n, dt):

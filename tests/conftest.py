@@ -1,0 +1,103 @@
+"""The compiled A1 and the verified examples shared by the modules that test them unedited, and the
+order in which the test modules are handed to pytest-xdist's workers.
+
+a1_project: specs/a1 loaded and compiled once per test process (its eight closed loops); the oracle
+chunks compiled for it are remembered on the primitives, so each later module reuses them instead
+of generating the same C code again. example(name): the in-process verify of specs/<name> that several
+modules read (the pendulum's report, its edges, the cart's radii), run once per test process.
+
+Scheduling (pyproject.toml runs `--dist loadfile --no-loadscope-reorder`): every module is one unit
+of work, so its module-scoped fixtures are built on one worker only, and the modules that use
+a1_project (A1_MODULES) form one unit, so the A1 is compiled once per run. Units are queued longest
+first (COST: seconds of a cold run, relative) so that the two workers finish together instead of one
+running a long module alone at the end. (xdist_group marks cannot merge modules: pytest-xdist 3.8
+renames the items through an attribute pytest 9 no longer reads.)
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from mpgspec.api import compile_project, settings_for
+from mpgspec.spec.loader import load_project
+
+SPECS = Path(__file__).parents[1] / "specs"
+A1 = SPECS / "a1" / "project.yaml"
+A1_GROUP = "a1"
+A1_MODULES = ("tests/gait/", "tests/rigidbody/", "tests/robust/test_robust_events.py")
+"""The modules (by path prefix) whose tests use a1_project: one unit of work, so the A1 is compiled
+once per run (a module here that does not use it only runs on the same worker)."""
+
+COST = {
+    "tests/test_anymal_project.py": 460, "tests/robust/test_robust_rigid.py": 420,
+    "tests/oracle/test_adversarial.py": 390, "tests/report/test_browser.py": 360,
+    "tests/oracle/test_executors.py": 210, "tests/gait/test_walk.py": 180, "tests/robust/test_robust_events.py": 150,
+    "tests/execute/test_crosscheck.py": 135, "tests/gait/test_walk_edges.py": 80, "tests/robust/test_robust.py": 60,
+    "tests/rigidbody/test_a1_project.py": 55, "tests/oracle/test_soundness.py": 45,
+    "tests/oracle/test_event_windows.py": 45, "tests/oracle/test_held_control.py": 42,
+    "tests/test_example_specs.py": 42, "tests/oracle/test_backend_plugin.py": 40,
+    "tests/rigidbody/test_contact_events.py": 40, "tests/graph/test_trace_memo.py": 37,
+    "tests/robust/test_robust_map.py": 36, "tests/gait/test_jump_land.py": 35, "tests/spec/test_fuzz.py": 31,
+    "tests/test_cli.py": 30, "tests/rigidbody/test_roa_contact_manifold.py": 22, "tests/test_cli_channels.py": 19,
+    "tests/verifiers/test_roa_level_set.py": 18, "tests/compile/test_task_pd.py": 13,
+    "tests/oracle/test_executor_map.py": 12, "tests/oracle/test_jit.py": 11,
+}
+"""Seconds per module in a cold run of the whole suite on 2 shared cores (only their order matters)."""
+
+
+@pytest.fixture(scope="session")
+def a1_project():
+    """(spec, primitives, settings) of specs/a1; callers that edit the primitives' dict copy it."""
+    spec = load_project(A1)
+    return spec, compile_project(spec), settings_for(spec)
+
+
+@pytest.fixture(scope="session")
+def example():
+    """name -> api.verify([specs/<name>], out_dir=None), run once per test process for every module
+    that checks the unedited example in this process (callers only read the result)."""
+    from mpgspec import api
+
+    runs: dict = {}
+
+    def verified(name: str):
+        if name not in runs:
+            runs[name] = api.verify([SPECS / name], out_dir=None)
+        return runs[name]
+
+    return verified
+
+
+def _unit(nodeid: str) -> str:
+    """The unit of work a test belongs to: A1_GROUP for A1_MODULES, else its module."""
+    module = nodeid.split("::", 1)[0]
+    return A1_GROUP if module.startswith(A1_MODULES) else module
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under xdist, units longest first (the controller queues them in the order collected)."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return  # one process runs everything: keep the files' order
+    cost: dict[str, float] = {}
+    for module in {item.nodeid.split("::", 1)[0] for item in items}:
+        cost[_unit(module)] = cost.get(_unit(module), 0.0) + COST.get(module, 0.0)
+    first: dict[str, int] = {}
+    for k, item in enumerate(items):
+        first.setdefault(_unit(item.nodeid), k)
+    order = {id(item): (-cost[_unit(item.nodeid)], first[_unit(item.nodeid)], k) for k, item in enumerate(items)}
+    items.sort(key=lambda item: order[id(item)])
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """--dist loadfile with the A1 modules merged into one unit."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class ModuleScheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return _unit(nodeid)
+
+    return ModuleScheduling(config, log)
