@@ -15,11 +15,14 @@ import numpy as np
 from mpgspec.compile.primitive import CompiledPrimitive
 from mpgspec.oracle.backend import HYBRID
 from mpgspec.oracle.evidence import OracleEvidence, Reason
-from mpgspec.oracle.integrator import Chunk, build_chunk, build_first
+from mpgspec.oracle.integrator import Chunk, build_chunk, build_first, start_states
+from mpgspec.oracle.judged import JudgedChunk, build_judged_chunk, decided_evidence
 from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidences, judge
 from mpgspec.settings import OracleSettings
 
 SIZES = (1, 4, 16, 64, 256)
+JUDGED_STEPS = 16
+"""Steps per judged chunk call: a decided rollout's slot waits at most this long for a new start point."""
 
 
 def margin_gain(prim: CompiledPrimitive) -> float:
@@ -35,10 +38,16 @@ class RK4Runner:
         self.prim = prim
         self.s = settings
         self.dt = dt or settings.dt
-        self.chunk: Chunk = build_chunk(prim, self.dt, settings.chunk, settings.jit, settings.jit_flags,
-                                        error=settings.error)
         # step doubling estimates the margin's error directly; local estimates are state norms
         self.c_margin = 1.0 if settings.error == "doubling" else margin_gain(prim)
+        self.judged = settings.error == "local"  # the judge runs inside the compiled chunk
+        if self.judged:
+            self.chunk: Chunk | JudgedChunk = build_judged_chunk(
+                prim, self.dt, min(JUDGED_STEPS, settings.chunk), settings.chunk, settings.h_tolerance,
+                self.c_margin, settings.jit, settings.jit_flags)
+        else:
+            self.chunk = build_chunk(prim, self.dt, settings.chunk, settings.jit, settings.jit_flags,
+                                     error=settings.error)
         self._fine: RK4Runner | None = None
 
     def evaluate(self, x0s: np.ndarray, t0s: np.ndarray, horizon: np.ndarray | float,
@@ -83,6 +92,47 @@ class RK4Runner:
         return np.flatnonzero(~np.isin(np.arange(n), decided))
 
     def _run(self, x0s: np.ndarray, t0s: np.ndarray, horizons: np.ndarray) -> list[OracleEvidence]:
+        """Rollouts in slots of one batch: judged inside the compiled chunk, or (step doubling) by
+        the Python judge, vectorised over slots."""
+        if self.judged:
+            return self._run_judged(x0s, t0s, np.asarray(horizons, float))
+        return self._run_python(x0s, t0s, horizons)
+
+    def _run_judged(self, x0s: np.ndarray, t0s: np.ndarray, T: np.ndarray) -> list[OracleEvidence]:
+        """Slots of [z; J] advanced by short judged chunks; after each, the decided slots' J become
+        evidence and free slots take the next start points."""
+        ch: JudgedChunk = self.chunk  # type: ignore[assignment]
+        t0s = np.asarray(t0s, float)
+        results: list[OracleEvidence | None] = [None] * len(x0s)
+        Zstart = start_states(self.prim, x0s, t0s)
+        order = self._first(Zstart, T, t0s, results)
+        queue = np.vstack([Zstart[:, order], ch.lay.start(T[order])])
+        done_row = ch.nz + ch.lay.slice("done").start
+        cap, n, qpos = min(self.s.batch, SIZES[-1]), order.size, 0
+        Z, ids = np.zeros((queue.shape[0], 0)), np.zeros(0, int)
+        while qpos < n or ids.size:
+            if qpos < n and ids.size < cap:
+                take = min(n, qpos + cap - ids.size)
+                Z, ids = np.concatenate([Z, queue[:, qpos:take]], axis=1), np.concatenate([ids, np.arange(qpos, take)])
+                qpos = take
+            try:
+                Z = ch.run(Z)
+            except Exception:  # a crash is the evidence of the calls that crash, each run alone
+                Z, errors = _alone_judged(ch, Z)
+                for b, err in errors.items():
+                    results[order[ids[b]]] = OracleEvidence(0, Reason.ERROR, 0.0, status="inconclusive",
+                                                            message=str(err)[:500])
+                ok = ~np.isin(np.arange(ids.size), list(errors))
+                Z, ids = Z[:, ok], ids[ok]
+            done = Z[done_row] > 0.5
+            if done.any():
+                rows = order[ids[done]]
+                for i, ev in zip(rows, decided_evidence(ch, Z[ch.nz:, done], t0s[rows], self.c_margin)):
+                    results[i] = ev
+                Z, ids = Z[:, ~done], ids[~done]
+        return results  # type: ignore[return-value]
+
+    def _run_python(self, x0s: np.ndarray, t0s: np.ndarray, horizons: np.ndarray) -> list[OracleEvidence]:
         """Rollouts in slots of one batch; the bookkeeping of every chunk is vectorised over slots."""
         prim, ch = self.prim, self.chunk
         r, K = ch.rows, ch.K
@@ -154,6 +204,17 @@ def _alone(ch, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
     if shape is None:
         return Zf, np.zeros((0, Z.shape[1], 0)), errors
     return Zf, np.concatenate([o if o is not None else np.full(shape, np.nan) for o in outs], axis=1), errors
+
+
+def _alone_judged(ch, Z: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Advance each column of Z in a judged chunk call of its own (after a batch failed)."""
+    Zf, errors = np.full(Z.shape, np.nan), {}
+    for b in range(Z.shape[1]):
+        try:
+            Zf[:, b] = ch.run(Z[:, b:b + 1])[:, 0]
+        except Exception as err:
+            errors[b] = err
+    return Zf, errors
 
 
 def _non_finite(out: np.ndarray, r, end_state: bool) -> str:

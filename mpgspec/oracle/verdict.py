@@ -191,6 +191,24 @@ def _decide(b: Block, c: Carry, e: _Errors, valid: np.ndarray, valid_t: np.ndarr
     return kind, np.where(wait, big, first), k, kc, horizon, big
 
 
+LANES = 8
+
+
+def lane_sum(a: np.ndarray) -> np.ndarray:
+    """Sum over the last axis in LANES lanes: lane q adds the entries q, q + 8, ... one after the
+    other, then ((l0 + l1) + (l2 + l3)) + ((l4 + l5) + (l6 + l7)). For 64 entries this is numpy's
+    own summation (pairwise, unrolled by 8); the compiled judge (judged.py) folds its lanes the same
+    way, so a rollout's error sums depend on its own samples only, never on its batch."""
+    K = a.shape[-1]
+    pad = (-K) % LANES
+    if pad or not K:
+        a = np.concatenate([a, np.zeros(a.shape[:-1] + (pad or LANES,))], axis=-1)
+    r = a[..., :LANES].copy()
+    for q in range(LANES, a.shape[-1], LANES):
+        r = r + a[..., q:q + LANES]
+    return ((r[..., 0] + r[..., 1]) + (r[..., 2] + r[..., 3])) + ((r[..., 4] + r[..., 5]) + (r[..., 6] + r[..., 7]))
+
+
 def _fold(b: Block, c: Carry, e: _Errors, n_s: np.ndarray, n_t: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
     """Fold the first n_s samples and n_t steps of each rollout into the carry: least values, counts,
     error estimates, the best RoA margin and the input's peaks and saturation."""
@@ -213,11 +231,11 @@ def _fold(b: Block, c: Carry, e: _Errors, n_s: np.ndarray, n_t: np.ndarray, lo: 
             last = np.clip(n_t - 1, 0, K - 1)
             c.eh = np.where(n_t > 0, e.eh_e[:, rows, last], c.eh)
         else:
-            c.eh = c.eh + (e.cdh[:, :, -1] if full_t else np.where(jt[None], b.dh, 0.0).sum(axis=2))
+            c.eh = c.eh + lane_sum(b.dh if full_t else np.where(jt[None], b.dh, 0.0))
     if absolute:  # the margin's error at the last judged sample
         c.en = np.where(n_s > 0, e.en_s[rows, np.clip(n_s - 1, 0, K - 1)], c.en)
     else:
-        c.en = c.en + (e.cen[:, -1] if bool(jt.all()) else np.where(jt, b.err, 0.0).sum(axis=1))
+        c.en = c.en + lane_sum(np.where(jt, b.err, 0.0))
     c.nsteps = c.nsteps + n_t
     with np.errstate(invalid="ignore"):
         c.best_m = np.maximum(c.best_m, np.where(js & ~np.isnan(b.margin), b.margin, -np.inf).max(axis=1))

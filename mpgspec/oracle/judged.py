@@ -1,0 +1,244 @@
+"""The judge inside the compiled chunk: rollouts that carry their own verdict.
+
+A judged chunk advances the augmented state [z; J] step by step, where z is the rollout's (as in
+integrator.step_body) and J the judge's: the running error sums, the least values, the peaks, the
+decision flag and what the evidence needs from the deciding sample. Every step applies the rules
+of oracle/verdict.py to that step's outputs, in the same order and with the same floating-point
+operations, so the verdicts and numbers are those of the judge on the full sample array; a decided
+rollout's J is frozen. Python then reads the decision flags and the J of decided slots only, and
+a rollout may enter a slot at any chunk boundary.
+
+The judge's error sums run in blocks of B steps from the rollout's start (B = settings.chunk): in
+a block, the estimate at a sample is the block's carry plus the running sum; at the block's end,
+the carry grows by the block's sum taken in eight lanes (verdict.lane_sum), as the Python judge
+folds it.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..compile.primitive import INACTIVE, CompiledPrimitive
+from .integrator import Rows, step_body
+from .jit import compile_cached, cse_sx
+from .verdict import LANES, Block, Carry, Decision, evidences, lane_sum
+
+KINDS = ("", "safe", "left_C", "non_finite", "horizon", "doubt", "doubt_E")
+SAFE, LEFT_C, NON_FINITE, HORIZON, DOUBT, DOUBT_E = range(1, 7)
+SCALARS = ("T", "j", "done", "kind", "t_stop", "entry", "why", "pend", "s_prev", "maybe", "en_c", "cen",
+           "best_m", "sat", "nsteps")
+WHY = ("any", "safety function", "RoA margin", "input", "state", "end")
+"""Bits of `why` at a non-finite decision: some output, the h rows, the margin, the raw input, the
+lower bounds, and the state after the block's last step."""
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where each part of J sits: the SCALARS, then hk (h at the deciding sample), eh_c (the block's
+    carry of h's error), cdh (its running sum in the block), lh (its lanes), min_h, low, count, le
+    (the lanes of the error norms), peak, peak_raw."""
+
+    nh: int
+    nu: int
+
+    @property
+    def parts(self) -> dict[str, tuple[int, int]]:
+        sizes = [(n, 1) for n in SCALARS] + [("hk", self.nh), ("eh_c", self.nh), ("cdh", self.nh),
+                                              ("lh", LANES * self.nh), ("min_h", self.nh), ("low", self.nh),
+                                              ("count", self.nh), ("le", LANES), ("peak", self.nu),
+                                              ("peak_raw", self.nu)]
+        out, o = {}, 0
+        for name, n in sizes:
+            out[name] = (o, o + n)
+            o += n
+        return out
+
+    @property
+    def size(self) -> int:
+        return max(b for _, b in self.parts.values())
+
+    def slice(self, name: str) -> slice:
+        a, b = self.parts[name]
+        return slice(a, b)
+
+    def start(self, T: np.ndarray) -> np.ndarray:
+        """J at switch-in for horizons T: nothing judged, least values +inf, best margin -inf."""
+        J = np.zeros((self.size, len(T)))
+        J[self.slice("T")] = T
+        for name in ("min_h", "low"):
+            J[self.slice(name)] = np.inf
+        J[self.slice("best_m")] = -np.inf
+        return J
+
+
+def _lanes_sum(r: list):
+    """The sum of LANES lanes in verdict.lane_sum's order."""
+    return ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+
+
+def _any(v):
+    return ca.DM(0) if v.shape[0] == 0 else ca.mmax(v)
+
+
+def _finite(v):
+    return v - v == 0  # NaN and inf give NaN, which equals nothing
+
+
+def judge_step(lay: Layout, rows: Rows, n_out: int, B: int, tol: float, cm: float, lo, hi) -> ca.Function:
+    """(J, out, zfin) -> J after judging one step whose outputs are `out` (Rows order) and whose end
+    state is finite when zfin is 1; see verdict.judge for the rules this applies one step at a time."""
+    J, o, zfin = ca.SX.sym("J", lay.size), ca.SX.sym("o", n_out), ca.SX.sym("zfin")
+    g = {n: J[lay.slice(n)] for n in lay.parts}
+    h, lb, dh = o[rows.h], o[rows.lb], o[rows.dh]
+    margin, err, s, dt, u_raw, u = o[rows.margin], o[rows.err], o[rows.s], o[rows.dt], o[rows.u_raw], o[rows.u]
+    j, nh = g["j"], lay.nh
+    i = ca.fmod(j, B)  # position in the block
+    fob, last = i == 0, ca.fmod(j + 1, B) == 0
+    fold = ca.logic_and(fob, j > 0)  # a block ended: its lanes join the carry
+    eh_c = ca.if_else(fold, g["eh_c"] + _lanes_sum([g["lh"][q * nh:(q + 1) * nh] for q in range(LANES)]), g["eh_c"]) if nh else g["eh_c"]
+    en_c = ca.if_else(fold, g["en_c"] + _lanes_sum([g["le"][q] for q in range(LANES)]), g["en_c"])
+    lh, le = ca.if_else(fold, ca.DM.zeros(LANES * nh), g["lh"]), ca.if_else(fold, ca.DM.zeros(LANES), g["le"])
+    cdh = ca.if_else(fob, dh, g["cdh"] + dh)
+    cen = ca.if_else(fob, err, g["cen"] + err)
+    eh_s, eh_e = (eh_c + cdh) - dh, eh_c + cdh
+    en_s = (en_c + cen) - err
+    viol, doubt_s = _any((h + eh_s) < -tol), _any((h - eh_s) < -tol)
+    doubt_t = _any((lb - eh_e) < -tol)
+    fin_out = ca.logic_not(_any(ca.logic_not(_finite(o))))
+    bad = ca.logic_or(ca.logic_not(fin_out), ca.logic_and(last, ca.logic_not(zfin)))
+    lim = g["T"] + 1e-9
+    valid, valid_t = s <= lim, (s + dt) <= lim
+    ment, mmay = margin - cm * en_s > 0, margin + cm * en_s > 0
+    maybe = ca.logic_or(g["maybe"], ca.logic_and(valid, mmay))
+    maybe_v = ca.logic_and(maybe, ca.logic_not(ca.logic_and(g["nsteps"] == 0, fob)))
+    c_kind = ca.if_else(bad, NON_FINITE, ca.if_else(viol, ca.if_else(maybe_v, DOUBT_E, LEFT_C), DOUBT))
+    pend, endbad = g["pend"] > 0.5, ca.logic_or(viol, bad)
+    # (decided, kind, sample folded, step folded, t_stop from the previous sample) in the judge's order
+    p_in = ca.logic_and(pend, ca.logic_not(fob))
+    cev = ca.logic_and(valid, ca.logic_or(ca.logic_or(viol, doubt_s), bad))
+    plain = ca.logic_and(ca.logic_not(cev), ca.logic_and(valid, ca.logic_not(ment)))  # sample passed
+    kind = ca.if_else(pend, ca.if_else(p_in, ca.if_else(endbad, c_kind, DOUBT), c_kind),
+                      ca.if_else(cev, c_kind, ca.if_else(ca.logic_and(valid, ment), SAFE,
+                                 ca.if_else(ca.logic_or(ca.logic_not(valid), ca.logic_not(valid_t)),
+                                            ca.if_else(maybe, DOUBT_E, HORIZON), 0))))
+    fs = ca.if_else(pend, ca.logic_or(ca.logic_not(p_in), endbad), valid)
+    ft = ca.logic_and(ca.logic_not(pend), ca.logic_and(plain, valid_t))
+    prev_t = ca.logic_and(p_in, ca.logic_not(endbad))
+    new = dict(g)
+    new.update(eh_c=eh_c, en_c=en_c, cdh=cdh, cen=cen, maybe=maybe, j=j + 1)
+    new["pend"] = ca.logic_and(ft, doubt_t)
+    new["s_prev"] = s
+    act = h < INACTIVE / 2
+    low_s, low_t = h - eh_s, lb - eh_e
+    new["min_h"] = ca.if_else(fs, ca.fmin(g["min_h"], h), g["min_h"])
+    low = ca.if_else(fs, ca.fmin(g["low"], low_s), g["low"])
+    new["low"] = ca.if_else(ft, ca.fmin(low, low_t), low)
+    new["count"] = g["count"] + ca.if_else(fs, act, 0) + ca.if_else(ft, low_t < INACTIVE / 2, 0)
+    new["best_m"] = ca.if_else(ca.logic_and(fs, margin == margin), ca.fmax(g["best_m"], margin), g["best_m"])
+    new["peak"] = ca.if_else(fs, ca.fmax(g["peak"], ca.if_else(_finite(u), ca.fabs(u), 0)), g["peak"])
+    new["peak_raw"] = ca.if_else(fs, ca.fmax(g["peak_raw"], ca.if_else(_finite(u_raw), ca.fabs(u_raw), 0)),
+                                 g["peak_raw"])
+    out_lo = ca.logic_or(u_raw < ca.DM(lo), u_raw > ca.DM(hi)) if lay.nu else ca.DM.zeros(0)
+    new["sat"] = ca.logic_or(g["sat"], ca.logic_and(fs, _any(out_lo)))
+    lane = ca.fmod(i, LANES)
+    new["lh"] = ca.vertcat(*[ca.if_else(ca.logic_and(ft, lane == q), lh[q * nh:(q + 1) * nh] + dh,
+                                        lh[q * nh:(q + 1) * nh]) for q in range(LANES)]) if nh else lh
+    new["le"] = ca.vertcat(*[ca.if_else(ca.logic_and(ft, lane == q), le[q] + err, le[q]) for q in range(LANES)])
+    new["nsteps"] = g["nsteps"] + ft
+    decided = kind > 0
+    new["done"] = decided
+    new["kind"] = kind
+    new["t_stop"] = ca.if_else(prev_t, g["s_prev"], s)
+    new["entry"], new["hk"] = margin, h
+    parts = [ca.logic_not(fin_out)] + [_any(ca.logic_not(_finite(v))) for v in (h, margin, u_raw, lb)] + \
+        [ca.logic_and(last, ca.logic_not(zfin))]
+    new["why"] = sum(p * 2 ** b for b, p in enumerate(parts))
+    Jn = ca.vertcat(*[new[n] for n in lay.parts])
+    for n in ("done", "kind", "t_stop", "entry", "hk", "why"):  # what the deciding sample left
+        Jn[lay.slice(n)] = ca.if_else(decided, new[n], g[n])
+    return ca.Function("judge_step", [J, o, zfin], [ca.if_else(g["done"] > 0.5, J, Jn)])
+
+
+class JudgedChunk:
+    """K compiled judged steps of one primitive: run(Z) advances the columns of [z; J] (nz + J rows)."""
+
+    def __init__(self, prim: CompiledPrimitive, fn: ca.Function, nz: int, lay: Layout, K: int):
+        self.prim, self.fn, self.nz, self.lay, self.K = prim, fn, nz, lay, K
+        self._buffers: dict = {}
+
+    def _bound(self, n: int) -> tuple:
+        if n not in self._buffers:
+            F = self.fn.map(n, "serial")
+            buf, ev = F.buffer()
+            zin, zf = np.zeros(F.nnz_in(0)), np.zeros(F.nnz_out(0))
+            buf.set_arg(0, memoryview(zin))
+            buf.set_res(0, memoryview(zf))
+            self._buffers[n] = (buf, ev, zin, zf)  # buf keeps the bindings alive
+        return self._buffers[n]
+
+    def run(self, Z: np.ndarray) -> np.ndarray:
+        """[z; J] of every column after K steps (a new array); a failed evaluation raises."""
+        n = Z.shape[1]
+        buf, ev, zin, zf = self._bound(n)
+        zin.reshape(Z.shape[0], n, order="F")[:] = Z
+        ev()
+        if buf.ret():
+            zf[:] = np.nan
+            raise RuntimeError(f"the compiled rollout failed (status {buf.ret()}): an evaluation inside it "
+                               "(e.g. an optimisation-based control law) returned an error")
+        return zf.reshape(Z.shape[0], n, order="F").copy()
+
+
+def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: float, cm: float,
+                       jit: bool = True, flags: tuple[str, ...] = ("-O1",)) -> JudgedChunk:
+    """Compile K judged steps (error 'local', blocks of B steps, tolerance tol, margin gain cm);
+    remembered on the primitive."""
+    key = ("judged", dt, K, B, tol, cm, jit, tuple(flags))
+    if key not in prim.cache:
+        body, nz = step_body(prim, dt)
+        lay = Layout(len(prim.h_names), prim.system.nu)
+        n_out = body.size1_out(1)
+        rows = Rows(lay.nh, lay.nu)
+        step = judge_step(lay, rows, n_out, B, tol, cm, prim.system.u_lo, prim.system.u_hi)
+        sym = ca.SX.sym if body.is_a("SXFunction") else ca.MX.sym
+        za = sym("za", nz + lay.size)
+        zn, o = body(za[:nz])
+        zfin = ca.logic_not(_any(ca.logic_not(_finite(zn))))
+        one = cse_sx(ca.Function("judged", [za], [ca.vertcat(zn, step(za[nz:], o, zfin))]))
+        Z = ca.MX.sym("Z", nz + lay.size)
+        name = "judged_" + hashlib.sha1(f"{prim.name}{dt}{K}{B}{tol}{cm}".encode()).hexdigest()[:10]
+        fn = ca.Function(name, [Z], [one.fold(K)(Z)])
+        prim.cache[key] = JudgedChunk(prim, compile_cached(fn, flags) if jit else fn, nz, lay, K)
+    return prim.cache[key]
+
+
+def decided_evidence(ch: JudgedChunk, J: np.ndarray, t0s, cm: float) -> list:
+    """Evidence of decided rollouts from their frozen J columns (through verdict.evidences, so it
+    reads exactly as the Python judge's)."""
+    lay, m = ch.lay, J.shape[1]
+    if not m:
+        return []
+    get = {n: J[lay.slice(n)] for n in lay.parts}
+    kind = np.array([KINDS[int(k)] for k in get["kind"][0]], dtype=object)
+    one = np.zeros((m, 1))
+    b = Block(get["hk"][:, :, None], get["hk"][:, :, None], get["hk"][:, :, None], get["entry"].T.copy(), one,
+              get["t_stop"].T.copy(), one, np.zeros((lay.nu, m, 1)), np.zeros((lay.nu, m, 1)), np.ones((m, 1), bool))
+    c = Carry(lay.nh, lay.nu, m)
+    c.en = get["en_c"][0] + lane_sum(get["le"].T)
+    c.min_h, c.low, c.count = get["min_h"], get["low"], get["count"].astype(int)
+    c.best_m, c.peak, c.peak_raw = get["best_m"][0], get["peak"], get["peak_raw"]
+    c.sat, c.nsteps = get["sat"][0] > 0.5, get["nsteps"][0].astype(int)
+    d = Decision(np.ones(m, bool), kind, np.zeros(m, int))
+    msgs = {b_: _message(int(w)) for b_, (w, k) in enumerate(zip(get["why"][0], kind)) if k == "non_finite"}
+    return evidences(ch.prim, b, c, d, np.arange(m), t0s, cm, msgs)
+
+
+def _message(why: int) -> str:
+    """The non-finite message of the Python runner from the `why` bits."""
+    if not why & 1:
+        return "non-finite state" if why & 32 else "non-finite output"
+    parts = [name for bit, name in enumerate(WHY[1:5], 1) if why & (1 << bit)]
+    return "non-finite " + " and ".join(parts or ["state"])
