@@ -16,8 +16,6 @@ folds it.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
-
 import casadi as ca
 import numpy as np
 
@@ -28,41 +26,32 @@ from .verdict import LANES, Block, Carry, Decision, evidences, lane_sum
 
 KINDS = ("", "safe", "left_C", "non_finite", "horizon", "doubt", "doubt_E")
 SAFE, LEFT_C, NON_FINITE, HORIZON, DOUBT, DOUBT_E = range(1, 7)
-SCALARS = ("T", "j", "done", "kind", "t_stop", "entry", "why", "pend", "s_prev", "maybe", "en_c", "cen",
+SCALARS = ("T", "i", "done", "kind", "t_stop", "entry", "why", "pend", "s_prev", "maybe", "en_c", "cen",
            "best_m", "sat", "nsteps")
 WHY = ("any", "safety function", "RoA margin", "input", "state", "end")
 """Bits of `why` at a non-finite decision: some output, the h rows, the margin, the raw input, the
 lower bounds, and the state after the block's last step."""
 
 
-@dataclass(frozen=True)
 class Layout:
     """Where each part of J sits: the SCALARS, then hk (h at the deciding sample), eh_c (the block's
-    carry of h's error), cdh (its running sum in the block), lh (its lanes), min_h, low, count, le
-    (the lanes of the error norms), peak, peak_raw."""
+    carry of h's error), cdh (its running sum in the block), lh (its lanes, rotated: see _rotate),
+    min_h, low, count, le (the lanes of the error norms), peak, peak_raw. nz: the rollout's z."""
 
-    nh: int
-    nu: int
-
-    @property
-    def parts(self) -> dict[str, tuple[int, int]]:
-        sizes = [(n, 1) for n in SCALARS] + [("hk", self.nh), ("eh_c", self.nh), ("cdh", self.nh),
-                                              ("lh", LANES * self.nh), ("min_h", self.nh), ("low", self.nh),
-                                              ("count", self.nh), ("le", LANES), ("peak", self.nu),
-                                              ("peak_raw", self.nu)]
-        out, o = {}, 0
+    def __init__(self, nh: int, nu: int, nz: int = 0):
+        self.nh, self.nu, self.nz = nh, nu, nz
+        sizes = [(n, 1) for n in SCALARS] + [("hk", nh), ("eh_c", nh), ("cdh", nh), ("lh", LANES * nh),
+                                              ("min_h", nh), ("low", nh), ("count", nh), ("le", LANES),
+                                              ("peak", nu), ("peak_raw", nu)]
+        self.parts: dict[str, tuple[int, int]] = {}
+        o = 0
         for name, n in sizes:
-            out[name] = (o, o + n)
+            self.parts[name] = (o, o + n)
             o += n
-        return out
-
-    @property
-    def size(self) -> int:
-        return max(b for _, b in self.parts.values())
+        self.size = o
 
     def slice(self, name: str) -> slice:
-        a, b = self.parts[name]
-        return slice(a, b)
+        return slice(*self.parts[name])
 
     def start(self, T: np.ndarray) -> np.ndarray:
         """J at switch-in for horizons T: nothing judged, least values +inf, best margin -inf."""
@@ -83,32 +72,50 @@ def _any(v):
     return ca.DM(0) if v.shape[0] == 0 else ca.mmax(v)
 
 
-def _finite(v):
-    return v - v == 0  # NaN and inf give NaN, which equals nothing
+def _nonfinite(*vs):
+    """1 when some entry of the vectors vs is NaN or infinite: v * 0 is 0 for finite v, else NaN."""
+    tot = ca.DM(0)
+    for v in vs:
+        if v.shape[0]:
+            tot = tot + ca.sum1(v * 0)
+    return ca.logic_not(tot == 0)
+
+
+def _rotate(R: list, add):
+    """Lanes rotated by one with `add` joining the current lane (R[0]); R[p] holds lane (i + p) % 8
+    at block position i, so the rotation costs no arithmetic."""
+    return R[1:] + [R[0] + add]
 
 
 def judge_step(lay: Layout, rows: Rows, n_out: int, B: int, tol: float, cm: float, lo, hi) -> ca.Function:
-    """(J, out, zfin) -> J after judging one step whose outputs are `out` (Rows order) and whose end
-    state is finite when zfin is 1; see verdict.judge for the rules this applies one step at a time."""
-    J, o, zfin = ca.SX.sym("J", lay.size), ca.SX.sym("o", n_out), ca.SX.sym("zfin")
+    """(J, out, zend) -> J after judging one step whose outputs are `out` (Rows order) and whose end
+    state is zend; see verdict.judge for the rules this applies one step at a time. A decided
+    rollout folds nothing more and keeps its decision (its sums and lanes may run on, but the
+    lanes and en_c keep en_c + lane_sum, the only sum its evidence reads)."""
+    J, o, zend = ca.SX.sym("J", lay.size), ca.SX.sym("o", n_out), ca.SX.sym("zend", lay.nz)
     g = {n: J[lay.slice(n)] for n in lay.parts}
     h, lb, dh = o[rows.h], o[rows.lb], o[rows.dh]
     margin, err, s, dt, u_raw, u = o[rows.margin], o[rows.err], o[rows.s], o[rows.dt], o[rows.u_raw], o[rows.u]
-    j, nh = g["j"], lay.nh
-    i = ca.fmod(j, B)  # position in the block
-    fob, last = i == 0, ca.fmod(j + 1, B) == 0
-    fold = ca.logic_and(fob, j > 0)  # a block ended: its lanes join the carry
-    eh_c = ca.if_else(fold, g["eh_c"] + _lanes_sum([g["lh"][q * nh:(q + 1) * nh] for q in range(LANES)]), g["eh_c"]) if nh else g["eh_c"]
-    en_c = ca.if_else(fold, g["en_c"] + _lanes_sum([g["le"][q] for q in range(LANES)]), g["en_c"])
-    lh, le = ca.if_else(fold, ca.DM.zeros(LANES * nh), g["lh"]), ca.if_else(fold, ca.DM.zeros(LANES), g["le"])
+    nh, i, live = lay.nh, g["i"], g["done"] < 0.5
+    fob, last = i == 0, i == B - 1
+    lh = [g["lh"][q * nh:(q + 1) * nh] for q in range(LANES)]
+    le = [g["le"][q] for q in range(LANES)]
+    fold = ca.logic_and(fob, g["nsteps"] > 0)  # a block ended: its lanes join the carry
+    eh_c = ca.if_else(fold, g["eh_c"] + _lanes_sum(lh), g["eh_c"]) if nh else g["eh_c"]
+    en_c = ca.if_else(fold, g["en_c"] + _lanes_sum(le), g["en_c"])
+    lh = [ca.if_else(fold, 0, r) for r in lh] if nh else lh
+    le = [ca.if_else(fold, 0, r) for r in le]
     cdh = ca.if_else(fob, dh, g["cdh"] + dh)
     cen = ca.if_else(fob, err, g["cen"] + err)
     eh_s, eh_e = (eh_c + cdh) - dh, eh_c + cdh
     en_s = (en_c + cen) - err
     viol, doubt_s = _any((h + eh_s) < -tol), _any((h - eh_s) < -tol)
     doubt_t = _any((lb - eh_e) < -tol)
-    fin_out = ca.logic_not(_any(ca.logic_not(_finite(o))))
-    bad = ca.logic_or(ca.logic_not(fin_out), ca.logic_and(last, ca.logic_not(zfin)))
+    parts = [_nonfinite(v) for v in (h, margin, u_raw, lb)]
+    other = _nonfinite(dh, err, s, dt, u, o[rows.u.stop:])
+    any_bad = ca.logic_or(ca.logic_or(ca.logic_or(parts[0], parts[1]), ca.logic_or(parts[2], parts[3])), other)
+    end_bad = ca.logic_and(last, _nonfinite(zend))
+    bad = ca.logic_or(any_bad, end_bad)
     lim = g["T"] + 1e-9
     valid, valid_t = s <= lim, (s + dt) <= lim
     ment, mmay = margin - cm * en_s > 0, margin + cm * en_s > 0
@@ -116,7 +123,8 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, B: int, tol: float, cm: floa
     maybe_v = ca.logic_and(maybe, ca.logic_not(ca.logic_and(g["nsteps"] == 0, fob)))
     c_kind = ca.if_else(bad, NON_FINITE, ca.if_else(viol, ca.if_else(maybe_v, DOUBT_E, LEFT_C), DOUBT))
     pend, endbad = g["pend"] > 0.5, ca.logic_or(viol, bad)
-    # (decided, kind, sample folded, step folded, t_stop from the previous sample) in the judge's order
+    # the judge's order: a pending doubtful step is decided by this sample (within a block: only a
+    # violation or failure here counts, else the doubt is the step's); then C, E, the horizon, the step
     p_in = ca.logic_and(pend, ca.logic_not(fob))
     cev = ca.logic_and(valid, ca.logic_or(ca.logic_or(viol, doubt_s), bad))
     plain = ca.logic_and(ca.logic_not(cev), ca.logic_and(valid, ca.logic_not(ment)))  # sample passed
@@ -124,11 +132,11 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, B: int, tol: float, cm: floa
                       ca.if_else(cev, c_kind, ca.if_else(ca.logic_and(valid, ment), SAFE,
                                  ca.if_else(ca.logic_or(ca.logic_not(valid), ca.logic_not(valid_t)),
                                             ca.if_else(maybe, DOUBT_E, HORIZON), 0))))
-    fs = ca.if_else(pend, ca.logic_or(ca.logic_not(p_in), endbad), valid)
-    ft = ca.logic_and(ca.logic_not(pend), ca.logic_and(plain, valid_t))
-    prev_t = ca.logic_and(p_in, ca.logic_not(endbad))
+    fs = ca.logic_and(live, ca.if_else(pend, ca.logic_or(ca.logic_not(p_in), endbad), valid))
+    ft = ca.logic_and(live, ca.logic_and(ca.logic_not(pend), ca.logic_and(plain, valid_t)))
+    decided = ca.logic_and(live, kind > 0)
     new = dict(g)
-    new.update(eh_c=eh_c, en_c=en_c, cdh=cdh, cen=cen, maybe=maybe, j=j + 1)
+    new.update(eh_c=eh_c, en_c=en_c, cdh=cdh, cen=cen, maybe=maybe, i=ca.if_else(last, 0, i + 1))
     new["pend"] = ca.logic_and(ft, doubt_t)
     new["s_prev"] = s
     act = h < INACTIVE / 2
@@ -136,30 +144,29 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, B: int, tol: float, cm: floa
     new["min_h"] = ca.if_else(fs, ca.fmin(g["min_h"], h), g["min_h"])
     low = ca.if_else(fs, ca.fmin(g["low"], low_s), g["low"])
     new["low"] = ca.if_else(ft, ca.fmin(low, low_t), low)
-    new["count"] = g["count"] + ca.if_else(fs, act, 0) + ca.if_else(ft, low_t < INACTIVE / 2, 0)
+    new["count"] = g["count"] + ca.logic_and(fs, act) + ca.logic_and(ft, low_t < INACTIVE / 2)
     new["best_m"] = ca.if_else(ca.logic_and(fs, margin == margin), ca.fmax(g["best_m"], margin), g["best_m"])
-    new["peak"] = ca.if_else(fs, ca.fmax(g["peak"], ca.if_else(_finite(u), ca.fabs(u), 0)), g["peak"])
-    new["peak_raw"] = ca.if_else(fs, ca.fmax(g["peak_raw"], ca.if_else(_finite(u_raw), ca.fabs(u_raw), 0)),
+    new["peak"] = ca.if_else(fs, ca.fmax(g["peak"], ca.if_else(u - u == 0, ca.fabs(u), 0)), g["peak"])
+    new["peak_raw"] = ca.if_else(fs, ca.fmax(g["peak_raw"], ca.if_else(u_raw - u_raw == 0, ca.fabs(u_raw), 0)),
                                  g["peak_raw"])
     out_lo = ca.logic_or(u_raw < ca.DM(lo), u_raw > ca.DM(hi)) if lay.nu else ca.DM.zeros(0)
     new["sat"] = ca.logic_or(g["sat"], ca.logic_and(fs, _any(out_lo)))
-    lane = ca.fmod(i, LANES)
-    new["lh"] = ca.vertcat(*[ca.if_else(ca.logic_and(ft, lane == q), lh[q * nh:(q + 1) * nh] + dh,
-                                        lh[q * nh:(q + 1) * nh]) for q in range(LANES)]) if nh else lh
-    new["le"] = ca.vertcat(*[ca.if_else(ca.logic_and(ft, lane == q), le[q] + err, le[q]) for q in range(LANES)])
+    new["lh"] = ca.vertcat(*_rotate(lh, ca.if_else(ft, dh, 0))) if nh else g["lh"]
+    new["le"] = ca.vertcat(*_rotate(le, ca.if_else(ft, err, 0)))
     new["nsteps"] = g["nsteps"] + ft
-    decided = kind > 0
-    new["done"] = decided
-    new["kind"] = kind
-    new["t_stop"] = ca.if_else(prev_t, g["s_prev"], s)
-    new["entry"], new["hk"] = margin, h
-    parts = [ca.logic_not(fin_out)] + [_any(ca.logic_not(_finite(v))) for v in (h, margin, u_raw, lb)] + \
-        [ca.logic_and(last, ca.logic_not(zfin))]
-    new["why"] = sum(p * 2 ** b for b, p in enumerate(parts))
-    Jn = ca.vertcat(*[new[n] for n in lay.parts])
-    for n in ("done", "kind", "t_stop", "entry", "hk", "why"):  # what the deciding sample left
-        Jn[lay.slice(n)] = ca.if_else(decided, new[n], g[n])
-    return ca.Function("judge_step", [J, o, zfin], [ca.if_else(g["done"] > 0.5, J, Jn)])
+    new["done"] = ca.logic_or(g["done"], decided)
+    why = [any_bad, *parts, end_bad]
+    for n, v in (("kind", kind), ("t_stop", ca.if_else(ca.logic_and(p_in, ca.logic_not(endbad)), g["s_prev"], s)),
+                 ("entry", margin), ("hk", h), ("why", sum(p * 2 ** b for b, p in enumerate(why)))):
+        new[n] = ca.if_else(decided, v, g[n])  # what the deciding sample left
+    return ca.Function("judge_step", [J, o, zend], [ca.vertcat(*[new[n] for n in lay.parts])])
+
+
+def lanes_in_order(R: np.ndarray, i: np.ndarray) -> np.ndarray:
+    """The lanes (LANES x m) in lane order from the rotated ones at block positions i."""
+    m = R.shape[1]
+    idx = (np.arange(LANES)[:, None] - i[None, :].astype(int)) % LANES
+    return R[idx, np.arange(m)[None, :]]
 
 
 class JudgedChunk:
@@ -199,15 +206,14 @@ def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: 
     key = ("judged", dt, K, B, tol, cm, jit, tuple(flags))
     if key not in prim.cache:
         body, nz = step_body(prim, dt)
-        lay = Layout(len(prim.h_names), prim.system.nu)
+        lay = Layout(len(prim.h_names), prim.system.nu, nz)
         n_out = body.size1_out(1)
         rows = Rows(lay.nh, lay.nu)
         step = judge_step(lay, rows, n_out, B, tol, cm, prim.system.u_lo, prim.system.u_hi)
         sym = ca.SX.sym if body.is_a("SXFunction") else ca.MX.sym
         za = sym("za", nz + lay.size)
         zn, o = body(za[:nz])
-        zfin = ca.logic_not(_any(ca.logic_not(_finite(zn))))
-        one = cse_sx(ca.Function("judged", [za], [ca.vertcat(zn, step(za[nz:], o, zfin))]))
+        one = cse_sx(ca.Function("judged", [za], [ca.vertcat(zn, step(za[nz:], o, zn))]))
         Z = ca.MX.sym("Z", nz + lay.size)
         name = "judged_" + hashlib.sha1(f"{prim.name}{dt}{K}{B}{tol}{cm}".encode()).hexdigest()[:10]
         fn = ca.Function(name, [Z], [one.fold(K)(Z)])
@@ -227,7 +233,7 @@ def decided_evidence(ch: JudgedChunk, J: np.ndarray, t0s, cm: float) -> list:
     b = Block(get["hk"][:, :, None], get["hk"][:, :, None], get["hk"][:, :, None], get["entry"].T.copy(), one,
               get["t_stop"].T.copy(), one, np.zeros((lay.nu, m, 1)), np.zeros((lay.nu, m, 1)), np.ones((m, 1), bool))
     c = Carry(lay.nh, lay.nu, m)
-    c.en = get["en_c"][0] + lane_sum(get["le"].T)
+    c.en = get["en_c"][0] + lane_sum(lanes_in_order(get["le"], get["i"][0]).T)
     c.min_h, c.low, c.count = get["min_h"], get["low"], get["count"].astype(int)
     c.best_m, c.peak, c.peak_raw = get["best_m"][0], get["peak"], get["peak_raw"]
     c.sat, c.nsteps = get["sat"][0] > 0.5, get["nsteps"][0].astype(int)
