@@ -10,13 +10,15 @@ Inconclusive rollouts are run again with the step halved, up to `settings.refine
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from mpgspec.compile.primitive import CompiledPrimitive
 from mpgspec.oracle.backend import HYBRID
 from mpgspec.oracle.evidence import OracleEvidence, Reason
 from mpgspec.oracle.integrator import Chunk, build_chunk, build_first, start_states
-from mpgspec.oracle.judged import JudgedChunk, build_judged_chunk, decided_evidence
+from mpgspec.oracle.judged import LANES, JudgedChunk, build_judged_chunk, decided_evidence
 from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidences, judge
 from mpgspec.settings import OracleSettings
 
@@ -34,17 +36,21 @@ def margin_gain(prim: CompiledPrimitive) -> float:
 class RK4Runner:
     """Evaluates O_B(x0, t_B) for batches of start points of one primitive."""
 
-    def __init__(self, prim: CompiledPrimitive, settings: OracleSettings, dt: float | None = None):
+    def __init__(self, prim: CompiledPrimitive, settings: OracleSettings, dt: float | None = None,
+                 judged: bool | None = None):
         self.prim = prim
         self.s = settings
         self.dt = dt or settings.dt
         # step doubling estimates the margin's error directly; local estimates are state norms
         self.c_margin = 1.0 if settings.error == "doubling" else margin_gain(prim)
-        self.judged = settings.error == "local"  # the judge runs inside the compiled chunk
+        # the judge runs inside the compiled chunk (judged.py) unless asked not to, or under step
+        # doubling, or when the judge's blocks (settings.chunk) are no multiple of the chunk
+        K = math.gcd(JUDGED_STEPS, settings.chunk)
+        self.judged = settings.error == "local" and K % LANES == 0 if judged is None else judged
         if self.judged:
             self.chunk: Chunk | JudgedChunk = build_judged_chunk(
-                prim, self.dt, min(JUDGED_STEPS, settings.chunk), settings.chunk, settings.h_tolerance,
-                self.c_margin, settings.jit, settings.jit_flags)
+                prim, self.dt, K, settings.chunk, settings.h_tolerance, self.c_margin, settings.jit,
+                settings.jit_flags)
         else:
             self.chunk = build_chunk(prim, self.dt, settings.chunk, settings.jit, settings.jit_flags,
                                      error=settings.error)
@@ -60,7 +66,7 @@ class RK4Runner:
         if not idx or level >= self.s.refinements:
             return ev
         if self._fine is None:
-            self._fine = RK4Runner(self.prim, self.s, dt=self.dt / 2)
+            self._fine = RK4Runner(self.prim, self.s, dt=self.dt / 2, judged=self.judged)
         fine = self._fine.evaluate(x0s[idx], t0s[idx], T[idx], level + 1)
         for i, f in zip(idx, fine):
             f.refined = True

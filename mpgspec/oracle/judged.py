@@ -81,32 +81,47 @@ def _nonfinite(*vs):
     return ca.logic_not(tot == 0)
 
 
-def _rotate(R: list, add):
-    """Lanes rotated by one with `add` joining the current lane (R[0]); R[p] holds lane (i + p) % 8
-    at block position i, so the rotation costs no arithmetic."""
-    return R[1:] + [R[0] + add]
+def _sel(c, a, b):
+    """if_else(c, a, b), resolved when c is a Python bool (a static fact of the step's position)."""
+    if c is True:
+        return a
+    if c is False:
+        return b
+    return ca.if_else(c, a, b)
 
 
-def judge_step(lay: Layout, rows: Rows, n_out: int, B: int, tol: float, cm: float, lo, hi) -> ca.Function:
-    """(J, out, zend) -> J after judging one step whose outputs are `out` (Rows order) and whose end
-    state is zend; see verdict.judge for the rules this applies one step at a time. A decided
-    rollout folds nothing more and keeps its decision (its sums and lanes may run on, but the
-    lanes and en_c keep en_c + lane_sum, the only sum its evidence reads)."""
+def _and(a, b):
+    """logic_and, resolved when either side is a Python bool."""
+    if a is False or b is False:
+        return False
+    return b if a is True else a if b is True else ca.logic_and(a, b)
+
+
+def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol: float, cm: float,
+               lo, hi) -> ca.Function:
+    """(J, out, zend) -> J after judging step k of a chunk of K, whose outputs are `out` (Rows order)
+    and whose end state is zend; see verdict.judge for the rules this applies one step at a time.
+
+    Chunks start at block positions i that are multiples of K (K divides B, 8 divides K), so a
+    block starts only at a chunk's first step (when i = 0), ends only at its last (i = B - K), and
+    step k adds to lane k % 8. A decided rollout folds nothing more and keeps its decision (its
+    running sums may run on; en_c + lane_sum of its lanes, which its evidence reads, stays)."""
     J, o, zend = ca.SX.sym("J", lay.size), ca.SX.sym("o", n_out), ca.SX.sym("zend", lay.nz)
     g = {n: J[lay.slice(n)] for n in lay.parts}
     h, lb, dh = o[rows.h], o[rows.lb], o[rows.dh]
     margin, err, s, dt, u_raw, u = o[rows.margin], o[rows.err], o[rows.s], o[rows.dt], o[rows.u_raw], o[rows.u]
     nh, i, live = lay.nh, g["i"], g["done"] < 0.5
-    fob, last = i == 0, i == B - 1
+    fob = i == 0 if k == 0 else False
+    last = i == B - K if k == K - 1 else False
     lh = [g["lh"][q * nh:(q + 1) * nh] for q in range(LANES)]
     le = [g["le"][q] for q in range(LANES)]
-    fold = ca.logic_and(fob, g["nsteps"] > 0)  # a block ended: its lanes join the carry
-    eh_c = ca.if_else(fold, g["eh_c"] + _lanes_sum(lh), g["eh_c"]) if nh else g["eh_c"]
-    en_c = ca.if_else(fold, g["en_c"] + _lanes_sum(le), g["en_c"])
-    lh = [ca.if_else(fold, 0, r) for r in lh] if nh else lh
-    le = [ca.if_else(fold, 0, r) for r in le]
-    cdh = ca.if_else(fob, dh, g["cdh"] + dh)
-    cen = ca.if_else(fob, err, g["cen"] + err)
+    fold = _and(fob, g["nsteps"] > 0)  # a block ended: its lanes join the carry
+    eh_c = _sel(fold, g["eh_c"] + _lanes_sum(lh), g["eh_c"]) if nh else g["eh_c"]
+    en_c = _sel(fold, g["en_c"] + _lanes_sum(le), g["en_c"])
+    lh = [_sel(fold, 0, r) for r in lh] if nh else lh
+    le = [_sel(fold, 0, r) for r in le]
+    cdh = _sel(fob, dh, g["cdh"] + dh)
+    cen = _sel(fob, err, g["cen"] + err)
     eh_s, eh_e = (eh_c + cdh) - dh, eh_c + cdh
     en_s = (en_c + cen) - err
     viol, doubt_s = _any((h + eh_s) < -tol), _any((h - eh_s) < -tol)
@@ -114,18 +129,19 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, B: int, tol: float, cm: floa
     parts = [_nonfinite(v) for v in (h, margin, u_raw, lb)]
     other = _nonfinite(dh, err, s, dt, u, o[rows.u.stop:])
     any_bad = ca.logic_or(ca.logic_or(ca.logic_or(parts[0], parts[1]), ca.logic_or(parts[2], parts[3])), other)
-    end_bad = ca.logic_and(last, _nonfinite(zend))
-    bad = ca.logic_or(any_bad, end_bad)
+    end_bad = _and(last, _nonfinite(zend))
+    bad = any_bad if end_bad is False else ca.logic_or(any_bad, end_bad)
     lim = g["T"] + 1e-9
     valid, valid_t = s <= lim, (s + dt) <= lim
     ment, mmay = margin - cm * en_s > 0, margin + cm * en_s > 0
     maybe = ca.logic_or(g["maybe"], ca.logic_and(valid, mmay))
-    maybe_v = ca.logic_and(maybe, ca.logic_not(ca.logic_and(g["nsteps"] == 0, fob)))
+    at_switch_in = _and(fob, g["nsteps"] == 0)  # E cannot have been entered before C was left
+    maybe_v = maybe if at_switch_in is False else ca.logic_and(maybe, ca.logic_not(at_switch_in))
     c_kind = ca.if_else(bad, NON_FINITE, ca.if_else(viol, ca.if_else(maybe_v, DOUBT_E, LEFT_C), DOUBT))
     pend, endbad = g["pend"] > 0.5, ca.logic_or(viol, bad)
     # the judge's order: a pending doubtful step is decided by this sample (within a block: only a
     # violation or failure here counts, else the doubt is the step's); then C, E, the horizon, the step
-    p_in = ca.logic_and(pend, ca.logic_not(fob))
+    p_in = pend if fob is False else ca.logic_and(pend, ca.logic_not(fob))
     cev = ca.logic_and(valid, ca.logic_or(ca.logic_or(viol, doubt_s), bad))
     plain = ca.logic_and(ca.logic_not(cev), ca.logic_and(valid, ca.logic_not(ment)))  # sample passed
     kind = ca.if_else(pend, ca.if_else(p_in, ca.if_else(endbad, c_kind, DOUBT), c_kind),
@@ -136,7 +152,9 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, B: int, tol: float, cm: floa
     ft = ca.logic_and(live, ca.logic_and(ca.logic_not(pend), ca.logic_and(plain, valid_t)))
     decided = ca.logic_and(live, kind > 0)
     new = dict(g)
-    new.update(eh_c=eh_c, en_c=en_c, cdh=cdh, cen=cen, maybe=maybe, i=ca.if_else(last, 0, i + 1))
+    new.update(eh_c=eh_c, en_c=en_c, cdh=cdh, cen=cen, maybe=maybe)
+    if k == K - 1:
+        new["i"] = ca.if_else(i == B - K, 0, i + K)
     new["pend"] = ca.logic_and(ft, doubt_t)
     new["s_prev"] = s
     act = h < INACTIVE / 2
@@ -151,22 +169,23 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, B: int, tol: float, cm: floa
                                  g["peak_raw"])
     out_lo = ca.logic_or(u_raw < ca.DM(lo), u_raw > ca.DM(hi)) if lay.nu else ca.DM.zeros(0)
     new["sat"] = ca.logic_or(g["sat"], ca.logic_and(fs, _any(out_lo)))
-    new["lh"] = ca.vertcat(*_rotate(lh, ca.if_else(ft, dh, 0))) if nh else g["lh"]
-    new["le"] = ca.vertcat(*_rotate(le, ca.if_else(ft, err, 0)))
+    q = k % LANES
+    if nh:
+        lh[q] = lh[q] + ca.if_else(ft, dh, 0)
+    le[q] = le[q] + ca.if_else(ft, err, 0)
+    new["lh"], new["le"] = ca.vertcat(*lh) if nh else g["lh"], ca.vertcat(*le)
     new["nsteps"] = g["nsteps"] + ft
     new["done"] = ca.logic_or(g["done"], decided)
     why = [any_bad, *parts, end_bad]
     for n, v in (("kind", kind), ("t_stop", ca.if_else(ca.logic_and(p_in, ca.logic_not(endbad)), g["s_prev"], s)),
-                 ("entry", margin), ("hk", h), ("why", sum(p * 2 ** b for b, p in enumerate(why)))):
+                 ("entry", margin), ("hk", h), ("why", sum(p * 2 ** b for b, p in enumerate(why) if p is not False))):
         new[n] = ca.if_else(decided, v, g[n])  # what the deciding sample left
-    return ca.Function("judge_step", [J, o, zend], [ca.vertcat(*[new[n] for n in lay.parts])])
+    return ca.Function(f"judge_step{k}", [J, o, zend], [ca.vertcat(*[new[n] for n in lay.parts])])
 
 
-def lanes_in_order(R: np.ndarray, i: np.ndarray) -> np.ndarray:
-    """The lanes (LANES x m) in lane order from the rotated ones at block positions i."""
-    m = R.shape[1]
-    idx = (np.arange(LANES)[:, None] - i[None, :].astype(int)) % LANES
-    return R[idx, np.arange(m)[None, :]]
+INLINE_CHUNK = 20000
+"""A judged chunk whose body is SX and at most this many nodes over its K steps is one inlined SX
+function; larger ones call the body and the judge's steps from an MX graph (each generated once)."""
 
 
 class JudgedChunk:
@@ -202,21 +221,28 @@ class JudgedChunk:
 def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: float, cm: float,
                        jit: bool = True, flags: tuple[str, ...] = ("-O1",)) -> JudgedChunk:
     """Compile K judged steps (error 'local', blocks of B steps, tolerance tol, margin gain cm);
-    remembered on the primitive."""
+    remembered on the primitive. K must divide B and be a multiple of 8 (see judge_step)."""
+    if B % K or K % LANES:
+        raise ValueError(f"a judged chunk of {K} steps needs blocks of a multiple of {K} and K a multiple of {LANES}")
     key = ("judged", dt, K, B, tol, cm, jit, tuple(flags))
     if key not in prim.cache:
         body, nz = step_body(prim, dt)
         lay = Layout(len(prim.h_names), prim.system.nu, nz)
         n_out = body.size1_out(1)
         rows = Rows(lay.nh, lay.nu)
-        step = judge_step(lay, rows, n_out, B, tol, cm, prim.system.u_lo, prim.system.u_hi)
-        sym = ca.SX.sym if body.is_a("SXFunction") else ca.MX.sym
-        za = sym("za", nz + lay.size)
-        zn, o = body(za[:nz])
-        one = cse_sx(ca.Function("judged", [za], [ca.vertcat(zn, step(za[nz:], o, zn))]))
-        Z = ca.MX.sym("Z", nz + lay.size)
+        steps = {}
+        inline = body.is_a("SXFunction") and body.n_nodes() * K <= INLINE_CHUNK
+        Z = (ca.SX.sym if inline else ca.MX.sym)("Z", nz + lay.size)
+        z, J = Z[:nz], Z[nz:]
+        for k in range(K):
+            kind = k if k in (0, K - 1) else ("inner", k % LANES)  # inner steps differ by their lane only
+            if kind not in steps:
+                steps[kind] = judge_step(lay, rows, n_out, K, k, B, tol, cm, prim.system.u_lo, prim.system.u_hi)
+            zn, o = body(z)
+            z, J = zn, steps[kind](J, o, zn)
         name = "judged_" + hashlib.sha1(f"{prim.name}{dt}{K}{B}{tol}{cm}".encode()).hexdigest()[:10]
-        fn = ca.Function(name, [Z], [one.fold(K)(Z)])
+        fn = ca.Function(name, [Z], [ca.vertcat(z, J)])
+        fn = cse_sx(fn) if inline else fn
         prim.cache[key] = JudgedChunk(prim, compile_cached(fn, flags) if jit else fn, nz, lay, K)
     return prim.cache[key]
 
@@ -233,7 +259,7 @@ def decided_evidence(ch: JudgedChunk, J: np.ndarray, t0s, cm: float) -> list:
     b = Block(get["hk"][:, :, None], get["hk"][:, :, None], get["hk"][:, :, None], get["entry"].T.copy(), one,
               get["t_stop"].T.copy(), one, np.zeros((lay.nu, m, 1)), np.zeros((lay.nu, m, 1)), np.ones((m, 1), bool))
     c = Carry(lay.nh, lay.nu, m)
-    c.en = get["en_c"][0] + lane_sum(lanes_in_order(get["le"], get["i"][0]).T)
+    c.en = get["en_c"][0] + lane_sum(get["le"].T)
     c.min_h, c.low, c.count = get["min_h"], get["low"], get["count"].astype(int)
     c.best_m, c.peak, c.peak_raw = get["best_m"][0], get["peak"], get["peak_raw"]
     c.sat, c.nsteps = get["sat"][0] > 0.5, get["nsteps"][0].astype(int)
