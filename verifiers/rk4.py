@@ -55,6 +55,7 @@ class RK4Runner:
             self.chunk = build_chunk(prim, self.dt, settings.chunk, settings.jit, settings.jit_flags,
                                      error=settings.error)
         self._fine: RK4Runner | None = None
+        self._maps: dict = {}
 
     def evaluate(self, x0s: np.ndarray, t0s: np.ndarray, horizon: np.ndarray | float,
                  level: int = 0) -> list[OracleEvidence]:
@@ -73,6 +74,12 @@ class RK4Runner:
             ev[i] = f
         return ev
 
+    def _first_map(self, n: int):
+        """build_first mapped over n start points (remembered per n)."""
+        if n not in self._maps:
+            self._maps[n] = build_first(self.prim, self.dt, self.s.jit).map(n, "serial")
+        return self._maps[n]
+
     def _first(self, Zall: np.ndarray, T: np.ndarray, t0s: np.ndarray, results: list) -> np.ndarray:
         """Judge every start point's first sample in one vectorised call; returns those still open.
 
@@ -82,7 +89,7 @@ class RK4Runner:
         n = Zall.shape[1]
         try:
             nz = 2 * self.prim.system.nx + 2
-            H, M, UR, U = (np.asarray(v) for v in build_first(self.prim, self.dt, self.s.jit).map(n, "serial")(Zall[:nz]))
+            H, M, UR, U = (np.asarray(v) for v in self._first_map(n)(Zall[:nz]))
         except Exception:  # judged with the chunks instead
             return np.arange(n)
         nh, nu = len(self.prim.h_names), self.prim.system.nu
@@ -116,6 +123,7 @@ class RK4Runner:
         done_row = ch.nz + ch.lay.slice("done").start
         cap, n, qpos = min(self.s.batch, SIZES[-1]), order.size, 0
         Z, ids = np.zeros((queue.shape[0], 0)), np.zeros(0, int)
+        decided: list[tuple[np.ndarray, np.ndarray]] = []
         while qpos < n or ids.size:
             if qpos < n and ids.size < cap:
                 take = min(n, qpos + cap - ids.size)
@@ -132,10 +140,12 @@ class RK4Runner:
                 Z, ids = Z[:, ok], ids[ok]
             done = Z[done_row] > 0.5
             if done.any():
-                rows = order[ids[done]]
-                for i, ev in zip(rows, decided_evidence(ch, Z[ch.nz:, done], t0s[rows], self.c_margin)):
-                    results[i] = ev
+                decided.append((order[ids[done]], Z[ch.nz:, done]))
                 Z, ids = Z[:, ~done], ids[~done]
+        if decided:  # evidence of every decided rollout in one go
+            rows = np.concatenate([r for r, _ in decided])
+            for i, ev in zip(rows, decided_evidence(ch, np.hstack([J for _, J in decided]), t0s[rows], self.c_margin)):
+                results[i] = ev
         return results  # type: ignore[return-value]
 
     def _run_python(self, x0s: np.ndarray, t0s: np.ndarray, horizons: np.ndarray) -> list[OracleEvidence]:
