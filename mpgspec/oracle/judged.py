@@ -73,12 +73,10 @@ def _any(v):
 
 
 def _nonfinite(*vs):
-    """1 when some entry of the vectors vs is NaN or infinite: v * 0 is 0 for finite v, else NaN."""
-    tot = ca.DM(0)
-    for v in vs:
-        if v.shape[0]:
-            tot = tot + ca.sum1(v * 0)
-    return ca.logic_not(tot == 0)
+    """1 when some entry of the vectors vs is NaN or infinite (written so that CasADi cannot
+    simplify it away, as it does v * 0 and v - v)."""
+    v = ca.vertcat(*[w for w in vs if w.shape[0]])
+    return ca.DM(0) if v.shape[0] == 0 else ca.logic_not(ca.mmin(ca.fabs(v) < ca.inf))
 
 
 def _sel(c, a, b):
@@ -163,10 +161,11 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol:
     low = ca.if_else(fs, ca.fmin(g["low"], low_s), g["low"])
     new["low"] = ca.if_else(ft, ca.fmin(low, low_t), low)
     new["count"] = g["count"] + ca.logic_and(fs, act) + ca.logic_and(ft, low_t < INACTIVE / 2)
-    new["best_m"] = ca.if_else(ca.logic_and(fs, margin == margin), ca.fmax(g["best_m"], margin), g["best_m"])
-    new["peak"] = ca.if_else(fs, ca.fmax(g["peak"], ca.if_else(u - u == 0, ca.fabs(u), 0)), g["peak"])
-    new["peak_raw"] = ca.if_else(fs, ca.fmax(g["peak_raw"], ca.if_else(u_raw - u_raw == 0, ca.fabs(u_raw), 0)),
-                                 g["peak_raw"])
+    not_nan = margin >= -ca.inf
+    new["best_m"] = ca.if_else(ca.logic_and(fs, not_nan), ca.fmax(g["best_m"], margin), g["best_m"])
+    au, aur = ca.fabs(u), ca.fabs(u_raw)
+    new["peak"] = ca.if_else(fs, ca.fmax(g["peak"], ca.if_else(au < ca.inf, au, 0)), g["peak"])
+    new["peak_raw"] = ca.if_else(fs, ca.fmax(g["peak_raw"], ca.if_else(aur < ca.inf, aur, 0)), g["peak_raw"])
     out_lo = ca.logic_or(u_raw < ca.DM(lo), u_raw > ca.DM(hi)) if lay.nu else ca.DM.zeros(0)
     new["sat"] = ca.logic_or(g["sat"], ca.logic_and(fs, _any(out_lo)))
     q = k % LANES
