@@ -95,6 +95,23 @@ def _and(a, b):
     return b if a is True else a if b is True else ca.logic_and(a, b)
 
 
+def _folded(g: dict, rows: Rows, o, fs, ft, eh_s, eh_e, lo, hi) -> dict:
+    """The least values, counts, best margin, peaks and saturation after folding in the sample
+    (when fs) and the step (when ft) of the outputs o, as verdict._fold does."""
+    h, lb, margin, u_raw, u = o[rows.h], o[rows.lb], o[rows.margin], o[rows.u_raw], o[rows.u]
+    low_s, low_t = h - eh_s, lb - eh_e
+    low = ca.if_else(fs, ca.fmin(g["low"], low_s), g["low"])
+    au, aur = ca.fabs(u), ca.fabs(u_raw)
+    out_lo = ca.logic_or(u_raw < ca.DM(lo), u_raw > ca.DM(hi)) if u.shape[0] else ca.DM.zeros(0)
+    return {"min_h": ca.if_else(fs, ca.fmin(g["min_h"], h), g["min_h"]),
+            "low": ca.if_else(ft, ca.fmin(low, low_t), low),
+            "count": g["count"] + ca.logic_and(fs, h < INACTIVE / 2) + ca.logic_and(ft, low_t < INACTIVE / 2),
+            "best_m": ca.if_else(ca.logic_and(fs, margin >= -ca.inf), ca.fmax(g["best_m"], margin), g["best_m"]),
+            "peak": ca.if_else(fs, ca.fmax(g["peak"], ca.if_else(au < ca.inf, au, 0)), g["peak"]),
+            "peak_raw": ca.if_else(fs, ca.fmax(g["peak_raw"], ca.if_else(aur < ca.inf, aur, 0)), g["peak_raw"]),
+            "sat": ca.logic_or(g["sat"], ca.logic_and(fs, _any(out_lo)))}
+
+
 def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol: float, cm: float,
                lo, hi) -> ca.Function:
     """(J, out, zend) -> J after judging step k of a chunk of K, whose outputs are `out` (Rows order)
@@ -155,19 +172,7 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol:
         new["i"] = ca.if_else(i == B - K, 0, i + K)
     new["pend"] = ca.logic_and(ft, doubt_t)
     new["s_prev"] = s
-    act = h < INACTIVE / 2
-    low_s, low_t = h - eh_s, lb - eh_e
-    new["min_h"] = ca.if_else(fs, ca.fmin(g["min_h"], h), g["min_h"])
-    low = ca.if_else(fs, ca.fmin(g["low"], low_s), g["low"])
-    new["low"] = ca.if_else(ft, ca.fmin(low, low_t), low)
-    new["count"] = g["count"] + ca.logic_and(fs, act) + ca.logic_and(ft, low_t < INACTIVE / 2)
-    not_nan = margin >= -ca.inf
-    new["best_m"] = ca.if_else(ca.logic_and(fs, not_nan), ca.fmax(g["best_m"], margin), g["best_m"])
-    au, aur = ca.fabs(u), ca.fabs(u_raw)
-    new["peak"] = ca.if_else(fs, ca.fmax(g["peak"], ca.if_else(au < ca.inf, au, 0)), g["peak"])
-    new["peak_raw"] = ca.if_else(fs, ca.fmax(g["peak_raw"], ca.if_else(aur < ca.inf, aur, 0)), g["peak_raw"])
-    out_lo = ca.logic_or(u_raw < ca.DM(lo), u_raw > ca.DM(hi)) if lay.nu else ca.DM.zeros(0)
-    new["sat"] = ca.logic_or(g["sat"], ca.logic_and(fs, _any(out_lo)))
+    new.update(_folded(g, rows, o, fs, ft, eh_s, eh_e, lo, hi))
     q = k % LANES
     if nh:
         lh[q] = lh[q] + ca.if_else(ft, dh, 0)
