@@ -26,7 +26,7 @@ from .verdict import LANES, Block, Carry, Decision, evidences, lane_sum
 
 KINDS = ("", "safe", "left_C", "non_finite", "horizon", "doubt", "doubt_E")
 SAFE, LEFT_C, NON_FINITE, HORIZON, DOUBT, DOUBT_E = range(1, 7)
-SCALARS = ("T", "i", "done", "kind", "t_stop", "entry", "why", "pend", "s_prev", "maybe", "en_c", "cen",
+SCALARS = ("T", "zero", "i", "done", "kind", "t_stop", "entry", "why", "pend", "s_prev", "maybe", "en_c", "cen",
            "best_m", "sat", "nsteps")
 WHY = ("any", "safety function", "RoA margin", "input", "state", "end")
 """Bits of `why` at a non-finite decision: some output, the h rows, the margin, the raw input, the
@@ -72,11 +72,11 @@ def _any(v):
     return ca.DM(0) if v.shape[0] == 0 else ca.mmax(v)
 
 
-def _nonfinite(*vs):
-    """1 when some entry of the vectors vs is NaN or infinite (written so that CasADi cannot
-    simplify it away, as it does v * 0 and v - v)."""
+def _probe(zero, *vs):
+    """The sum of v * zero over the entries of the vectors vs, zero a state entry that stays 0 (a
+    symbol, so that CasADi cannot simplify v * 0 away): 0 when every entry is finite, else NaN."""
     v = ca.vertcat(*[w for w in vs if w.shape[0]])
-    return ca.DM(0) if v.shape[0] == 0 else ca.logic_not(ca.mmin(ca.fabs(v) < ca.inf))
+    return ca.DM(0) if v.shape[0] == 0 else ca.sum1(v * zero)
 
 
 def _sel(c, a, b):
@@ -107,8 +107,8 @@ def _folded(g: dict, rows: Rows, o, fs, ft, eh_s, eh_e, lo, hi) -> dict:
             "low": ca.if_else(ft, ca.fmin(low, low_t), low),
             "count": g["count"] + ca.logic_and(fs, h < INACTIVE / 2) + ca.logic_and(ft, low_t < INACTIVE / 2),
             "best_m": ca.if_else(ca.logic_and(fs, margin >= -ca.inf), ca.fmax(g["best_m"], margin), g["best_m"]),
-            "peak": ca.if_else(fs, ca.fmax(g["peak"], ca.if_else(au < ca.inf, au, 0)), g["peak"]),
-            "peak_raw": ca.if_else(fs, ca.fmax(g["peak_raw"], ca.if_else(aur < ca.inf, aur, 0)), g["peak_raw"]),
+            "peak": ca.fmax(g["peak"], ca.if_else(ca.logic_and(fs, au < ca.inf), au, 0)),  # peaks are >= 0
+            "peak_raw": ca.fmax(g["peak_raw"], ca.if_else(ca.logic_and(fs, aur < ca.inf), aur, 0)),
             "sat": ca.logic_or(g["sat"], ca.logic_and(fs, _any(out_lo)))}
 
 
@@ -141,10 +141,10 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol:
     en_s = (en_c + cen) - err
     viol, doubt_s = _any((h + eh_s) < -tol), _any((h - eh_s) < -tol)
     doubt_t = _any((lb - eh_e) < -tol)
-    parts = [_nonfinite(v) for v in (h, margin, u_raw, lb)]
-    other = _nonfinite(dh, err, s, dt, u, o[rows.u.stop:])
-    any_bad = ca.logic_or(ca.logic_or(ca.logic_or(parts[0], parts[1]), ca.logic_or(parts[2], parts[3])), other)
-    end_bad = _and(last, _nonfinite(zend))
+    probes = [_probe(g["zero"], v) for v in (h, margin, u_raw, lb)]
+    any_bad = (probes[0] + probes[1] + probes[2] + probes[3] + _probe(g["zero"], dh, err, s, dt, u, o[rows.u.stop:])) != 0
+    parts = [p != 0 for p in probes]
+    end_bad = _and(last, _probe(g["zero"], zend) != 0)
     bad = any_bad if end_bad is False else ca.logic_or(any_bad, end_bad)
     lim = g["T"] + 1e-9
     valid, valid_t = s <= lim, (s + dt) <= lim
@@ -152,17 +152,20 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol:
     maybe = ca.logic_or(g["maybe"], ca.logic_and(valid, mmay))
     at_switch_in = _and(fob, g["nsteps"] == 0)  # E cannot have been entered before C was left
     maybe_v = maybe if at_switch_in is False else ca.logic_and(maybe, ca.logic_not(at_switch_in))
-    c_kind = ca.if_else(bad, NON_FINITE, ca.if_else(viol, ca.if_else(maybe_v, DOUBT_E, LEFT_C), DOUBT))
+    # kinds as sums of 0/1 flags times codes (exact small integers; fewer operations than if_else)
+    c_kind = bad * NON_FINITE + (1 - bad) * (viol * (LEFT_C + (DOUBT_E - LEFT_C) * maybe_v) + (1 - viol) * DOUBT)
     pend, endbad = g["pend"] > 0.5, ca.logic_or(viol, bad)
     # the judge's order: a pending doubtful step is decided by this sample (within a block: only a
     # violation or failure here counts, else the doubt is the step's); then C, E, the horizon, the step
     p_in = pend if fob is False else ca.logic_and(pend, ca.logic_not(fob))
     cev = ca.logic_and(valid, ca.logic_or(ca.logic_or(viol, doubt_s), bad))
     plain = ca.logic_and(ca.logic_not(cev), ca.logic_and(valid, ca.logic_not(ment)))  # sample passed
-    kind = ca.if_else(pend, ca.if_else(p_in, ca.if_else(endbad, c_kind, DOUBT), c_kind),
-                      ca.if_else(cev, c_kind, ca.if_else(ca.logic_and(valid, ment), SAFE,
-                                 ca.if_else(ca.logic_or(ca.logic_not(valid), ca.logic_not(valid_t)),
-                                            ca.if_else(maybe, DOUBT_E, HORIZON), 0))))
+    npend, entered = ca.logic_not(pend), ca.logic_and(valid, ment)
+    on_c = ca.logic_or(ca.logic_and(pend, ca.logic_or(ca.logic_not(p_in), endbad)), ca.logic_and(npend, cev))
+    rest = ca.logic_and(npend, ca.logic_not(cev))
+    ends = ca.logic_and(ca.logic_not(entered), ca.logic_or(ca.logic_not(valid), ca.logic_not(valid_t)))
+    kind = on_c * c_kind + ca.logic_and(p_in, ca.logic_not(endbad)) * DOUBT + ca.logic_and(rest, entered) * SAFE + \
+        ca.logic_and(rest, ends) * (HORIZON + (DOUBT_E - HORIZON) * maybe)
     fs = ca.logic_and(live, ca.if_else(pend, ca.logic_or(ca.logic_not(p_in), endbad), valid))
     ft = ca.logic_and(live, ca.logic_and(ca.logic_not(pend), ca.logic_and(plain, valid_t)))
     decided = ca.logic_and(live, kind > 0)
@@ -183,7 +186,7 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol:
     why = [any_bad, *parts, end_bad]
     for n, v in (("kind", kind), ("t_stop", ca.if_else(ca.logic_and(p_in, ca.logic_not(endbad)), g["s_prev"], s)),
                  ("entry", margin), ("hk", h), ("why", sum(p * 2 ** b for b, p in enumerate(why) if p is not False))):
-        new[n] = ca.if_else(decided, v, g[n])  # what the deciding sample left
+        new[n] = g[n] + ca.if_else(decided, v, 0)  # what the deciding sample left (0 until then)
     return ca.Function(f"judge_step{k}", [J, o, zend], [ca.vertcat(*[new[n] for n in lay.parts])])
 
 
