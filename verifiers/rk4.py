@@ -5,8 +5,12 @@ the safe set or the contact mode switches. Each step reports the safety function
 their rates along the flow and an integration error estimate (embedded third-order per step, or
 step doubling: see mpgspec.oracle.integrator), from which the judge
 (mpgspec.oracle.verdict) bounds what can hide between samples and in the integration error.
-After each chunk, decided rollouts are retired and their slots refilled from the queue.
-Inconclusive rollouts are run again with the step halved, up to `settings.refinements` times.
+With the embedded estimates the judge runs inside the compiled chunk (mpgspec.oracle.judged): the
+running error sums, least values and the decision ride in each rollout's state, so after a chunk
+of JUDGED_STEPS steps Python reads the decision flags, keeps the state of the decided rollouts
+for their evidence and refills their slots from the queue. Under step doubling the chunk hands
+every step's outputs to the Python judge instead. Inconclusive rollouts are run again with the
+step halved, up to `settings.refinements` times.
 """
 from __future__ import annotations
 
