@@ -198,9 +198,13 @@ function; larger ones call the body and the judge's steps from an MX graph (each
 class JudgedChunk:
     """K compiled judged steps of one primitive: run(Z) advances the columns of [z; J] (nz + J rows)."""
 
-    def __init__(self, prim: CompiledPrimitive, fn: ca.Function, nz: int, lay: Layout, K: int):
-        self.prim, self.fn, self.nz, self.lay, self.K = prim, fn, nz, lay, K
+    def __init__(self, prim: CompiledPrimitive, dt: float, fn: ca.Function, nz: int, lay: Layout, K: int):
+        self.prim, self.dt, self.fn, self.nz, self.lay, self.K = prim, dt, fn, nz, lay, K
         self._buffers: dict = {}
+
+    def bound(self, n: int) -> tuple:
+        """(evaluate, z_in, z_final, None): the batch-of-n function bound to numpy arrays, as Chunk.bound."""
+        return (*self._bound(n)[1:], None)
 
     def _bound(self, n: int) -> tuple:
         if n not in self._buffers:
@@ -250,7 +254,7 @@ def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: 
         name = "judged_" + hashlib.sha1(f"{prim.name}{dt}{K}{B}{tol}{cm}".encode()).hexdigest()[:10]
         fn = ca.Function(name, [Z], [ca.vertcat(z, J)])
         fn = cse_sx(fn) if inline else fn
-        prim.cache[key] = JudgedChunk(prim, compile_cached(fn, flags) if jit else fn, nz, lay, K)
+        prim.cache[key] = JudgedChunk(prim, dt, compile_cached(fn, flags) if jit else fn, nz, lay, K)
     return prim.cache[key]
 
 
