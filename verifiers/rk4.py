@@ -8,9 +8,9 @@ step doubling: see mpgspec.oracle.integrator), from which the judge
 With the embedded estimates the judge runs inside the compiled chunk (mpgspec.oracle.judged): the
 running error sums, least values and the decision ride in each rollout's state, so after a chunk
 of JUDGED_STEPS steps Python reads the decision flags, keeps the state of the decided rollouts
-for their evidence and refills their slots from the queue. Under step doubling the chunk hands
-every step's outputs to the Python judge instead. Inconclusive rollouts are run again with the
-step halved, up to `settings.refinements` times.
+for their evidence and refills their slots from the queue (RK4Runner(judged=False) hands every
+step's outputs to the Python judge instead, as the oracle ran before). Inconclusive rollouts are
+run again with the step halved, up to `settings.refinements` times.
 """
 from __future__ import annotations
 
@@ -47,14 +47,14 @@ class RK4Runner:
         self.dt = dt or settings.dt
         # step doubling estimates the margin's error directly; local estimates are state norms
         self.c_margin = 1.0 if settings.error == "doubling" else margin_gain(prim)
-        # the judge runs inside the compiled chunk (judged.py) unless asked not to, or under step
-        # doubling, or when the judge's blocks (settings.chunk) are no multiple of the chunk
+        # the judge runs inside the compiled chunk (judged.py) unless asked not to or the judge's
+        # blocks (settings.chunk) are no multiple of a chunk of 8 or more steps
         K = math.gcd(JUDGED_STEPS, settings.chunk)
-        self.judged = settings.error == "local" and K % LANES == 0 if judged is None else judged
+        self.judged = K % LANES == 0 if judged is None else judged
         if self.judged:
             self.chunk: Chunk | JudgedChunk = build_judged_chunk(
                 prim, self.dt, K, settings.chunk, settings.h_tolerance, self.c_margin, settings.jit,
-                settings.jit_flags)
+                settings.jit_flags, doubling=settings.error == "doubling")
         else:
             self.chunk = build_chunk(prim, self.dt, settings.chunk, settings.jit, settings.jit_flags,
                                      error=settings.error)
@@ -121,7 +121,7 @@ class RK4Runner:
         ch: JudgedChunk = self.chunk  # type: ignore[assignment]
         t0s = np.asarray(t0s, float)
         results: list[OracleEvidence | None] = [None] * len(x0s)
-        Zstart = start_states(self.prim, x0s, t0s)
+        Zstart = start_states(self.prim, x0s, t0s, self.s.error == "doubling")
         order = self._first(Zstart, T, t0s, results)
         queue = np.vstack([Zstart[:, order], ch.lay.start(T[order])])
         done_row = ch.nz + ch.lay.slice("done").start

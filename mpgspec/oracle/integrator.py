@@ -323,13 +323,14 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
                  Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0))
 
 
-def step_body(prim: CompiledPrimitive, dt: float, with_state: bool = False,
-              boundaries: bool = True) -> tuple[ca.Function, int]:
+def step_body(prim: CompiledPrimitive, dt: float, with_state: bool = False, boundaries: bool = True,
+              doubling: bool = False) -> tuple[ca.Function, int]:
     """(z -> (z after one step, that step's outputs in Rows order), nz): one step of the chunk with
-    error 'local', remembered on the primitive so that every chunk built from it shares it."""
-    key = ("body", dt, with_state, boundaries)
+    error 'local' (or 'doubling'), remembered on the primitive so that every chunk built from it
+    shares it."""
+    key = ("body", dt, with_state, boundaries, doubling)
     if key not in prim.cache:
-        prim.cache[key] = _step_body(prim, dt, with_state, boundaries)
+        prim.cache[key] = (_doubling_body if doubling else _step_body)(prim, dt, with_state, boundaries)
     return prim.cache[key]
 
 
@@ -379,7 +380,14 @@ def _accumulate(prefix: str, prim: CompiledPrimitive, dt: float, K: int, with_st
 
 def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: tuple[str, ...],
                     with_state: bool, boundaries: bool) -> Chunk:
-    """K steps of step doubling: the judged rollout takes two RK4 half steps per step while a
+    body, nz = step_body(prim, dt, with_state, boundaries, doubling=True)
+    fn = _accumulate("chunk2_", prim, dt, K, with_state, boundaries, body, nz)
+    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, len(prim.h_names), prim.system.nu,
+                 Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0, doubling=True))
+
+
+def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple[ca.Function, int]:
+    """One step of step doubling: the judged rollout takes two RK4 half steps per step while a
     companion rollout x_c takes one full step from its own state, both with the same clock, jumps
     and boundaries. RK4's global error shrinks 16x when the step halves, so |h(x) - h(x_c)| at each
     sample (and at each step's end, before the jump) estimates the judged rollout's error in h
@@ -414,10 +422,7 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
     m_f, m_c = prim.roa_margin(x, t), prim.roa_margin(xc, t)
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), ca.fabs(h1 - h1c), m_f,
                      ca.fabs(m_f - m_c), s, h, u_raw, u, *([x] if with_state else []), ca.fabs(h0 - h0c))
-    body = cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out]))
-    fn = _accumulate("chunk2_", prim, dt, K, with_state, boundaries, body, nz)
-    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
-                 Rows(nh, prim.system.nu, nx if with_state else 0, doubling=True))
+    return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out])), nz
 
 
 def start_states(prim: CompiledPrimitive, x0s: np.ndarray, t0s: np.ndarray, doubling: bool = False) -> np.ndarray:

@@ -8,10 +8,11 @@ operations, so the verdicts and numbers are those of the judge on the full sampl
 rollout's J is frozen. Python then reads the decision flags and the J of decided slots only, and
 a rollout may enter a slot at any chunk boundary.
 
-The judge's error sums run in blocks of B steps from the rollout's start (B = settings.chunk): in
-a block, the estimate at a sample is the block's carry plus the running sum; at the block's end,
-the carry grows by the block's sum taken in eight lanes (verdict.lane_sum), as the Python judge
-folds it.
+With the embedded ('local') error estimates, the judge's error sums run in blocks of B steps from
+the rollout's start (B = settings.chunk): in a block, the estimate at a sample is the block's carry
+plus the running sum; at the block's end, the carry grows by the block's sum taken in eight lanes
+(verdict.lane_sum), as the Python judge folds it. Under step doubling the estimates are absolute
+and the judge keeps no sums.
 """
 from __future__ import annotations
 
@@ -112,6 +113,23 @@ def _folded(g: dict, rows: Rows, o, fs, ft, eh_s, eh_e, lo, hi) -> dict:
             "sat": ca.logic_or(g["sat"], ca.logic_and(fs, _any(out_lo)))}
 
 
+def _error_sums(g: dict, nh: int, dh, err, fob) -> dict:
+    """The running error estimates of the embedded ('local') error: at a block's start the lanes
+    join the carry (eh_c, en_c); in the block cdh and cen sum dh and err; eh_s, eh_e and en_s are
+    h's estimate at the sample and at the step's end and the margin's at the sample, as
+    verdict._errors forms them (carry + cumulative sum - this step's)."""
+    lh = [g["lh"][q * nh:(q + 1) * nh] for q in range(LANES)]
+    le = [g["le"][q] for q in range(LANES)]
+    fold = _and(fob, g["nsteps"] > 0)  # a block ended: its lanes join the carry
+    eh_c = _sel(fold, g["eh_c"] + _lanes_sum(lh), g["eh_c"]) if nh else g["eh_c"]
+    en_c = _sel(fold, g["en_c"] + _lanes_sum(le), g["en_c"])
+    cdh = _sel(fob, dh, g["cdh"] + dh)
+    cen = _sel(fob, err, g["cen"] + err)
+    return {"eh_c": eh_c, "en_c": en_c, "cdh": cdh, "cen": cen, "eh_s": (eh_c + cdh) - dh, "eh_e": eh_c + cdh,
+            "en_s": (en_c + cen) - err, "lh": [_sel(fold, 0, r) for r in lh] if nh else lh,
+            "le": [_sel(fold, 0, r) for r in le]}
+
+
 def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol: float, cm: float,
                lo, hi) -> ca.Function:
     """(J, out, zend) -> J after judging step k of a chunk of K, whose outputs are `out` (Rows order)
@@ -128,17 +146,9 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol:
     nh, i, live = lay.nh, g["i"], g["done"] < 0.5
     fob = i == 0 if k == 0 else False
     last = i == B - K if k == K - 1 else False
-    lh = [g["lh"][q * nh:(q + 1) * nh] for q in range(LANES)]
-    le = [g["le"][q] for q in range(LANES)]
-    fold = _and(fob, g["nsteps"] > 0)  # a block ended: its lanes join the carry
-    eh_c = _sel(fold, g["eh_c"] + _lanes_sum(lh), g["eh_c"]) if nh else g["eh_c"]
-    en_c = _sel(fold, g["en_c"] + _lanes_sum(le), g["en_c"])
-    lh = [_sel(fold, 0, r) for r in lh] if nh else lh
-    le = [_sel(fold, 0, r) for r in le]
-    cdh = _sel(fob, dh, g["cdh"] + dh)
-    cen = _sel(fob, err, g["cen"] + err)
-    eh_s, eh_e = (eh_c + cdh) - dh, eh_c + cdh
-    en_s = (en_c + cen) - err
+    sums = _error_sums(g, nh, dh, err, fob) if not rows.doubling else {}
+    # step doubling: the rows hold absolute estimates (h's at the sample and at the step's end, the margin's)
+    eh_s, eh_e, en_s = (o[rows.ds], dh, err) if rows.doubling else (sums["eh_s"], sums["eh_e"], sums["en_s"])
     viol, doubt_s = _any((h + eh_s) < -tol), _any((h - eh_s) < -tol)
     doubt_t = _any((lb - eh_e) < -tol)
     probes = [_probe(g["zero"], v) for v in (h, margin, u_raw, lb)]
@@ -170,17 +180,20 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol:
     ft = ca.logic_and(live, ca.logic_and(ca.logic_not(pend), ca.logic_and(plain, valid_t)))
     decided = ca.logic_and(live, kind > 0)
     new = dict(g)
-    new.update(eh_c=eh_c, en_c=en_c, cdh=cdh, cen=cen, maybe=maybe)
+    new.update({n: v for n, v in sums.items() if n in lay.parts}, maybe=maybe)
     if k == K - 1:
         new["i"] = ca.if_else(i == B - K, 0, i + K)
     new["pend"] = ca.logic_and(ft, doubt_t)
     new["s_prev"] = s
     new.update(_folded(g, rows, o, fs, ft, eh_s, eh_e, lo, hi))
-    q = k % LANES
-    if nh:
-        lh[q] = lh[q] + ca.if_else(ft, dh, 0)
-    le[q] = le[q] + ca.if_else(ft, err, 0)
-    new["lh"], new["le"] = ca.vertcat(*lh) if nh else g["lh"], ca.vertcat(*le)
+    if rows.doubling:  # the margin's error at the last sample judged
+        new["en_c"] = ca.if_else(fs, err, g["en_c"])
+    else:
+        lh, le, q = sums["lh"], sums["le"], k % LANES
+        if nh:
+            lh[q] = lh[q] + ca.if_else(ft, dh, 0)
+        le[q] = le[q] + ca.if_else(ft, err, 0)
+        new["lh"], new["le"] = ca.vertcat(*lh) if nh else g["lh"], ca.vertcat(*le)
     new["nsteps"] = g["nsteps"] + ft
     new["done"] = ca.logic_or(g["done"], decided)
     why = [any_bad, *parts, end_bad]
@@ -198,8 +211,10 @@ function; larger ones call the body and the judge's steps from an MX graph (each
 class JudgedChunk:
     """K compiled judged steps of one primitive: run(Z) advances the columns of [z; J] (nz + J rows)."""
 
-    def __init__(self, prim: CompiledPrimitive, dt: float, fn: ca.Function, nz: int, lay: Layout, K: int):
+    def __init__(self, prim: CompiledPrimitive, dt: float, fn: ca.Function, nz: int, lay: Layout, K: int,
+                 doubling: bool = False):
         self.prim, self.dt, self.fn, self.nz, self.lay, self.K = prim, dt, fn, nz, lay, K
+        self.doubling = doubling
         self._buffers: dict = {}
 
     def bound(self, n: int) -> tuple:
@@ -230,17 +245,17 @@ class JudgedChunk:
 
 
 def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: float, cm: float,
-                       jit: bool = True, flags: tuple[str, ...] = ("-O1",)) -> JudgedChunk:
+                       jit: bool = True, flags: tuple[str, ...] = ("-O1",), doubling: bool = False) -> JudgedChunk:
     """Compile K judged steps (error 'local', blocks of B steps, tolerance tol, margin gain cm);
     remembered on the primitive. K must divide B and be a multiple of 8 (see judge_step)."""
     if B % K or K % LANES:
         raise ValueError(f"a judged chunk of {K} steps needs blocks of a multiple of {K} and K a multiple of {LANES}")
-    key = ("judged", dt, K, B, tol, cm, jit, tuple(flags))
+    key = ("judged", dt, K, B, tol, cm, jit, tuple(flags), doubling)
     if key not in prim.cache:
-        body, nz = step_body(prim, dt)
+        body, nz = step_body(prim, dt, doubling=doubling)
         lay = Layout(len(prim.h_names), prim.system.nu, nz)
         n_out = body.size1_out(1)
-        rows = Rows(lay.nh, lay.nu)
+        rows = Rows(lay.nh, lay.nu, doubling=doubling)
         steps = {}
         inline = body.is_a("SXFunction") and body.n_nodes() * K <= INLINE_CHUNK
         Z = (ca.SX.sym if inline else ca.MX.sym)("Z", nz + lay.size)
@@ -251,10 +266,10 @@ def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: 
                 steps[kind] = judge_step(lay, rows, n_out, K, k, B, tol, cm, prim.system.u_lo, prim.system.u_hi)
             zn, o = body(z)
             z, J = zn, steps[kind](J, o, zn)
-        name = "judged_" + hashlib.sha1(f"{prim.name}{dt}{K}{B}{tol}{cm}".encode()).hexdigest()[:10]
+        name = "judged_" + hashlib.sha1(f"{prim.name}{dt}{K}{B}{tol}{cm}{doubling}".encode()).hexdigest()[:10]
         fn = ca.Function(name, [Z], [ca.vertcat(z, J)])
         fn = cse_sx(fn) if inline else fn
-        prim.cache[key] = JudgedChunk(prim, dt, compile_cached(fn, flags) if jit else fn, nz, lay, K)
+        prim.cache[key] = JudgedChunk(prim, dt, compile_cached(fn, flags) if jit else fn, nz, lay, K, doubling)
     return prim.cache[key]
 
 
@@ -270,7 +285,7 @@ def decided_evidence(ch: JudgedChunk, J: np.ndarray, t0s, cm: float) -> list:
     b = Block(get["hk"][:, :, None], get["hk"][:, :, None], get["hk"][:, :, None], get["entry"].T.copy(), one,
               get["t_stop"].T.copy(), one, np.zeros((lay.nu, m, 1)), np.zeros((lay.nu, m, 1)), np.ones((m, 1), bool))
     c = Carry(lay.nh, lay.nu, m)
-    c.en = get["en_c"][0] + lane_sum(get["le"].T)
+    c.en = get["en_c"][0] if ch.doubling else get["en_c"][0] + lane_sum(get["le"].T)
     c.min_h, c.low, c.count = get["min_h"], get["low"], get["count"].astype(int)
     c.best_m, c.peak, c.peak_raw = get["best_m"][0], get["peak"], get["peak_raw"]
     c.sat, c.nsteps = get["sat"][0] > 0.5, get["nsteps"][0].astype(int)

@@ -51,6 +51,7 @@ def _same(a, b) -> None:
 @pytest.mark.parametrize("overrides", [
     {"refinements": 0},  # the project's steps, 64-step blocks
     {"refinements": 0, "dt": 0.05, "chunk": 16},  # coarse steps: doubts, pending steps across blocks
+    {"refinements": 0, "dt": 0.05, "error": "doubling"},  # absolute estimates from a companion rollout
 ])
 def test_the_judge_in_the_chunk_agrees_with_the_python_judge_bit_for_bit(pendulum, overrides):
     spec, prims = pendulum
@@ -65,6 +66,7 @@ def test_the_judge_in_the_chunk_agrees_with_the_python_judge_bit_for_bit(pendulu
     assert any(e.steps == 0 for e in ours)  # decided at the first sample, inside a chunk
     if overrides.get("dt") == 0.05:
         assert any(e.status == "inconclusive" for e in ours)
+        assert any(e.entry_error for e in ours)
 
 
 def test_a_rollout_is_judged_alone_whatever_its_batch(pendulum):
