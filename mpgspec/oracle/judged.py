@@ -98,16 +98,18 @@ def _and(a, b):
 
 def _folded(g: dict, rows: Rows, o, fs, ft, eh_s, eh_e, lo, hi) -> dict:
     """The least values, counts, best margin, peaks and saturation after folding in the sample
-    (when fs) and the step (when ft) of the outputs o, as verdict._fold does."""
+    (when fs) and the step (when ft) of the outputs o, as verdict._fold does. A value left out is
+    pushed to +-inf by subtracting a masked infinity, never selected with if_else: CasADi's if_else
+    adds a zero, which would turn a -0.0 into 0.0 (fmin and fmax ignore the NaN of inf - inf)."""
     h, lb, margin, u_raw, u = o[rows.h], o[rows.lb], o[rows.margin], o[rows.u_raw], o[rows.u]
     low_s, low_t = h - eh_s, lb - eh_e
-    low = ca.if_else(fs, ca.fmin(g["low"], low_s), g["low"])
+    off_s, off_t = ca.if_else(fs, 0, -ca.inf), ca.if_else(ft, 0, -ca.inf)
     au, aur = ca.fabs(u), ca.fabs(u_raw)
     out_lo = ca.logic_or(u_raw < ca.DM(lo), u_raw > ca.DM(hi)) if u.shape[0] else ca.DM.zeros(0)
-    return {"min_h": ca.if_else(fs, ca.fmin(g["min_h"], h), g["min_h"]),
-            "low": ca.if_else(ft, ca.fmin(low, low_t), low),
+    return {"min_h": ca.fmin(g["min_h"], h - off_s),
+            "low": ca.fmin(ca.fmin(g["low"], low_s - off_s), low_t - off_t),
             "count": g["count"] + ca.logic_and(fs, h < INACTIVE / 2) + ca.logic_and(ft, low_t < INACTIVE / 2),
-            "best_m": ca.if_else(ca.logic_and(fs, margin >= -ca.inf), ca.fmax(g["best_m"], margin), g["best_m"]),
+            "best_m": ca.fmax(g["best_m"], margin - ca.if_else(fs, 0, ca.inf)),
             "peak": ca.fmax(g["peak"], ca.if_else(ca.logic_and(fs, au < ca.inf), au, 0)),  # peaks are >= 0
             "peak_raw": ca.fmax(g["peak_raw"], ca.if_else(ca.logic_and(fs, aur < ca.inf), aur, 0)),
             "sat": ca.logic_or(g["sat"], ca.logic_and(fs, _any(out_lo)))}

@@ -117,6 +117,7 @@ def _synthetic(n: int, steps: int, doubling: bool, rng) -> np.ndarray:
     if doubling:
         O[rows.ds] = rng.uniform(0, 4e-3, (2, n, steps))
     O[rows.margin, :3, 0], O[rows.h.start, :3, 0] = 0.005, -0.5  # inside E and outside C at switch-in: left C
+    O[rows.margin, 3:9, 0], O[rows.h.start, 6:9, 0] = -0.0, -0.0  # signed zeros must come out as they went in
     for r in rng.choice(n, n // 6, replace=False):  # a NaN or an inf in some row at some step
         O[rng.integers(O.shape[0]), r, rng.integers(steps)] = rng.choice([np.nan, np.inf, -np.inf])
     return O
