@@ -79,9 +79,25 @@ class RK4Runner:
         return ev
 
     def _first_map(self, n: int):
-        """build_first mapped over n start points (remembered per n)."""
+        """build_first mapped over n start points, called through a FunctionBuffer bound to numpy
+        arrays (remembered per n): z (columns) -> (h, RoA margin, u_raw, u) as arrays."""
         if n not in self._maps:
-            self._maps[n] = build_first(self.prim, self.dt, self.s.jit).map(n, "serial")
+            F = build_first(self.prim, self.dt, self.s.jit).map(n, "serial")
+            buf, ev = F.buffer()
+            zin, outs = np.zeros(F.nnz_in(0)), [np.zeros(F.nnz_out(i)) for i in range(F.n_out())]
+            buf.set_arg(0, memoryview(zin))
+            for i, o in enumerate(outs):
+                buf.set_res(i, memoryview(o))
+
+            shapes = [(F.size1_out(i), F.size2_out(i)) for i in range(F.n_out())]
+
+            def call(Z, buf=buf, ev=ev, zin=zin, outs=outs, shapes=shapes):
+                zin.reshape(Z.shape, order="F")[:] = Z
+                ev()
+                if buf.ret():
+                    raise RuntimeError("the first-sample evaluation failed")
+                return [o.reshape(sh, order="F").copy() for o, sh in zip(outs, shapes)]
+            self._maps[n] = call
         return self._maps[n]
 
     def _first(self, Zall: np.ndarray, T: np.ndarray, t0s: np.ndarray, results: list) -> np.ndarray:
@@ -93,7 +109,7 @@ class RK4Runner:
         n = Zall.shape[1]
         try:
             nz = 2 * self.prim.system.nx + 2
-            H, M, UR, U = (np.asarray(v) for v in self._first_map(n)(Zall[:nz]))
+            H, M, UR, U = self._first_map(n)(Zall[:nz])
         except Exception:  # judged with the chunks instead
             return np.arange(n)
         nh, nu = len(self.prim.h_names), self.prim.system.nu
@@ -126,12 +142,13 @@ class RK4Runner:
         queue = np.vstack([Zstart[:, order], ch.lay.start(T[order])])
         done_row = ch.nz + ch.lay.slice("done").start
         cap, n, qpos = min(self.s.batch, SIZES[-1]), order.size, 0
-        Z, ids = np.zeros((queue.shape[0], 0)), np.zeros(0, int)
-        decided: list[tuple[np.ndarray, np.ndarray]] = []
+        Z, ids = queue[:, :0], np.zeros(0, int)
+        rows: list[np.ndarray] = []
+        Js: list[np.ndarray] = []
         while qpos < n or ids.size:
             if qpos < n and ids.size < cap:
                 take = min(n, qpos + cap - ids.size)
-                Z, ids = np.concatenate([Z, queue[:, qpos:take]], axis=1), np.concatenate([ids, np.arange(qpos, take)])
+                Z, ids = np.hstack([Z, queue[:, qpos:take]]), np.concatenate([ids, np.arange(qpos, take)])
                 qpos = take
             try:
                 Z = ch.run(Z)
@@ -144,11 +161,13 @@ class RK4Runner:
                 Z, ids = Z[:, ok], ids[ok]
             done = Z[done_row] > 0.5
             if done.any():
-                decided.append((order[ids[done]], Z[ch.nz:, done]))
-                Z, ids = Z[:, ~done], ids[~done]
-        if decided:  # evidence of every decided rollout in one go
-            rows = np.concatenate([r for r, _ in decided])
-            for i, ev in zip(rows, decided_evidence(ch, np.hstack([J for _, J in decided]), t0s[rows], self.c_margin)):
+                keep = np.flatnonzero(~done)
+                rows.append(ids[done])
+                Js.append(Z[ch.nz:, done])
+                Z, ids = Z[:, keep], ids[keep]
+        if rows:  # evidence of every decided rollout in one go
+            rows_ = order[np.concatenate(rows)]
+            for i, ev in zip(rows_, decided_evidence(ch, np.hstack(Js), t0s[rows_], self.c_margin)):
                 results[i] = ev
         return results  # type: ignore[return-value]
 

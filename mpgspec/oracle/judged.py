@@ -234,7 +234,8 @@ class JudgedChunk:
         return self._buffers[n]
 
     def run(self, Z: np.ndarray) -> np.ndarray:
-        """[z; J] of every column after K steps (a new array); a failed evaluation raises."""
+        """[z; J] of every column after K steps, as a view of the output buffer for this many
+        columns (valid until the next call with as many); a failed evaluation raises."""
         n = Z.shape[1]
         buf, ev, zin, zf = self._bound(n)
         zin.reshape(Z.shape[0], n, order="F")[:] = Z
@@ -243,7 +244,7 @@ class JudgedChunk:
             zf[:] = np.nan
             raise RuntimeError(f"the compiled rollout failed (status {buf.ret()}): an evaluation inside it "
                                "(e.g. an optimisation-based control law) returned an error")
-        return zf.reshape(Z.shape[0], n, order="F").copy()
+        return zf.reshape(Z.shape[0], n, order="F")
 
 
 def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: float, cm: float,

@@ -269,12 +269,11 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
         ms = np.fmin.reduce(min_h, axis=0) if len(names) else np.full(len(cols), np.inf)
         lw = np.fmin.reduce(low, axis=0) if len(names) else np.full(len(cols), np.inf)
         worst = np.argmin(low, axis=0).tolist() if len(names) else []
-    fin = lambda v: v if v == v and abs(v) < INACTIVE / 2 else None  # noqa: E731
     clean = bool((np.abs(min_h) < INACTIVE / 2).all() and (np.abs(low) < INACTIVE / 2).all())
-    min_l, low_l = min_h.T.tolist(), low.T.tolist()
+    min_l, low_l = (min_h.T.tolist(), low.T.tolist()) if clean else (_or_none(min_h).T.tolist(), _or_none(low).T.tolist())
     windows = any(w is not None for w in prim.windows)
     check = (~count.all(axis=0) | windows).tolist() if len(names) else [False] * len(cols)
-    ms_l, lw_l = ms.tolist(), lw.tolist()
+    ms_l, lw_l = _or_none(ms).tolist(), _or_none(lw).tolist()
     steps, best = c.nsteps[cols].tolist(), c.best_m[cols].tolist()
     peak, peak_raw, sat = c.peak[:, cols].T.tolist(), c.peak_raw[:, cols].T.tolist(), c.sat[cols].tolist()
     out = []
@@ -294,13 +293,9 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
         else:
             ev = OracleEvidence(0, Reason.HORIZON, tn, status=UNSAFE)
         ev.steps = steps[n]
-        if clean:
-            ev.min_margins, ev.lower_bounds = dict(zip(names, min_l[n])), dict(zip(names, low_l[n]))
-        else:
-            ev.min_margins = {nm: fin(v) for nm, v in zip(names, min_l[n])}
-            ev.lower_bounds = {nm: fin(v) for nm, v in zip(names, low_l[n])}
+        ev.min_margins, ev.lower_bounds = dict(zip(names, min_l[n])), dict(zip(names, low_l[n]))
         if names:
-            m0, l0 = fin(ms_l[n]), fin(lw_l[n])
+            m0, l0 = ms_l[n], lw_l[n]
             ev.margin = m0
             ev.error_bound = m0 - l0 if m0 is not None and l0 is not None else None
             if kind == "doubt" and ev.error_bound is not None and ev.error_bound > 1e3 * max(1.0, abs(m0)):
@@ -316,6 +311,12 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
             ev.checked = True
         out.append(ev)
     return out
+
+
+def _or_none(a: np.ndarray) -> np.ndarray:
+    """a as objects, None where a value is NaN, infinite or INACTIVE (a function never active)."""
+    with np.errstate(invalid="ignore"):
+        return np.where((a == a) & (np.abs(a) < INACTIVE / 2), a, None)
 
 
 def evidence(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, j: int, t0: float, c_margin: float,
