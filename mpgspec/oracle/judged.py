@@ -4,9 +4,10 @@ A judged chunk advances the augmented state [z; J] step by step, where z is the 
 integrator.step_body) and J the judge's: the running error sums, the least values, the peaks, the
 decision flag and what the evidence needs from the deciding sample. Every step applies the rules
 of oracle/verdict.py to that step's outputs, in the same order and with the same floating-point
-operations, so the verdicts and numbers are those of the judge on the full sample array; a decided
-rollout's J is frozen. Python then reads the decision flags and the J of decided slots only, and
-a rollout may enter a slot at any chunk boundary.
+operations, so the verdicts and numbers are those of the judge on the full sample array; once a
+rollout is decided, its decision and what its evidence reads stay as they were. Python then reads
+the decision flags and the J of decided slots only, and a rollout may enter a slot at any chunk
+boundary.
 
 With the embedded ('local') error estimates, the judge's error sums run in blocks of B steps from
 the rollout's start (B = settings.chunk): in a block, the estimate at a sample is the block's carry
@@ -17,6 +18,7 @@ and the judge keeps no sums.
 from __future__ import annotations
 
 import hashlib
+
 import casadi as ca
 import numpy as np
 
@@ -35,9 +37,11 @@ lower bounds, and the state after the block's last step."""
 
 
 class Layout:
-    """Where each part of J sits: the SCALARS, then hk (h at the deciding sample), eh_c (the block's
-    carry of h's error), cdh (its running sum in the block), lh (its lanes, rotated: see _rotate),
-    min_h, low, count, le (the lanes of the error norms), peak, peak_raw. nz: the rollout's z."""
+    """Where each part of J sits: the SCALARS (T the horizon, zero a constant 0 for _probe, i the
+    chunk's first position in its block, ...), then hk (h at the deciding sample), eh_c (the block's
+    carry of h's error), cdh (its running sum in the block), lh (its eight lanes, lane q at
+    [q nh, (q + 1) nh)), min_h, low, count, le (the lanes of the error norms), peak, peak_raw.
+    nz: the size of the rollout's z."""
 
     def __init__(self, nh: int, nu: int, nz: int = 0):
         self.nh, self.nu, self.nz = nh, nu, nz
