@@ -5,8 +5,8 @@ the safe set or the contact mode switches. Each step reports the safety function
 their rates along the flow and an integration error estimate (embedded third-order per step, or
 step doubling: see mpgspec.oracle.integrator), from which the judge
 (mpgspec.oracle.verdict) bounds what can hide between samples and in the integration error.
-With the embedded estimates the judge runs inside the compiled chunk (mpgspec.oracle.judged): the
-running error sums, least values and the decision ride in each rollout's state, so after a chunk
+The judge runs inside the compiled chunk (mpgspec.oracle.judged): the running error sums, least
+values and the decision ride in each rollout's state, so after a chunk
 of JUDGED_STEPS steps Python reads the decision flags, keeps the state of the decided rollouts
 for their evidence and refills their slots from the queue (RK4Runner(judged=False) hands every
 step's outputs to the Python judge instead, as the oracle ran before). Inconclusive rollouts are
@@ -125,8 +125,8 @@ class RK4Runner:
         return np.flatnonzero(~np.isin(np.arange(n), decided))
 
     def _run(self, x0s: np.ndarray, t0s: np.ndarray, horizons: np.ndarray) -> list[OracleEvidence]:
-        """Rollouts in slots of one batch: judged inside the compiled chunk, or (step doubling) by
-        the Python judge, vectorised over slots."""
+        """Rollouts in slots of one batch: judged inside the compiled chunk, or (judged=False) by the
+        Python judge, vectorised over slots."""
         if self.judged:
             return self._run_judged(x0s, t0s, np.asarray(horizons, float))
         return self._run_python(x0s, t0s, horizons)
