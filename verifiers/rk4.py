@@ -6,11 +6,11 @@ their rates along the flow and an integration error estimate (embedded third-ord
 step doubling: see mpgspec.oracle.integrator), from which the judge
 (mpgspec.oracle.verdict) bounds what can hide between samples and in the integration error.
 The judge runs inside the compiled chunk (mpgspec.oracle.judged): the running error sums, least
-values and the decision ride in each rollout's state, so after a chunk
-of JUDGED_STEPS steps Python reads the decision flags, keeps the state of the decided rollouts
-for their evidence and refills their slots from the queue (RK4Runner(judged=False) hands every
-step's outputs to the Python judge instead, as the oracle ran before). Inconclusive rollouts are
-run again with the step halved, up to `settings.refinements` times.
+values and the decision ride in each rollout's state, so after a chunk of JUDGED_STEPS steps
+Python reads the decision flags, keeps the state of the decided rollouts for their evidence and
+refills their slots from the queue (RK4Runner(judged=False) hands every step's outputs to the
+Python judge instead, as the oracle ran before). Inconclusive rollouts are run again with the
+step halved, up to `settings.refinements` times.
 """
 from __future__ import annotations
 
