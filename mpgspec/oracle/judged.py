@@ -136,22 +136,27 @@ def _error_sums(g: dict, nh: int, dh, err, fob) -> dict:
             "le": [_sel(fold, 0, r) for r in le]}
 
 
-def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol: float, cm: float,
+def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, first: bool, B: int, tol: float, cm: float,
                lo, hi) -> ca.Function:
-    """(J, out, zend) -> J after judging step k of a chunk of K, whose outputs are `out` (Rows order)
-    and whose end state is zend; see verdict.judge for the rules this applies one step at a time.
+    """(J, out, zend, last_k) -> J after judging a step of a chunk of K (its first when `first`; its
+    last when last_k is 1), whose outputs are `out` (Rows order) and whose end state is zend; see
+    verdict.judge for the rules this applies one step at a time.
 
     Chunks start at block positions i that are multiples of K (K divides B, 8 divides K), so a
-    block starts only at a chunk's first step (when i = 0), ends only at its last (i = B - K), and
-    step k adds to lane k % 8. A decided rollout folds nothing more and keeps its decision (its
-    running sums may run on; en_c + lane_sum of its lanes, which its evidence reads, stays)."""
+    block starts only at a chunk's first step (when i = 0) and ends only at its last (i = B - K).
+    The lanes rotate by one every step (R[0] is the current one: no arithmetic), so they are in
+    lane order at every chunk's start and end. Two functions serve every step of a chunk, so the
+    C of a large judge is generated twice, not K times. A decided rollout folds nothing more and
+    keeps its decision (its running sums may run on; en_c + lane_sum of its lanes, which its
+    evidence reads, stays)."""
     J, o, zend = ca.SX.sym("J", lay.size), ca.SX.sym("o", n_out), ca.SX.sym("zend", lay.nz)
+    last_k = ca.SX.sym("last_k")
     g = {n: J[lay.slice(n)] for n in lay.parts}
     h, lb, dh = o[rows.h], o[rows.lb], o[rows.dh]
     margin, err, s, dt, u_raw, u = o[rows.margin], o[rows.err], o[rows.s], o[rows.dt], o[rows.u_raw], o[rows.u]
     nh, i, live = lay.nh, g["i"], g["done"] < 0.5
-    fob = i == 0 if k == 0 else False
-    last = i == B - K if k == K - 1 else False
+    fob = i == 0 if first else False
+    last = False if first else ca.logic_and(last_k, i == B - K)
     sums = _error_sums(g, nh, dh, err, fob) if not rows.doubling else {}
     # step doubling: the rows hold absolute estimates (h's at the sample and at the step's end, the margin's)
     eh_s, eh_e, en_s = (o[rows.ds], dh, err) if rows.doubling else (sums["eh_s"], sums["eh_e"], sums["en_s"])
@@ -187,26 +192,25 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, k: int, B: int, tol:
     decided = ca.logic_and(live, kind > 0)
     new = dict(g)
     new.update({n: v for n, v in sums.items() if n in lay.parts}, maybe=maybe)
-    if k == K - 1:
-        new["i"] = ca.if_else(i == B - K, 0, i + K)
+    if not first:
+        new["i"] = ca.if_else(last_k, ca.if_else(i == B - K, 0, i + K), i)
     new["pend"] = ca.logic_and(ft, doubt_t)
     new["s_prev"] = s
     new.update(_folded(g, rows, o, fs, ft, eh_s, eh_e, lo, hi))
     if rows.doubling:  # the margin's error at the last sample judged
         new["en_c"] = ca.if_else(fs, err, g["en_c"])
     else:
-        lh, le, q = sums["lh"], sums["le"], k % LANES
-        if nh:
-            lh[q] = lh[q] + ca.if_else(ft, dh, 0)
-        le[q] = le[q] + ca.if_else(ft, err, 0)
-        new["lh"], new["le"] = ca.vertcat(*lh) if nh else g["lh"], ca.vertcat(*le)
+        lh, le = sums["lh"], sums["le"]
+        new["lh"] = ca.vertcat(*lh[1:], lh[0] + ca.if_else(ft, dh, 0)) if nh else g["lh"]
+        new["le"] = ca.vertcat(*le[1:], le[0] + ca.if_else(ft, err, 0))
     new["nsteps"] = g["nsteps"] + ft
     new["done"] = ca.logic_or(g["done"], decided)
     why = [any_bad, *parts, end_bad]
     for n, v in (("kind", kind), ("t_stop", ca.if_else(ca.logic_and(p_in, ca.logic_not(endbad)), g["s_prev"], s)),
                  ("entry", margin), ("hk", h), ("why", sum(p * 2 ** b for b, p in enumerate(why) if p is not False))):
         new[n] = g[n] + ca.if_else(decided, v, 0)  # what the deciding sample left (0 until then)
-    return ca.Function(f"judge_step{k}", [J, o, zend], [ca.vertcat(*[new[n] for n in lay.parts])])
+    return ca.Function("judge_first" if first else "judge_step", [J, o, zend, last_k],
+                       [ca.vertcat(*[new[n] for n in lay.parts])])
 
 
 INLINE_CHUNK = 20000
@@ -263,16 +267,14 @@ def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: 
         lay = Layout(len(prim.h_names), prim.system.nu, nz)
         n_out = body.size1_out(1)
         rows = Rows(lay.nh, lay.nu, doubling=doubling)
-        steps = {}
+        steps = [judge_step(lay, rows, n_out, K, first, B, tol, cm, prim.system.u_lo, prim.system.u_hi)
+                 for first in (True, False)]
         inline = body.is_a("SXFunction") and body.n_nodes() * K <= INLINE_CHUNK
         Z = (ca.SX.sym if inline else ca.MX.sym)("Z", nz + lay.size)
         z, J = Z[:nz], Z[nz:]
         for k in range(K):
-            kind = k if k in (0, K - 1) else ("inner", k % LANES)  # inner steps differ by their lane only
-            if kind not in steps:
-                steps[kind] = judge_step(lay, rows, n_out, K, k, B, tol, cm, prim.system.u_lo, prim.system.u_hi)
             zn, o = body(z)
-            z, J = zn, steps[kind](J, o, zn)
+            z, J = zn, steps[k > 0](J, o, zn, float(k == K - 1))
         name = "judged_" + hashlib.sha1(f"{prim.name}{dt}{K}{B}{tol}{cm}{doubling}".encode()).hexdigest()[:10]
         fn = ca.Function(name, [Z], [ca.vertcat(z, J)])
         fn = cse_sx(fn) if inline else fn

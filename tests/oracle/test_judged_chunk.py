@@ -146,11 +146,11 @@ def _compiled_judge(O, T, K, B, tol, cm, lo, hi, prim, doubling):
     """The judged chunk's steps (judge_step, K per chunk) over the same outputs; evidence from J."""
     rows, (n_out, n, steps) = Rows(2, 1, doubling=doubling), O.shape
     lay = Layout(2, 1, 1)
-    fns = [judge_step(lay, rows, n_out, K, k, B, tol, cm, lo, hi) for k in range(K)]
+    fns = [judge_step(lay, rows, n_out, K, first, B, tol, cm, lo, hi) for first in (True, False)]
     J = lay.start(T)
     for j in range(steps):
-        zend = np.zeros((1, n))  # the end state is finite
-        J = np.hstack([np.array(fns[j % K](J[:, i], O[:, i, j], zend[:, i])) for i in range(n)])
+        zend, k = np.zeros((1, n)), j % K  # the end state is finite
+        J = np.hstack([np.array(fns[k > 0](J[:, i], O[:, i, j], zend[:, i], float(k == K - 1))) for i in range(n)])
     ch = JudgedChunk(prim, 0.01, None, 1, lay, K, doubling)
     assert (J[lay.slice("done")] > 0.5).all()
     return decided_evidence(ch, J, np.zeros(n), cm)
