@@ -9,7 +9,10 @@
    the full build.
 3. Compute floor of the rk4 oracle on the pendulum's Swing(2.6) target (Algorithm 1's start
    points): the steps each rollout needs to its decision, times the compiled cost of one step
-   (full 256-wide chunks, zero-copy), against the oracle's own time (accuracy low: no refinement).
+   (full 256-wide chunks, zero-copy), against the oracle's own time (accuracy low: no refinement),
+   with the judge inside the compiled chunk (the default) and, in the same rounds, in Python on
+   every step's outputs (RK4Runner(judged=False), as the oracle ran before); both give the same
+   evidence, which is asserted.
 
 Prints a markdown table; `--write` puts it into bench/RESULTS.md under "## Executors and cache".
 """
@@ -38,6 +41,7 @@ from mpgspec.oracle.cache import CachedExecutor, ResultStore  # noqa: E402
 from mpgspec.oracle.executors import DaskExecutor, InProcess, ProcessPool  # noqa: E402
 from mpgspec.oracle.integrator import build_chunk, initial_state  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402
+from verifiers.rk4 import RK4Runner  # noqa: E402
 
 
 def log(*a):
@@ -106,18 +110,65 @@ def floor(repeats: int) -> dict:
     x0s, t0s, _ = _start_points(prims, gA, gB, "Swing(2.6)")
     prim = prims["Swing(2.6)"]
     oracle = SafetyOracle(prim, settings)
+    python = SafetyOracle(prim, settings)
+    python.runner = RK4Runner(prim, settings, judged=False)  # the judge in Python, on every step's outputs
     ev = oracle.evaluate(x0s, t0s)
+    assert [e.to_dict() for e in ev] == [e.to_dict() for e in python.evaluate(x0s, t0s)]
     needed = int(sum(e.steps + 1 for e in ev))  # samples judged: steps taken plus the deciding one
     at_zero = sum(e.steps == 0 for e in ev)
     ch = build_chunk(prim, settings.dt, settings.chunk, settings.jit, settings.jit_flags)
     Z = np.stack([initial_state(prim, x0s[i % len(x0s)], t0s[i % len(x0s)]) for i in range(256)], axis=1)
     ev_fn, zin, _zf, _out = ch.bound(256)
     zin.reshape(Z.shape[0], 256, order="F")[:] = Z
-    t = rounds({"oracle": lambda: oracle.evaluate(x0s, t0s), "chunk": ev_fn}, repeats)
-    per_step = statistics.median(t["chunk"]) / (256 * ch.K)
-    t_oracle = statistics.median(t["oracle"])
-    return {"points": len(t0s), "at_zero": int(at_zero), "steps_needed": needed, "ns_per_step": per_step * 1e9,
-            "floor_s": needed * per_step, "oracle_s": t_oracle, "ratio": t_oracle / (needed * per_step)}
+    fns = {"oracle": lambda: oracle.evaluate(x0s, t0s), "python": lambda: python.evaluate(x0s, t0s), "chunk": ev_fn}
+    out = {"points": len(t0s), "at_zero": int(at_zero), "steps_needed": needed}
+    for clock, t in (("", rounds(fns, repeats)), ("cpu_", cpu_rounds(fns, repeats))):
+        per_step = statistics.median(t["chunk"]) / (256 * ch.K)
+        t_oracle, t_python = statistics.median(t["oracle"]), statistics.median(t["python"])
+        out |= {clock + "ns_per_step": per_step * 1e9, clock + "floor_s": needed * per_step,
+                clock + "oracle_s": t_oracle, clock + "ratio": t_oracle / (needed * per_step),
+                clock + "python_s": t_python, clock + "ratio_python": t_python / (needed * per_step),
+                clock + "speedup": statistics.median(p / o for p, o in zip(t["python"], t["oracle"]))}
+    return out
+
+
+def cpu_rounds(fns: dict, repeats: int) -> dict[str, list[float]]:
+    """As common.rounds, in this process's CPU time: on a machine other jobs share, the time spent
+    waiting for a core is left out (the calls run on one thread)."""
+    out = {k: [] for k in fns}
+    for _ in range(repeats):
+        for k, fn in fns.items():
+            t = time.process_time()
+            fn()
+            out[k].append(time.process_time() - t)
+    return out
+
+
+def floor_rows(fl: dict) -> list[str]:
+    return [f"| **oracle time / compute floor** (target <= 2), judge in the compiled chunk | **{fl['ratio']:.2f}** "
+            f"({fl['oracle_s'] * 1e3:.1f} ms); in CPU time {fl['cpu_ratio']:.2f} ({fl['cpu_oracle_s'] * 1e3:.1f} ms "
+            f"/ {fl['cpu_floor_s'] * 1e3:.1f} ms) |",
+            f"| the same oracle with the judge in Python on every step's outputs (as before) | {fl['ratio_python']:.2f} "
+            f"({fl['python_s'] * 1e3:.1f} ms); in CPU time {fl['cpu_ratio_python']:.2f}; the judge in the chunk "
+            f"**{fl['speedup']:.2f}x** faster ({fl['cpu_speedup']:.2f}x in CPU time), same evidence |"]
+
+
+def write_floor(fl: dict) -> None:
+    """Replace the floor's rows of the section written by a full run (--only floor --write)."""
+    res = ROOT / "bench" / "RESULTS.md"
+    lines = res.read_text().splitlines()
+    keep = [ln for ln in lines if not ln.startswith(("| **oracle time / compute floor**", "| the same oracle with the judge",
+                                                      "| steps needed to the verdicts", "| rk4 oracle on Swing(2.6)"))]
+    at = max(i for i, ln in enumerate(keep) if ln.startswith("| incremental:")) + 1
+    rows = [f"| rk4 oracle on Swing(2.6): start points, decided at their first sample | {fl['points']}, {fl['at_zero']} |",
+            f"| steps needed to the verdicts x compiled cost per step (floor) | {fl['steps_needed']:,} x "
+            f"{fl['ns_per_step']:.0f} ns = {fl['floor_s'] * 1e3:.1f} ms |", *floor_rows(fl)]
+    note = (f"Floor rows: {time.strftime('%Y-%m-%d %H:%M')}, `python bench/bench_executors.py --only floor` "
+            f"(load average {' '.join(f'{v:.2f}' for v in __import__('os').getloadavg())}).")
+    keep[at:at] = rows
+    keep.insert(at + len(rows), "")
+    keep.insert(at + len(rows) + 1, note)
+    res.write_text("\n".join(keep) + "\n")
 
 
 def table(b_p, b_v, b_a, inc, fl, info) -> str:
@@ -137,7 +188,7 @@ def table(b_p, b_v, b_a, inc, fl, info) -> str:
         f"| rk4 oracle on Swing(2.6): start points, decided at their first sample | {fl['points']}, {fl['at_zero']} |",
         f"| steps needed to the verdicts x compiled cost per step (floor) | {fl['steps_needed']:,} x "
         f"{fl['ns_per_step']:.0f} ns = {fl['floor_s'] * 1e3:.1f} ms |",
-        f"| **oracle time / compute floor** (target <= 2) | **{fl['ratio']:.2f}** ({fl['oracle_s'] * 1e3:.1f} ms) |",
+        *floor_rows(fl),
     ]
     head = (f"{time.strftime('%Y-%m-%d %H:%M')}; {info['nproc']} CPU ({info['cpu']}), Python {info['python']}; "
             f"load average {' '.join(f'{v:.2f}' for v in __import__('os').getloadavg())}; "
@@ -149,7 +200,14 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--write", action="store_true", help="update bench/RESULTS.md")
+    ap.add_argument("--only", choices=("floor",), help="only the compute floor (with --write: its rows only)")
     a = ap.parse_args(argv)
+    if a.only == "floor":
+        fl = floor(max(5, a.repeats))
+        print("\n".join(floor_rows(fl)))
+        if a.write:
+            write_floor(fl)
+        return 0
     log("pendulum builds")
     b_p = builds(ROOT / "specs" / "pendulum" / "project.yaml", a.repeats)
     log("pendulum builds, very_high")

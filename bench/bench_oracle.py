@@ -65,6 +65,7 @@ from mpgspec.api import build, compile_project, settings_for  # noqa: E402
 from mpgspec.graph.build import grids  # noqa: E402
 from mpgspec.oracle.evidence import OracleEvidence, Reason  # noqa: E402
 from mpgspec.oracle.integrator import Chunk, build_chunk, initial_state  # noqa: E402
+from mpgspec.oracle.judged import JudgedChunk  # noqa: E402
 from mpgspec.oracle.oracle import SafetyOracle  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402
 
@@ -135,7 +136,8 @@ def stratified(points: dict, n: int, seed: int = 0) -> tuple[dict, list[tuple[st
 
 
 class ChunkRecorder:
-    """Records every Chunk.run call (chunk, input) while active; times spent inside the calls."""
+    """Records every Chunk.run and JudgedChunk.run call (chunk, input) while active; times spent
+    inside the calls."""
 
     def __init__(self):
         self.calls: list[tuple[Chunk, np.ndarray]] = []
@@ -143,21 +145,25 @@ class ChunkRecorder:
         self._orig = None
 
     def __enter__(self):
-        self._orig = orig = Chunk.run
+        self._orig = {cls: cls.run for cls in (Chunk, JudgedChunk)}
         rec = self
 
-        def run(chunk, Z):
-            t = time.perf_counter()
-            r = orig(chunk, Z)
-            rec.t_in += time.perf_counter() - t
-            rec.calls.append((chunk, np.array(Z, copy=True)))
-            return r
+        def recording(orig):
+            def run(chunk, Z):
+                t = time.perf_counter()
+                r = orig(chunk, Z)
+                rec.t_in += time.perf_counter() - t
+                rec.calls.append((chunk, np.array(Z, copy=True)))
+                return r
+            return run
 
-        Chunk.run = run
+        for cls, orig in self._orig.items():
+            cls.run = recording(orig)
         return self
 
     def __exit__(self, *exc):
-        Chunk.run = self._orig
+        for cls, orig in self._orig.items():
+            cls.run = orig
 
     @property
     def step_columns(self) -> int:
@@ -170,7 +176,7 @@ class RawChunk:
     once per batch size to numpy arrays, so a call is the compiled loop and nothing else (no
     numpy -> DM -> numpy conversion as in Chunk.run). Outputs are computed but not read."""
 
-    def __init__(self, ch: Chunk):
+    def __init__(self, ch: Chunk | JudgedChunk):
         self.ch, self.K, self.prim, self.dt = ch, ch.K, ch.prim, ch.dt
         self.nz = ch.fn.size1_in(0)
 

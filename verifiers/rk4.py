@@ -5,21 +5,30 @@ the safe set or the contact mode switches. Each step reports the safety function
 their rates along the flow and an integration error estimate (embedded third-order per step, or
 step doubling: see mpgspec.oracle.integrator), from which the judge
 (mpgspec.oracle.verdict) bounds what can hide between samples and in the integration error.
-After each chunk, decided rollouts are retired and their slots refilled from the queue.
-Inconclusive rollouts are run again with the step halved, up to `settings.refinements` times.
+The judge runs inside the compiled chunk (mpgspec.oracle.judged): the running error sums, least
+values and the decision ride in each rollout's state, so after a chunk of JUDGED_STEPS steps
+Python reads the decision flags, keeps the state of the decided rollouts for their evidence and
+refills their slots from the queue (RK4Runner(judged=False) hands every step's outputs to the
+Python judge instead, as the oracle ran before). Inconclusive rollouts are run again with the
+step halved, up to `settings.refinements` times.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from mpgspec.compile.primitive import CompiledPrimitive
 from mpgspec.oracle.backend import HYBRID
 from mpgspec.oracle.evidence import OracleEvidence, Reason
-from mpgspec.oracle.integrator import Chunk, build_chunk, build_first
+from mpgspec.oracle.integrator import Chunk, build_chunk, build_first, start_states
+from mpgspec.oracle.judged import LANES, JudgedChunk, build_judged_chunk, decided_evidence
 from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidences, judge
 from mpgspec.settings import OracleSettings
 
 SIZES = (1, 4, 16, 64, 256)
+JUDGED_STEPS = 16
+"""Steps per judged chunk call: a decided rollout's slot waits at most this long for a new start point."""
 
 
 def margin_gain(prim: CompiledPrimitive) -> float:
@@ -31,15 +40,26 @@ def margin_gain(prim: CompiledPrimitive) -> float:
 class RK4Runner:
     """Evaluates O_B(x0, t_B) for batches of start points of one primitive."""
 
-    def __init__(self, prim: CompiledPrimitive, settings: OracleSettings, dt: float | None = None):
+    def __init__(self, prim: CompiledPrimitive, settings: OracleSettings, dt: float | None = None,
+                 judged: bool | None = None):
         self.prim = prim
         self.s = settings
         self.dt = dt or settings.dt
-        self.chunk: Chunk = build_chunk(prim, self.dt, settings.chunk, settings.jit, settings.jit_flags,
-                                        error=settings.error)
         # step doubling estimates the margin's error directly; local estimates are state norms
         self.c_margin = 1.0 if settings.error == "doubling" else margin_gain(prim)
+        # the judge runs inside the compiled chunk (judged.py) unless asked not to or the judge's
+        # blocks (settings.chunk) are no multiple of a chunk of 8 or more steps
+        K = math.gcd(JUDGED_STEPS, settings.chunk)
+        self.judged = K % LANES == 0 if judged is None else judged
+        if self.judged:
+            self.chunk: Chunk | JudgedChunk = build_judged_chunk(
+                prim, self.dt, K, settings.chunk, settings.h_tolerance, self.c_margin, settings.jit,
+                settings.jit_flags, doubling=settings.error == "doubling")
+        else:
+            self.chunk = build_chunk(prim, self.dt, settings.chunk, settings.jit, settings.jit_flags,
+                                     error=settings.error)
         self._fine: RK4Runner | None = None
+        self._maps: dict = {}
 
     def evaluate(self, x0s: np.ndarray, t0s: np.ndarray, horizon: np.ndarray | float,
                  level: int = 0) -> list[OracleEvidence]:
@@ -51,12 +71,34 @@ class RK4Runner:
         if not idx or level >= self.s.refinements:
             return ev
         if self._fine is None:
-            self._fine = RK4Runner(self.prim, self.s, dt=self.dt / 2)
+            self._fine = RK4Runner(self.prim, self.s, dt=self.dt / 2, judged=self.judged)
         fine = self._fine.evaluate(x0s[idx], t0s[idx], T[idx], level + 1)
         for i, f in zip(idx, fine):
             f.refined = True
             ev[i] = f
         return ev
+
+    def _first_map(self, n: int):
+        """build_first mapped over n start points, called through a FunctionBuffer bound to numpy
+        arrays (remembered per n): z (columns) -> (h, RoA margin, u_raw, u) as arrays."""
+        if n not in self._maps:
+            F = build_first(self.prim, self.dt, self.s.jit).map(n, "serial")
+            buf, ev = F.buffer()
+            zin, outs = np.zeros(F.nnz_in(0)), [np.zeros(F.nnz_out(i)) for i in range(F.n_out())]
+            buf.set_arg(0, memoryview(zin))
+            for i, o in enumerate(outs):
+                buf.set_res(i, memoryview(o))
+
+            shapes = [(F.size1_out(i), F.size2_out(i)) for i in range(F.n_out())]
+
+            def call(Z, buf=buf, ev=ev, zin=zin, outs=outs, shapes=shapes):
+                zin.reshape(Z.shape, order="F")[:] = Z
+                ev()
+                if buf.ret():
+                    raise RuntimeError("the first-sample evaluation failed")
+                return [o.reshape(sh, order="F").copy() for o, sh in zip(outs, shapes)]
+            self._maps[n] = call
+        return self._maps[n]
 
     def _first(self, Zall: np.ndarray, T: np.ndarray, t0s: np.ndarray, results: list) -> np.ndarray:
         """Judge every start point's first sample in one vectorised call; returns those still open.
@@ -67,7 +109,7 @@ class RK4Runner:
         n = Zall.shape[1]
         try:
             nz = 2 * self.prim.system.nx + 2
-            H, M, UR, U = (np.asarray(v) for v in build_first(self.prim, self.dt, self.s.jit).map(n, "serial")(Zall[:nz]))
+            H, M, UR, U = self._first_map(n)(Zall[:nz])
         except Exception:  # judged with the chunks instead
             return np.arange(n)
         nh, nu = len(self.prim.h_names), self.prim.system.nu
@@ -83,6 +125,53 @@ class RK4Runner:
         return np.flatnonzero(~np.isin(np.arange(n), decided))
 
     def _run(self, x0s: np.ndarray, t0s: np.ndarray, horizons: np.ndarray) -> list[OracleEvidence]:
+        """Rollouts in slots of one batch: judged inside the compiled chunk, or (judged=False) by the
+        Python judge, vectorised over slots."""
+        if self.judged:
+            return self._run_judged(x0s, t0s, np.asarray(horizons, float))
+        return self._run_python(x0s, t0s, horizons)
+
+    def _run_judged(self, x0s: np.ndarray, t0s: np.ndarray, T: np.ndarray) -> list[OracleEvidence]:
+        """Slots of [z; J] advanced by short judged chunks; after each, the decided slots' J become
+        evidence and free slots take the next start points."""
+        ch: JudgedChunk = self.chunk  # type: ignore[assignment]
+        t0s = np.asarray(t0s, float)
+        results: list[OracleEvidence | None] = [None] * len(x0s)
+        Zstart = start_states(self.prim, x0s, t0s, self.s.error == "doubling")
+        order = self._first(Zstart, T, t0s, results)
+        queue = np.vstack([Zstart[:, order], ch.lay.start(T[order])])
+        done_row = ch.nz + ch.lay.slice("done").start
+        cap, n, qpos = min(self.s.batch, SIZES[-1]), order.size, 0
+        Z, ids = queue[:, :0], np.zeros(0, int)
+        rows: list[np.ndarray] = []
+        Js: list[np.ndarray] = []
+        while qpos < n or ids.size:
+            if qpos < n and ids.size < cap:
+                take = min(n, qpos + cap - ids.size)
+                Z, ids = np.hstack([Z, queue[:, qpos:take]]), np.concatenate([ids, np.arange(qpos, take)])
+                qpos = take
+            try:
+                Z = ch.run(Z)
+            except Exception:  # a crash is the evidence of the calls that crash, each run alone
+                Z, errors = _alone_judged(ch, Z)
+                for b, err in errors.items():
+                    results[order[ids[b]]] = OracleEvidence(0, Reason.ERROR, 0.0, status="inconclusive",
+                                                            message=str(err)[:500])
+                ok = ~np.isin(np.arange(ids.size), list(errors))
+                Z, ids = Z[:, ok], ids[ok]
+            done = Z[done_row] > 0.5
+            if done.any():
+                keep = np.flatnonzero(~done)
+                rows.append(ids[done])
+                Js.append(Z[ch.nz:, done])
+                Z, ids = Z[:, keep], ids[keep]
+        if rows:  # evidence of every decided rollout in one go
+            rows_ = order[np.concatenate(rows)]
+            for i, ev in zip(rows_, decided_evidence(ch, np.hstack(Js), t0s[rows_], self.c_margin)):
+                results[i] = ev
+        return results  # type: ignore[return-value]
+
+    def _run_python(self, x0s: np.ndarray, t0s: np.ndarray, horizons: np.ndarray) -> list[OracleEvidence]:
         """Rollouts in slots of one batch; the bookkeeping of every chunk is vectorised over slots."""
         prim, ch = self.prim, self.chunk
         r, K = ch.rows, ch.K
@@ -154,6 +243,17 @@ def _alone(ch, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
     if shape is None:
         return Zf, np.zeros((0, Z.shape[1], 0)), errors
     return Zf, np.concatenate([o if o is not None else np.full(shape, np.nan) for o in outs], axis=1), errors
+
+
+def _alone_judged(ch, Z: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Advance each column of Z in a judged chunk call of its own (after a batch failed)."""
+    Zf, errors = np.full(Z.shape, np.nan), {}
+    for b in range(Z.shape[1]):
+        try:
+            Zf[:, b] = ch.run(Z[:, b:b + 1])[:, 0]
+        except Exception as err:
+            errors[b] = err
+    return Zf, errors
 
 
 def _non_finite(out: np.ndarray, r, end_state: bool) -> str:

@@ -137,10 +137,7 @@ class Chunk:
 
     def start(self, x0s: np.ndarray, t0s: np.ndarray) -> np.ndarray:
         """Augmented start states (one column per row of x0s), as initial_state."""
-        X = np.asarray(x0s, float).T
-        t = np.asarray(t0s, float)[None, :]
-        block = np.repeat(hold_start(self.prim, self.rows.doubling)[:, None], X.shape[1], axis=1)
-        return np.vstack([X, t, np.zeros_like(t), X] + ([X] if self.rows.doubling else []) + [block])
+        return start_states(self.prim, x0s, t0s, self.rows.doubling)
 
     def run(self, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Advance the columns of Z (nz x n) by K steps; out has shape (rows, n, K).
@@ -320,6 +317,24 @@ def _hold(prim: CompiledPrimitive, dt: float, block, rollouts: list) -> tuple[li
 
 def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: tuple[str, ...],
                  with_state: bool, boundaries: bool) -> Chunk:
+    body, nz = step_body(prim, dt, with_state, boundaries)
+    fn = _accumulate("chunk_", prim, dt, K, with_state, boundaries, body, nz)
+    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, len(prim.h_names), prim.system.nu,
+                 Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0))
+
+
+def step_body(prim: CompiledPrimitive, dt: float, with_state: bool = False, boundaries: bool = True,
+              doubling: bool = False) -> tuple[ca.Function, int]:
+    """(z -> (z after one step, that step's outputs in Rows order), nz): one step of the chunk with
+    error 'local' (or 'doubling'), remembered on the primitive so that every chunk built from it
+    shares it."""
+    key = ("body", dt, with_state, boundaries, doubling)
+    if key not in prim.cache:
+        prim.cache[key] = (_doubling_body if doubling else _step_body)(prim, dt, with_state, boundaries)
+    return prim.cache[key]
+
+
+def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple[ca.Function, int]:
     nx, nh = prim.system.nx, len(prim.h_names)
     start, end, f = _ends(prim, prim.sampled is not None)
     jump = jump_of(prim)
@@ -339,10 +354,7 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
                      ca.norm_2(e), s, h, u_raw, u, *([x] if with_state else []))
     # small SX loops: cse saves 1-8 % of C; an MX graph around a large loop (itself with cse) gains
     # nothing measurable from it (bench/bench_jit.py)
-    body = cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out]))
-    fn = _accumulate("chunk_", prim, dt, K, with_state, boundaries, body, nz)
-    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
-                 Rows(nh, prim.system.nu, nx if with_state else 0))
+    return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out])), nz
 
 
 def _sample_bound(h0, h1, d0, d1, h):
@@ -368,7 +380,14 @@ def _accumulate(prefix: str, prim: CompiledPrimitive, dt: float, K: int, with_st
 
 def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: tuple[str, ...],
                     with_state: bool, boundaries: bool) -> Chunk:
-    """K steps of step doubling: the judged rollout takes two RK4 half steps per step while a
+    body, nz = step_body(prim, dt, with_state, boundaries, doubling=True)
+    fn = _accumulate("chunk2_", prim, dt, K, with_state, boundaries, body, nz)
+    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, len(prim.h_names), prim.system.nu,
+                 Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0, doubling=True))
+
+
+def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple[ca.Function, int]:
+    """One step of step doubling: the judged rollout takes two RK4 half steps per step while a
     companion rollout x_c takes one full step from its own state, both with the same clock, jumps
     and boundaries. RK4's global error shrinks 16x when the step halves, so |h(x) - h(x_c)| at each
     sample (and at each step's end, before the jump) estimates the judged rollout's error in h
@@ -403,10 +422,15 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
     m_f, m_c = prim.roa_margin(x, t), prim.roa_margin(xc, t)
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), ca.fabs(h1 - h1c), m_f,
                      ca.fabs(m_f - m_c), s, h, u_raw, u, *([x] if with_state else []), ca.fabs(h0 - h0c))
-    body = cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out]))
-    fn = _accumulate("chunk2_", prim, dt, K, with_state, boundaries, body, nz)
-    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, nh, prim.system.nu,
-                 Rows(nh, prim.system.nu, nx if with_state else 0, doubling=True))
+    return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out])), nz
+
+
+def start_states(prim: CompiledPrimitive, x0s: np.ndarray, t0s: np.ndarray, doubling: bool = False) -> np.ndarray:
+    """Augmented start states z, one column per row of x0s switched in at the clock t0s."""
+    X = np.asarray(x0s, float).T
+    t = np.asarray(t0s, float)[None, :]
+    block = np.repeat(hold_start(prim, doubling)[:, None], X.shape[1], axis=1)
+    return np.vstack([X, t, np.zeros_like(t), X] + ([X] if doubling else []) + [block])
 
 
 def build_first(prim: CompiledPrimitive, dt: float, jit: bool = True) -> ca.Function:

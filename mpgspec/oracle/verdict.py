@@ -191,6 +191,24 @@ def _decide(b: Block, c: Carry, e: _Errors, valid: np.ndarray, valid_t: np.ndarr
     return kind, np.where(wait, big, first), k, kc, horizon, big
 
 
+LANES = 8
+
+
+def lane_sum(a: np.ndarray) -> np.ndarray:
+    """Sum over the last axis in LANES lanes: lane q adds the entries q, q + 8, ... one after the
+    other, then ((l0 + l1) + (l2 + l3)) + ((l4 + l5) + (l6 + l7)). For 64 entries this is numpy's
+    own summation (pairwise, unrolled by 8); the compiled judge (judged.py) folds its lanes the same
+    way, so a rollout's error sums depend on its own samples only, never on its batch."""
+    K = a.shape[-1]
+    pad = (-K) % LANES
+    if pad or not K:
+        a = np.concatenate([a, np.zeros(a.shape[:-1] + (pad or LANES,))], axis=-1)
+    r = a[..., :LANES].copy()
+    for q in range(LANES, a.shape[-1], LANES):
+        r = r + a[..., q:q + LANES]
+    return ((r[..., 0] + r[..., 1]) + (r[..., 2] + r[..., 3])) + ((r[..., 4] + r[..., 5]) + (r[..., 6] + r[..., 7]))
+
+
 def _fold(b: Block, c: Carry, e: _Errors, n_s: np.ndarray, n_t: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
     """Fold the first n_s samples and n_t steps of each rollout into the carry: least values, counts,
     error estimates, the best RoA margin and the input's peaks and saturation."""
@@ -213,11 +231,11 @@ def _fold(b: Block, c: Carry, e: _Errors, n_s: np.ndarray, n_t: np.ndarray, lo: 
             last = np.clip(n_t - 1, 0, K - 1)
             c.eh = np.where(n_t > 0, e.eh_e[:, rows, last], c.eh)
         else:
-            c.eh = c.eh + (e.cdh[:, :, -1] if full_t else np.where(jt[None], b.dh, 0.0).sum(axis=2))
+            c.eh = c.eh + lane_sum(b.dh if full_t else np.where(jt[None], b.dh, 0.0))
     if absolute:  # the margin's error at the last judged sample
         c.en = np.where(n_s > 0, e.en_s[rows, np.clip(n_s - 1, 0, K - 1)], c.en)
     else:
-        c.en = c.en + (e.cen[:, -1] if bool(jt.all()) else np.where(jt, b.err, 0.0).sum(axis=1))
+        c.en = c.en + lane_sum(np.where(jt, b.err, 0.0))
     c.nsteps = c.nsteps + n_t
     with np.errstate(invalid="ignore"):
         c.best_m = np.maximum(c.best_m, np.where(js & ~np.isnan(b.margin), b.margin, -np.inf).max(axis=1))
@@ -251,12 +269,11 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
         ms = np.fmin.reduce(min_h, axis=0) if len(names) else np.full(len(cols), np.inf)
         lw = np.fmin.reduce(low, axis=0) if len(names) else np.full(len(cols), np.inf)
         worst = np.argmin(low, axis=0).tolist() if len(names) else []
-    fin = lambda v: v if v == v and abs(v) < INACTIVE / 2 else None  # noqa: E731
     clean = bool((np.abs(min_h) < INACTIVE / 2).all() and (np.abs(low) < INACTIVE / 2).all())
-    min_l, low_l = min_h.T.tolist(), low.T.tolist()
+    min_l, low_l = (min_h.T.tolist(), low.T.tolist()) if clean else (_or_none(min_h).T.tolist(), _or_none(low).T.tolist())
     windows = any(w is not None for w in prim.windows)
     check = (~count.all(axis=0) | windows).tolist() if len(names) else [False] * len(cols)
-    ms_l, lw_l = ms.tolist(), lw.tolist()
+    ms_l, lw_l = _or_none(ms).tolist(), _or_none(lw).tolist()
     steps, best = c.nsteps[cols].tolist(), c.best_m[cols].tolist()
     peak, peak_raw, sat = c.peak[:, cols].T.tolist(), c.peak_raw[:, cols].T.tolist(), c.sat[cols].tolist()
     out = []
@@ -276,13 +293,9 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
         else:
             ev = OracleEvidence(0, Reason.HORIZON, tn, status=UNSAFE)
         ev.steps = steps[n]
-        if clean:
-            ev.min_margins, ev.lower_bounds = dict(zip(names, min_l[n])), dict(zip(names, low_l[n]))
-        else:
-            ev.min_margins = {nm: fin(v) for nm, v in zip(names, min_l[n])}
-            ev.lower_bounds = {nm: fin(v) for nm, v in zip(names, low_l[n])}
+        ev.min_margins, ev.lower_bounds = dict(zip(names, min_l[n])), dict(zip(names, low_l[n]))
         if names:
-            m0, l0 = fin(ms_l[n]), fin(lw_l[n])
+            m0, l0 = ms_l[n], lw_l[n]
             ev.margin = m0
             ev.error_bound = m0 - l0 if m0 is not None and l0 is not None else None
             if kind == "doubt" and ev.error_bound is not None and ev.error_bound > 1e3 * max(1.0, abs(m0)):
@@ -298,6 +311,12 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
             ev.checked = True
         out.append(ev)
     return out
+
+
+def _or_none(a: np.ndarray) -> np.ndarray:
+    """a as objects, None where a value is NaN, infinite or INACTIVE (a function never active)."""
+    with np.errstate(invalid="ignore"):
+        return np.where((a == a) & (np.abs(a) < INACTIVE / 2), a, None)
 
 
 def evidence(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, j: int, t0: float, c_margin: float,
