@@ -33,7 +33,7 @@ from .cells import TargetJob, failed_target, run_target
 from .library import prefetch
 from .rigid import RigidRobustRollout, uses_library
 from .rollout import RobustRollout, plant
-from .scenarios import Scenarios, scenarios
+from .scenarios import Scenarios, scenarios, searched
 from .sequence import sequence_under_uncertainty
 
 LABEL = "empirical"
@@ -147,12 +147,13 @@ class RolloutFactory:
     duration: float | None = None
     P: object = None
     dist_idx: tuple = ()
+    gradient: bool = True  # the push gradient is built (the adversarial search runs)
 
     def __call__(self, B, horizon):
         if self.rigid:
             return RigidRobustRollout(B, list(self.names), self.frame, self.push, self.K, self.settings, horizon,
-                                      self.duration)
-        return RobustRollout(B, self.P, list(self.dist_idx), self.K, self.settings, horizon)
+                                      self.duration, self.gradient)
+        return RobustRollout(B, self.P, list(self.dist_idx), self.K, self.settings, horizon, gradient=self.gradient)
 
 
 def _setup(spec, sys, unc, settings) -> tuple[Scenarios, RolloutFactory]:
@@ -167,14 +168,14 @@ def _setup(spec, sys, unc, settings) -> tuple[Scenarios, RolloutFactory]:
         dist_names = [f"force_{a}" for a in "xyz"] if force is not None else []
         bound = np.asarray(force.bound, float) if force is not None else np.zeros(0)
         rollout = RolloutFactory(settings, K, tuple(names), True, frame, force is not None,
-                                 force.duration if force is not None else None)
+                                 force.duration if force is not None else None, gradient=searched(unc))
     else:
         nominal_values = dict(sys.parameters)
         dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
         dist_names = list(dist.inputs) if dist is not None else []
         bound = (np.broadcast_to(np.asarray(dist.bound, float), (len(dist_idx),)).copy() if dist is not None
                  else np.zeros(0))
-        rollout = RolloutFactory(settings, K, P=plant(spec, names), dist_idx=tuple(dist_idx))
+        rollout = RolloutFactory(settings, K, P=plant(spec, names), dist_idx=tuple(dist_idx), gradient=searched(unc))
     rng = np.random.default_rng(unc.seed)
     TH, ERR, SG, KIND = scenarios(unc, sys, rng, nominal_values)
     return Scenarios(names, TH, ERR, SG, KIND, bound, K, dist_names, list(sys.state_names)), rollout

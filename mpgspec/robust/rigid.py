@@ -88,28 +88,30 @@ class RigidRobustRollout(RobustRollout):
     friction), d the push's world force (3 entries, or none)."""
 
     def __init__(self, prim: CompiledPrimitive, names: list[str], frame: str, push: bool, segments: int,
-                 settings, horizon: float, duration: float | None = None):
+                 settings, horizon: float, duration: float | None = None, gradient: bool = True):
         self.names, self.push, self.frame = list(names), push, frame
         self.lib = library_for(prim, settings)
         self.libs = (self.lib.path,) if self.lib is not None else ()
         self.plant_fn = robust_plant(prim, frame, self.lib)
-        super().__init__(prim, self.plant_fn, [], segments, settings, horizon, duration)
+        super().__init__(prim, self.plant_fn, [], segments, settings, horizon, duration, gradient)
 
     def _loop(self, prim, plant_fn, dist_inputs, dt):
         parts = rigid_step(prim, plant_fn, self.names, self.frame, self.push, dt, self.lib)
-        step, first, path = shared_step(parts, self.lib, self.settings)
+        step, first, path = shared_step(parts, self.lib, self.settings, self.gradient)
         self.libs += (path,) if path is not None else ()
         return (step, first, *parts[2:])
 
 
-def shared_step(parts: tuple, lib: RobotLibrary | None, settings) -> tuple[ca.Function, ca.Function, Path | None]:
+def shared_step(parts: tuple, lib: RobotLibrary | None, settings,
+                gradient: bool = True) -> tuple[ca.Function, ca.Function, Path | None]:
     """(step, first, library path) of rigid_step's parts: with the robot's library, compiled once per
-    primitive into one library (with reverse derivatives where a push gradient is taken) that its
-    robust rollouts and its sequence stepper share; else as they are (path None)."""
+    primitive into one library (with reverse derivatives where a push gradient is taken: `gradient`,
+    the adversarial search runs, and the law holds no input) that its robust rollouts and its
+    sequence stepper share; else as they are (path None)."""
     step, first, _nth, nd, nhold = parts
     if lib is None:
         return step, first, None
-    shared = step_library(step, first, bool(nd) and nhold == 0, tuple(settings.jit_flags), (lib.path,))
+    shared = step_library(step, first, gradient and bool(nd) and nhold == 0, tuple(settings.jit_flags), (lib.path,))
     return shared if shared is not None else (step, first, None)
 
 

@@ -74,8 +74,8 @@ class RobustRollout:
     libs: tuple = ()  # compiled libraries the step calls (the robot's dynamics), linked in
 
     def __init__(self, prim: CompiledPrimitive, plant_fn, dist_inputs: list[int], segments: int,
-                 settings: OracleSettings, horizon: float, duration: float | None = None):
-        self.prim, self.settings = prim, settings
+                 settings: OracleSettings, horizon: float, duration: float | None = None, gradient: bool = True):
+        self.prim, self.settings, self.gradient = prim, settings, gradient  # the push gradient: only for a search
         self.K = segments
         dt = settings.dt
         self.N = max(1, int(math.ceil(horizon / dt - 1e-9)))
@@ -96,7 +96,7 @@ class RobustRollout:
         zL, outs_c = step.mapaccum("robust_chunk", self.CHUNK)(zc, Dc)
         fns = [ca.Function(name + "_first", [x0, t0, s0, TH, D], [ca.vertcat(*f0)]),
                ca.Function(name + "_chunk", [zc, Dc], [ca.vertcat(zL[:, -1], ca.vec(outs_c))])]
-        if self.nd and self.nhold == 0:  # reverse mode: the gradient of one weighted sample w'vec(Y) wrt D
+        if gradient and self.nd and self.nhold == 0:  # reverse mode: the gradient of one weighted sample w'vec(Y) wrt D
             S = np.zeros((self.K, self.N))
             on = self.seg < self.K
             S[self.seg[on], n[on]] = 1.0

@@ -71,3 +71,8 @@ def scenarios(unc, sys, rng: np.random.Generator, nominal: dict) -> tuple[np.nda
             sg.append(sgn)
             kd.append(k if sgn == 0 else f"{k}, constant disturbance {'+' if sgn > 0 else '-'}bound")
     return np.array(th).reshape(-1, len(names)), np.array(err), np.array(sg), kd
+
+
+def searched(unc) -> bool:
+    """Whether the adversarial search runs (rounds and a disturbance): only then is a gradient built."""
+    return bool(unc.search) and unc.disturbance is not None

@@ -285,6 +285,7 @@ def _compiled(built: dict, runs: int, rigid: bool, settings) -> dict[str, _Stepp
 def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], list[str], int, np.ndarray]:
     """Each primitive's mapped step over `runs` on the perturbed plant, the uncertain parameters'
     names, the disturbance's size and bound."""
+    from .scenarios import searched
     from .rigid import library_for, rigid_step, robust_plant, shared_step
     from .rollout import plant
 
@@ -297,7 +298,7 @@ def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], lis
         for name, p in prims.items():
             lib = library_for(p, settings)
             parts = rigid_step(p, robust_plant(p, frame, lib), names, frame, force is not None, settings.dt, lib)
-            step, first, path = shared_step(parts, lib, settings)
+            step, first, path = shared_step(parts, lib, settings, searched(unc))
             (built if path is None else shared)[name] = (step, first)
         out = {**_compiled(built, runs, True, settings),
                **{name: _Stepper(step, first, runs, True) for name, (step, first) in shared.items()}}
