@@ -193,17 +193,23 @@ def compile_cached(fn: ca.Function, flags: tuple[str, ...]) -> ca.Function:
 
 
 def compile_library(name: str, fns: list[ca.Function], flags: tuple[str, ...], reverse: bool = True,
-                    large: bool = False, libs: tuple[Path, ...] = ()) -> Path | None:
+                    large: bool = False, libs: tuple[Path, ...] = (), wait: bool = True) -> Path | None:
     """The path of one library holding fns and (`reverse`) each one's reverse derivative (adj1_<name>,
     what a gradient through casadi.external of it calls), linked against `libs`, compiled once with
     `flags` (and LARGE_CODE_FLAGS when `large` and the code is large) and reused while its code is
-    unchanged; None when the compiler fails (with a warning)."""
+    unchanged; None when the compiler fails (with a warning). Without `wait`, gcc runs in a
+    background thread (no CasADi there) and None is returned at once: a later call with the same
+    code waits on the library's lock and loads it."""
     cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
     for fn in fns:
         cg.add(fn)
         if reverse:
             cg.add(fn.reverse(1))
     job = _library_job(name, None, cg.dump(), tuple(flags), tuple(libs), large=large)
+    if not wait:
+        if not job.hit:
+            threading.Thread(target=_gcc, args=(job,), name=f"gcc {name}", daemon=True).start()
+        return None
     if not job.hit:
         _gcc(job)
     _log(job)

@@ -73,19 +73,17 @@ def robot_library(sys) -> RobotLibrary | None:
 
 
 def prefetch(sys) -> None:
-    """Start building the robot's library in a background thread (gcc then runs beside the stages
-    before the robust one); robot_library waits for it."""
-    threading.Thread(target=_quiet, args=(sys,), name="robot-library", daemon=True).start()
-
-
-def _quiet(sys) -> None:
+    """Generate the robot library's C code now and leave its gcc running in the background (beside
+    the stages before the robust one); robot_library later finds it compiled, or waits for it. The
+    CasADi work stays in this thread: a process forked while another thread runs CasADi can inherit
+    its locks held and hang."""
     try:
-        robot_library(sys)
+        _build(sys, LIBRARY_FLAGS, wait=False)
     except Exception:  # noqa: BLE001 - the robust stage builds again and reports its own failure
         pass
 
 
-def _build(sys, flags: tuple[str, ...]) -> RobotLibrary | None:
+def _build(sys, flags: tuple[str, ...], wait: bool = True) -> RobotLibrary | None:
     m = sys.model
     q, v, u = ca.SX.sym("q", m.nq), ca.SX.sym("v", m.nv), ca.SX.sym("u", m.nu)
     c, k, w = ca.SX.sym("c", len(m.contact_frames)), ca.SX.sym("k"), ca.SX.sym("w", m.nv)
@@ -103,7 +101,7 @@ def _build(sys, flags: tuple[str, ...]) -> RobotLibrary | None:
         digest.update(ca.Function(name, ins, outs).serialize().encode())
     tag = f"robot_{digest.hexdigest()[:16]}"
     fns = [ca.Function(f"{tag}_{name}", ins, outs, {"cse": True}) for name, (ins, outs) in parts.items()]
-    path = compile_library(tag, fns, flags)
+    path = compile_library(tag, fns, flags, wait=wait)
     if path is None:
         return None
     ext = {name: ca.external(f"{tag}_{name}", str(path)) for name in parts}

@@ -72,9 +72,10 @@ def test_one_library_for_every_target_and_its_gradient(a1):
     np.testing.assert_allclose(g, g0, rtol=1e-9, atol=1e-12)
 
 
-def test_prefetch_and_requests_build_once(monkeypatch):
-    """A background prefetch and requests that arrive while it builds share one build; another
-    system gets its own."""
+def test_requests_build_once_per_system(monkeypatch):
+    """Requests for one system share one build (and threads that ask while it builds wait for it);
+    another system gets its own."""
+    import threading
     import time
 
     from mpgspec.robust import library
@@ -92,33 +93,34 @@ def test_prefetch_and_requests_build_once(monkeypatch):
 
     monkeypatch.setattr(library, "_build", build)
     a, b = System("a"), System("b")
-    library.prefetch(a)
-    time.sleep(0.05)
-    assert [library.robot_library(a) for _ in range(3)] == ["library of a"] * 3
+    got = []
+    threads = [threading.Thread(target=lambda: got.append(library.robot_library(a))) for _ in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert got == ["library of a"] * 3
     assert library.robot_library(b) == "library of b"
     assert calls == [a, b]
 
 
-def test_the_sequence_stepper_shares_the_rollouts_step_library(a1, monkeypatch):
-    """The uncertain sequence's stepper of a primitive calls the library its robust rollouts
-    compiled: no second compile of the same step."""
-    from mpgspec.robust import library, sequence
+def test_a_library_compiled_in_the_background_is_loaded_once_done(tmp_path, monkeypatch):
+    """compile_library without waiting returns at once and leaves gcc running; the next call with the
+    same code waits for that compile instead of starting another, and loads the library."""
+    import json
 
-    spec, prims, settings = a1
-    paths = []
-    real = library.step_library
+    import casadi as ca
 
-    def spy(*a, **kw):
-        out = real(*a, **kw)
-        paths.append(out[2])
-        return out
+    from mpgspec.oracle.jit import compile_library
 
-    monkeypatch.setattr(library, "step_library", spy)
-    import mpgspec.robust.rigid as rigid
-
-    monkeypatch.setattr(rigid, "step_library", spy)
-    rr = RigidRobustRollout(prims["Walk(slow)"], NAMES, "trunk", True, 4, settings, 0.05, 0.04)
-    few = {"Walk(slow)": prims["Walk(slow)"]}
-    steppers = sequence.steppers(spec, few, settings, 2)[0]
-    assert paths[0] == paths[1] == rr.libs[1]
-    assert steppers["Walk(slow)"].step is not None
+    monkeypatch.setenv("MPGSPEC_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("MPGSPEC_JIT_LOG", str(tmp_path / "jit.jsonl"))
+    x = ca.SX.sym("x", 3)
+    fn = ca.Function("lib_bg_f", [x], [ca.sin(x) * ca.dot(x, x)])
+    assert compile_library("lib_bg", [fn], ("-O1",), wait=False) is None
+    path = compile_library("lib_bg", [fn], ("-O1",))
+    assert path is not None and path.exists()
+    f = ca.external("lib_bg_f", str(path))
+    np.testing.assert_allclose(np.array(f([1.0, 2.0, 3.0])).ravel(), np.sin([1, 2, 3]) * 14.0)
+    log = [json.loads(line) for line in open(tmp_path / "jit.jsonl")]
+    assert len(log) == 1 and log[0]["name"] == "lib_bg"  # one compile: the second call found it (or waited)
