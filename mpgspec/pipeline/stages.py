@@ -3,6 +3,7 @@ sized), graph (Algorithm 1 and the traces the report shows), checks (plans, sequ
 assertions, cross-check, robust graph, Definition-1 assumptions and the verdict)."""
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -15,7 +16,7 @@ from ..compile.system import compile_system
 from ..errors import SpecError
 from ..execute.crosscheck import CrossCheckResult, crosscheck_runs
 from ..execute.crosscheck.settings import settings_of as crosscheck_settings
-from ..execute.sequence import simulate_sequence
+from ..execute.sequence import SequenceRun, simulate_sequence
 from ..graph.build import build_graph
 from ..graph.traces import edge_traces, failure_traces
 from ..graph.transition import MotionPrimitiveGraph
@@ -87,7 +88,6 @@ def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progres
     for p in prims.values():  # a control period must be a whole number of oracle steps
         if p.sampled is not None:
             p.sampled.steps(settings.dt)
-    prefetch_robust(spec, prims, settings, memo)
     t1 = time.perf_counter()
     if progress:
         progress(spec.name, "regions of attraction", 0, len(prims))
@@ -105,6 +105,7 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
     before = dict(getattr(executor, "stats", {}))
     t0 = time.perf_counter()
+    prefetch_robust(spec, prims, settings, getattr(executor, "memo", None))  # gcc beside the oracle
     if progress:
         progress(spec.name, "oracle (JIT-compiling the rollouts unless cached)", 0, 0)
     g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, executor)
@@ -137,7 +138,7 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
         if progress:
             progress(spec.name, "sequence", 0, 2)
         for mode in ("naive", "graph"):
-            runs[mode] = simulate_sequence(prims, g, table["next"], spec.project.sequence, settings, mode)
+            runs[mode] = _sequence_run(cp, g, table["next"], mode, memo)
     checks = evaluate_assertions(spec.project.assertions, g, runs)
     checks += roa_requirements(spec, cp.roa, start=len(checks))
     t_x = time.perf_counter()
@@ -164,6 +165,26 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     return Checks(plans, table, runs, checks, assumed, status,
                   {"plan_execute_s": t_x - t0, **({"crosscheck_s": t1 - t_x} if xc is not None else {}),
                    "robust_s": t2 - t1, "assumptions_s": time.perf_counter() - t2}, robust, xc)
+
+
+SEQUENCE_RECORD = 1
+"""Layout of the memoised goal-sequence run (part of its key)."""
+
+
+def _sequence_run(cp: CompiledProject, g: MotionPrimitiveGraph, table: dict, mode: str, memo=None) -> SequenceRun:
+    """The goal sequence in one mode, kept in the memo by what decides it: the closed loops, the
+    oracle's grid and settings (which decide the graph and its table), the sequence and the mode."""
+    spec, prims, settings = cp.spec, cp.prims, cp.settings
+    key = memo.key("sequence", SEQUENCE_RECORD, mode, *(p.digest() for p in prims.values()),
+                   spec.project.oracle.grid.model_dump_json(), spec.project.sequence.model_dump_json(),
+                   sorted(dataclasses.asdict(settings).items())) if memo is not None else None
+    known = memo.get(key) if memo is not None else None
+    if known is not None:
+        return SequenceRun(**known)
+    run = simulate_sequence(prims, g, table, spec.project.sequence, settings, mode)
+    if memo is not None:
+        memo.put(key, run.to_dict())
+    return run
 
 
 def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,
