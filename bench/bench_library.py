@@ -26,6 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -116,9 +117,7 @@ def main(argv=None) -> int:
                      f"{t['grad library'] * 1e3:.0f} ms, **{t['grad inline'] / t['grad library']:.2f}x**; "
                      f"largest difference {gdiff:.1e}"))
     table = markdown_table([(m, f"inline {x}; library {y}") for m, x, y in rows])
-    import casadi as ca
-
-    mach = {**common.machine(casadi=ca.__version__), "revision": common.revision(ROOT)}
+    mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
     head = stamp(mach, f"bench_library.py --target '{a.target}'", False, a.repeats,
                  time.perf_counter() - t_start)
     print(head + "\n\n" + table)

@@ -100,8 +100,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     R = args.repeats or (1 if args.quick else 2)
     T0 = time.perf_counter()
-    mach = common.machine(casadi=ca.__version__, numpy=np.__version__)
-    mach["revision"] = common.revision(ROOT)
+    mach = common.machine(casadi=ca.__version__, numpy=np.__version__, revision=common.revision(ROOT))
     rows: list[tuple[str, str]] = []
     cp, g = a1_graph()
     unc = cp.spec.project.uncertainty

@@ -16,6 +16,12 @@ PHASES = ("load", "compile", "regions of attraction", "oracle", "traces", "seque
 PLAIN_EVERY_S = 2.0  # plain lines: at most one per phase this often, plus phase starts and ends
 
 
+def of_project(progress: Progress | None, project: str) -> Callable[[str, int, int], None] | None:
+    """progress bound to one project: what(phase, done, total) for the stages' executors and maps;
+    None without progress."""
+    return (lambda what, i, n: progress(project, what, i, n)) if progress else None
+
+
 def phase_of(what: str) -> str:
     """The phase a progress message belongs to ('oracle Swing(1)' -> 'oracle')."""
     return next((p for p in PHASES if what.startswith(p)), what)

@@ -106,6 +106,10 @@ class Memo:
         row = self.store.db.execute("SELECT value FROM memo WHERE key = ?", (key,)).fetchone()
         return json.loads(row[0]) if row else None
 
+    def has(self, key: str) -> bool:
+        """Whether a value is stored under key (without reading it)."""
+        return self.store.db.execute("SELECT 1 FROM memo WHERE key = ?", (key,)).fetchone() is not None
+
     def put(self, key: str, value) -> None:
         with self.store.db:
             self.store.db.execute("INSERT OR REPLACE INTO memo VALUES (?, ?)", (key, json.dumps(value, default=_plain)))

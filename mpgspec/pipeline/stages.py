@@ -24,7 +24,7 @@ from ..oracle.executors import Executor, InProcess
 from ..oracle.oracle import CapabilityError, require_capabilities
 from ..oracle.registry import get_backend
 from ..plan.planner import lookup_table, shortest_plan
-from ..progress import Progress
+from ..progress import Progress, of_project
 from ..spec.uncertainty_refs import check_uncertainty, check_uncertainty_compiled
 from ..robust.graph import RobustResult, prefetch_robust, robust_stage
 from ..settings import OracleSettings
@@ -91,7 +91,7 @@ def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progres
     t1 = time.perf_counter()
     if progress:
         progress(spec.name, "regions of attraction", 0, len(prims))
-    cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
+    cb = of_project(progress, spec.name)
     roa = size_regions(spec, prims, memo, executor, cb)
     return CompiledProject(spec, settings, prims, roa,
                            {"compile_s": t1 - t0, "roa_s": time.perf_counter() - t1})
@@ -102,7 +102,7 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     """Algorithm 1 through the executor, then the traces of every edge and of the closest failures."""
     spec, prims, settings = cp.spec, cp.prims, cp.settings
     executor = executor or InProcess()
-    cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
+    cb = of_project(progress, spec.name)
     before = dict(getattr(executor, "stats", {}))
     t0 = time.perf_counter()
     prefetch_robust(spec, prims, settings, getattr(executor, "memo", None))  # gcc beside the oracle
@@ -158,7 +158,7 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     t2 = time.perf_counter()
     if progress:
         progress(spec.name, "assumptions (Definition 1)", 0, len(prims))
-    cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
+    cb = of_project(progress, spec.name)
     assumed = check_assumptions(prims, spec.project.assumptions, memo, cp.roa, executor, cb)
     st = [c.status for c in checks] + [a.status for a in assumed]
     status = "error" if "error" in st else "fail" if "fail" in st else "pass"

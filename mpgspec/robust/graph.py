@@ -27,6 +27,7 @@ import numpy as np
 from ..check.assertions import AssertionResult, evaluate_assertions
 from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
+from ..progress import of_project
 from ..oracle.executors import InProcess
 from ..oracle.tasks import Failed
 from .cells import TargetJob, failed_target, run_target
@@ -89,7 +90,7 @@ def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResul
     sys = next(iter(prims.values())).system
     sc, jobs = target_jobs(spec, prims, settings, g)
     among = set(unc.nodes) if unc.nodes is not None else set(prims)
-    cb = (lambda what, i, n: progress(spec.name, what, i, n)) if progress else None
+    cb = of_project(progress, spec.name)
     edges, nodes, n_roll, build_s = check_targets(jobs, prims, unc, executor, cb)
     rg = _robust_graph(g, edges, unc.nodes)
     scen = _scenario_record(unc, sc, among, edges, sys)
@@ -127,7 +128,7 @@ def prefetch_robust(spec, prims: dict, settings, memo=None) -> None:
     if spec.project.uncertainty is None or not prims:
         return
     prim = next((p for p in prims.values() if uses_library(p, settings)), None)
-    if prim is None or (memo is not None and memo.get(_key(spec, prims, settings, memo)) is not None):
+    if prim is None or (memo is not None and memo.has(_key(spec, prims, settings, memo))):
         return
     prefetch(prim.system)
 
