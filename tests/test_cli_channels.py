@@ -136,14 +136,17 @@ def _group(pgid: int) -> list[int]:
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc (Linux)")
-def test_sigterm_ends_workers_and_leaves_no_temporary_folder(tmp_path):
+@pytest.mark.parametrize("projects, procs", [(["specs/pendulum"], 3), (["specs/pendulum", "specs/cart"], 4)],
+                         ids=["one project", "side by side"])
+def test_sigterm_ends_workers_and_leaves_no_temporary_folder(tmp_path, projects, procs):
     out = tmp_path / "reports"
-    p = subprocess.Popen([*_script(), "verify", "-j", "2", "specs/pendulum", "--no-cache", "--out", str(out)],
+    p = subprocess.Popen([*_script(), "verify", "-j", "2", *projects, "--no-cache", "--out", str(out)],
                          cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     try:
         t0 = time.monotonic()
-        while len(_group(p.pid)) < 3 and p.poll() is None and time.monotonic() - t0 < 240:
-            time.sleep(0.05)  # until the pool's workers run (the parent and two workers)
+        while len(_group(p.pid)) < procs and p.poll() is None and time.monotonic() - t0 < 240:
+            time.sleep(0.05)  # until the pool's workers run (the parent and two workers; side by side: the
+            # parent, the two project processes and a worker of one of them)
         assert p.poll() is None, "the run ended before its worker processes were seen"
         p.send_signal(signal.SIGTERM)
         _, err = p.communicate(timeout=30)

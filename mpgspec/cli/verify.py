@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .. import api
@@ -107,6 +108,26 @@ def _check_jobs(jobs: int) -> None:
                              f"({JOBS_PER_CORE} per core, {cores} cores), not {jobs}")
 
 
+def _verify(args, overrides: dict, show) -> VerifyResult:
+    """Every project of args.paths verified and (unless --no-write) written: side by side, one
+    process per project, when there are several, more than one job and no Dask; else here."""
+    try:
+        files = [f for p in args.paths for f in api.discover(p)]
+    except UsageError:  # api.verify reports it
+        files = []
+    if len(files) > 1 and args.jobs > 1 and not (args.dask or args.scheduler):
+        from ..pipeline.side_by_side import verify_side_by_side
+
+        return verify_side_by_side(files, None if args.no_write else Path(args.out), overrides, show, args.jobs,
+                                   not args.no_cache, args.jobs, args.allow_path or None)
+    executor = api.executor(args.jobs, args.dask or args.scheduler, cache=not args.no_cache)
+    res = api.verify(args.paths, out_dir=None, overrides=overrides, progress=show, executor=executor,
+                     allow_paths=args.allow_path or None)
+    if not args.no_write:
+        api.write_reports(res, args.out, show)
+    return res
+
+
 def cmd_verify(args) -> int:
     overrides = {}
     if args.method:
@@ -120,11 +141,7 @@ def cmd_verify(args) -> int:
     show = None if args.quiet else _progress(sys.stderr, args.format)
     try:
         with stdout_to_stderr():  # solver logs and prints of the pipeline go to stderr
-            executor = api.executor(args.jobs, args.dask or args.scheduler, cache=not args.no_cache)
-            res = api.verify(args.paths, out_dir=None, overrides=overrides, progress=show, executor=executor,
-                             allow_paths=args.allow_path or None)
-            if not args.no_write:
-                api.write_reports(res, args.out, show)
+            res = _verify(args, overrides, show)
     finally:
         if show is not None:
             show.close()
