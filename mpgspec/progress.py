@@ -36,10 +36,10 @@ class Display:
         self.stream = stream or sys.stderr
         self.line = line
         self.t0 = time.perf_counter()
-        self.cur: tuple[str, str] | None = None
-        self.phase_t0 = self.t0
+        self.cur: dict[str, tuple[str, float]] = {}  # project -> (its phase, when the phase began)
         self.last_plain = 0.0
         self._live = None
+        self._tasks: dict[str, object] = {}  # project -> its line of the live display
         if live is None:
             live = bool(getattr(self.stream, "isatty", lambda: False)())
         if live:
@@ -51,7 +51,6 @@ class Display:
                                       MofNCompleteColumn(), TimeElapsedColumn(),
                                       console=Console(file=self.stream), transient=True)
                 self._live.start()
-                self._task = self._live.add_task("starting", total=None, project="")
             except ImportError:
                 self._live = None
 
@@ -60,29 +59,33 @@ class Display:
 
     def __call__(self, project: str, what: str, i: int, n: int) -> None:
         now = time.perf_counter()
-        key = (project, phase_of(what))
-        changed = key != self.cur
+        phase = phase_of(what)
+        changed = self.cur.get(project, (None,))[0] != phase
         if changed:
-            self._finish_phase(now)
-            self.cur, self.phase_t0 = key, now
+            self._finish_phase(project, now)
+            self.cur[project] = (phase, now)
         if self._live is not None:
-            self._live.update(self._task, description=what, completed=i, total=n or None, project=project)
+            if project not in self._tasks:  # one line per project: projects may run side by side
+                self._tasks[project] = self._live.add_task(what, total=None, project=project)
+            self._live.update(self._tasks[project], description=what, completed=i, total=n or None)
             return
         if changed or (n and i >= n) or now - self.last_plain >= PLAIN_EVERY_S:
             self.last_plain = now
             count = f" ({i}/{n})" if n else ""
             print(self.line(f"[{project}] {what}{count} · {now - self.t0:.1f} s"), file=self.stream, flush=True)
 
-    def _finish_phase(self, now: float) -> None:
-        if self.cur is None or self._live is None:
+    def _finish_phase(self, project: str, now: float) -> None:
+        if project not in self.cur or self._live is None:
             return
-        project, phase = self.cur
-        self._live.console.print(f"[dim]{project}[/] {phase} done in {now - self.phase_t0:.1f} s")
+        phase, t0 = self.cur[project]
+        self._live.console.print(f"[dim]{project}[/] {phase} done in {now - t0:.1f} s")
 
     def close(self) -> None:
         """End the live display (the finished phases stay on the screen)."""
-        self._finish_phase(time.perf_counter())
-        self.cur = None
+        now = time.perf_counter()
+        for project in list(self.cur):
+            self._finish_phase(project, now)
+        self.cur = {}
         if self._live is not None:
             self._live.stop()
             self._live = None

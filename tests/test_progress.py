@@ -30,3 +30,26 @@ def test_summary_across_projects():
     text = summary([proj("pass", 10, 2), proj("fail", 5), SimpleNamespace(status="error", report=None)], 3.21)
     assert text == ("3 projects: 1 passed, 1 failed, 1 errors; 15 oracle calls (2 from the cache); 2 warnings; "
                     "3.2 s in all")
+
+
+def test_projects_side_by_side_keep_their_own_phases():
+    out = io.StringIO()
+    d = Display(out, live=False)
+    for k in range(1, 6):  # two projects' events interleaved, each within one phase
+        d("a", "oracle Walk", k, 5)
+        d("b", "regions of attraction", k, 5)
+    d.close()
+    lines = out.getvalue().splitlines()
+    assert [ln.split(" ", 1)[0] for ln in lines] == ["[a]", "[b]", "[a]", "[b]"]  # first and last of each
+    live = io.StringIO()
+    d = Display(live, live=True)
+    if d._live is None:  # rich not installed
+        return
+    d("a", "oracle Walk", 1, 5)
+    d("b", "regions of attraction", 1, 5)
+    d("a", "oracle Walk", 5, 5)
+    d("b", "traces", 0, 1)
+    d.close()
+    done = [ln for ln in live.getvalue().splitlines() if " done in " in ln]
+    assert [ln.split()[0] for ln in done] == ["b", "a", "b"]  # b's roa when it changed, then each at the end
+    assert len(d._tasks) == 2
