@@ -35,8 +35,9 @@ def rnd(v, digits: int = DIGITS):
         return float(f"{v:.{digits}g}") if math.isfinite(v) else None
     if isinstance(v, dict):
         return {k: rnd(x, digits) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [rnd(x, digits) for x in v]
+    if isinstance(v, (list, tuple)):  # the long series of traces: no recursive call per finite float
+        fmt = f"{{:.{digits}g}}".format
+        return [float(fmt(x)) if type(x) is float and -math.inf < x < math.inf else rnd(x, digits) for x in v]
     try:  # numpy scalars
         return rnd(float(v), digits)
     except (TypeError, ValueError):
