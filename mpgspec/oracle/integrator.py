@@ -24,12 +24,8 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .flow import active, jump_of, rk4, solve_or_keep, step_end, step_length, wrap
-from .jit import compile_cached, compile_many, cse_sx, with_cse
-
-
-INLINE_NODES = 4000
-"""Closed loops up to this many SX nodes are inlined (fastest code); larger ones become calls
-in an MX graph, so each Function is generated once and jit compilation stays quick."""
+from .jit import compile_cached, compile_many, cse_sx
+from .looplib import INLINE_NODES, attach, attached, build_all, libs_of, plain_loop
 
 
 def _sym(f: ca.Function, prim: CompiledPrimitive | None = None):
@@ -176,6 +172,8 @@ def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
         prim.sampled.steps(dt)
     key = (dt, K, jit, tuple(flags), with_state, boundaries, error)
     if key not in prim.cache:
+        if jit:  # a large loop through its compiled library
+            attach(prim)
         build = _build_doubling if error == "doubling" else _build_chunk
         prim.cache[key] = build(prim, dt, K, jit, flags, with_state, boundaries)
     return prim.cache[key]
@@ -191,8 +189,9 @@ def build_chunks(prims: list[CompiledPrimitive], dt: float, K: int, flags: tuple
     other, then gcc run side by side (compile_many). Chunks remembered on a primitive are reused."""
     key = (dt, K, True, tuple(flags), with_state, boundaries, error)
     new = list({id(p): p for p in prims if key not in p.cache}.values())
+    build_all(new)  # the large loops' libraries first, side by side
     raw = [build_chunk(p, dt, K, False, flags, with_state, boundaries, error) for p in new]
-    for p, c, fn in zip(new, raw, compile_many([c.fn for c in raw], flags)):
+    for p, c, fn in zip(new, raw, compile_many([c.fn for c in raw], flags, libs=[libs_of(p) for p in new])):
         p.cache[key] = dataclasses.replace(c, fn=fn, _maps={}, _buffers={})
     return [p.cache[key] for p in prims]
 
@@ -238,15 +237,25 @@ def _at_end(prim: CompiledPrimitive, start: ca.Function) -> ca.Function:
 
 def _loop(prim: CompiledPrimitive, held: bool = False) -> ca.Function:
     """The closed loop (x, t, s, x_sw) -> (xdot, h, u_raw, u), or with `held` the open loop loop_u
-    (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u); large SX loops with common subexpressions
-    eliminated, one Function object per primitive so that its code is generated once."""
-    loop = prim.loop_u if held else (prim.loop_raw or prim.loop)
-    key = "cse_loop_u" if held else "cse_loop"
-    if loop.is_a("SXFunction") and (loop.n_nodes() if held else prim.f_cl.n_nodes()) > INLINE_NODES:
-        if key not in prim.cache:
-            prim.cache[key] = with_cse(loop)
-        return prim.cache[key]
-    return loop
+    (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): from the primitive's loop library when one is
+    attached (looplib.py), else looplib.plain_loop."""
+    lib = attached(prim)
+    ext = lib.get("loop_u" if held else "loop") if lib is not None else None
+    return ext if ext is not None else plain_loop(prim, held)
+
+
+def _jump(prim: CompiledPrimitive) -> ca.Function:
+    """flow.jump_of, from the primitive's loop library when one is attached."""
+    lib = attached(prim)
+    return lib.get("jump") if lib is not None else jump_of(prim)
+
+
+def _sampled(prim: CompiledPrimitive):
+    """The primitive's sampled law, its solve from the loop library when one is attached."""
+    lib = attached(prim)
+    if lib is None or lib.get("solve") is None:
+        return prim.sampled
+    return dataclasses.replace(prim.sampled, solve=lib.get("solve"))
 
 
 def _xdot_of(loop: ca.Function) -> ca.Function:
@@ -298,7 +307,7 @@ def _hold(prim: CompiledPrimitive, dt: float, block, rollouts: list) -> tuple[li
     of the judged rollout (and of the companion). When c is 0 the law is solved from the warm start w
     and c restarts at m - 1 (m steps per control period); otherwise u and w are kept.
     """
-    law, nu = prim.sampled, prim.system.nu
+    law, nu = _sampled(prim), prim.system.nu
     if law is None:
         return [], block
     m, per = law.steps(dt), nu + law.nw
@@ -319,7 +328,7 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
                  with_state: bool, boundaries: bool) -> Chunk:
     body, nz = step_body(prim, dt, with_state, boundaries)
     fn = _accumulate("chunk_", prim, dt, K, with_state, boundaries, body, nz)
-    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, len(prim.h_names), prim.system.nu,
+    return Chunk(prim, dt, K, compile_cached(fn, flags, libs_of(prim)) if jit else fn, len(prim.h_names), prim.system.nu,
                  Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0))
 
 
@@ -327,8 +336,8 @@ def step_body(prim: CompiledPrimitive, dt: float, with_state: bool = False, boun
               doubling: bool = False) -> tuple[ca.Function, int]:
     """(z -> (z after one step, that step's outputs in Rows order), nz): one step of the chunk with
     error 'local' (or 'doubling'), remembered on the primitive so that every chunk built from it
-    shares it."""
-    key = ("body", dt, with_state, boundaries, doubling)
+    shares it (one body inlining the loop, one calling its library)."""
+    key = ("body", dt, with_state, boundaries, doubling, attached(prim) is not None)
     if key not in prim.cache:
         prim.cache[key] = (_doubling_body if doubling else _step_body)(prim, dt, with_state, boundaries)
     return prim.cache[key]
@@ -337,7 +346,7 @@ def step_body(prim: CompiledPrimitive, dt: float, with_state: bool = False, boun
 def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple[ca.Function, int]:
     nx, nh = prim.system.nx, len(prim.h_names)
     start, end, f = _ends(prim, prim.sampled is not None)
-    jump = jump_of(prim)
+    jump = _jump(prim)
     nz = 2 * nx + 2 + hold_size(prim)
     z = _sym(prim.f_cl, prim)("z", nz)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2]
@@ -382,7 +391,7 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
                     with_state: bool, boundaries: bool) -> Chunk:
     body, nz = step_body(prim, dt, with_state, boundaries, doubling=True)
     fn = _accumulate("chunk2_", prim, dt, K, with_state, boundaries, body, nz)
-    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, len(prim.h_names), prim.system.nu,
+    return Chunk(prim, dt, K, compile_cached(fn, flags, libs_of(prim)) if jit else fn, len(prim.h_names), prim.system.nu,
                  Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0, doubling=True))
 
 
@@ -398,7 +407,7 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     held = prim.sampled is not None
     start, _end, f = _ends(prim, held)
     loop = _loop(prim, held)
-    jump = jump_of(prim)
+    jump = _jump(prim)
     nz = 3 * nx + 2 + hold_size(prim, doubling=True)
     z = _sym(prim.f_cl, prim)("z", nz)
     x, t, s, xs, xc = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2], z[2 * nx + 2:3 * nx + 2]
