@@ -250,6 +250,13 @@ def _jump(prim: CompiledPrimitive) -> ca.Function:
     return lib.get("jump") if lib is not None else jump_of(prim)
 
 
+def _margin(prim: CompiledPrimitive) -> ca.Function:
+    """The RoA margin (x, t), from the primitive's loop library when it holds it."""
+    lib = attached(prim)
+    ext = lib.get("roa_margin") if lib is not None else None
+    return ext if ext is not None else prim.roa_margin
+
+
 def _sampled(prim: CompiledPrimitive):
     """The primitive's sampled law, its solve from the loop library when one is attached."""
     lib = attached(prim)
@@ -359,7 +366,7 @@ def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries:
     _k5, h1, d1, dh, e = end(x_end, t + te, s + te, xs, *U, k4, h)
     x_next = jump(x_end, u, t + h, s + h)
     act = active(prim, wrap(prim, t + h / 2), x, s, x_next, h)  # a step lies inside or outside each window
-    out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), dh, prim.roa_margin(x, t),
+    out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), dh, _margin(prim)(x, t),
                      ca.norm_2(e), s, h, u_raw, u, *([x] if with_state else []))
     # small SX loops: cse saves 1-8 % of C; an MX graph around a large loop (itself with cse) gains
     # nothing measurable from it (bench/bench_jit.py)
@@ -428,7 +435,7 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     h1c = loop(xc_end, t + te, s + te, xs, *Uc)[1]
     x_next, xc_next = jump(x_end, u, t + h, s + h), jump(xc_end, uc, t + h, s + h)
     act = active(prim, wrap(prim, t + h / 2), x, s, x_next, h)
-    m_f, m_c = prim.roa_margin(x, t), prim.roa_margin(xc, t)
+    m_f, m_c = _margin(prim)(x, t), _margin(prim)(xc, t)
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), ca.fabs(h1 - h1c), m_f,
                      ca.fabs(m_f - m_c), s, h, u_raw, u, *([x] if with_state else []), ca.fabs(h0 - h0c))
     return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out])), nz
@@ -444,8 +451,9 @@ def start_states(prim: CompiledPrimitive, x0s: np.ndarray, t0s: np.ndarray, doub
 
 def build_first(prim: CompiledPrimitive, dt: float, jit: bool = True) -> ca.Function:
     """z -> (h at the start with step 0's windows, RoA margin, u_raw, u), mapped over many start
-    points in one call: the data that decides rollouts already at their first sample."""
-    key = ("first", dt)
+    points in one call: the data that decides rollouts already at their first sample. A large loop
+    is not compiled here: it runs in CasADi's virtual machine, calling the loop library if attached."""
+    key = ("first", dt, attached(prim) is not None)
     if key not in prim.cache:
         nx = prim.system.nx
         start, _end, _f = _ends(prim)
@@ -457,7 +465,7 @@ def build_first(prim: CompiledPrimitive, dt: float, jit: bool = True) -> ca.Func
         act = active(prim, wrap(prim, t + h / 2), x, s, h=h)
         hm = ca.if_else(act, h0, INACTIVE) if prim.h_names else h0
         fn = ca.Function("first_" + hashlib.sha1(f"{prim.name}{dt}".encode()).hexdigest()[:10], [z],
-                         [hm, prim.roa_margin(x, t), u_raw, u])
+                         [hm, _margin(prim)(x, t), u_raw, u])
         small = prim.loop.is_a("SXFunction") and prim.f_cl.n_nodes() <= INLINE_NODES \
             and prim.roa_margin.is_a("SXFunction")
         prim.cache[key] = compile_cached(fn, ("-O1",)) if jit and small else fn  # large loops: not worth a compile

@@ -6,10 +6,11 @@ period map and the cross-check; inlined, each of them generates and compiles its
 is compiled once per primitive, with the other large per-primitive parts the chunks call:
 - loop (x, t, s, x_sw) -> (xdot, h, u_raw, u): the closed loop every safety function active
   (integrator._loop), or for a sampled law loop_u (..., u_held) and the law's solve;
-- jump (x, u, t, s) -> x: the discrete update after a step (flow.jump_of).
-The dependents call them through casadi.external and are linked against the library. Symbols and
-file carry the hash of the parts (and of the flags and CasADi's version), so what is compiled
-against the library changes when the loop does. The values are those of the inlined parts (the
+- jump (x, u, t, s) -> x: the discrete update after a step (flow.jump_of);
+- roa_margin (x, t) when it is large (a setpoint looked up in a gait's table), not a small SX one.
+The dependents call them through casadi.external and are linked against the library. Its symbols
+carry the hash of the primitive's content (and of the flags and CasADi's version), its file the
+hash of its code, so what is compiled against the library changes when the loop does. The values are those of the inlined parts (the
 same expressions, evaluated in the same order).
 
 build_all compiles the libraries of several primitives side by side (code generated in this
@@ -74,13 +75,17 @@ def is_large(prim: CompiledPrimitive) -> bool:
     return not (prim.f_cl.is_a("SXFunction") and prim.f_cl.n_nodes() <= INLINE_NODES)
 
 
+def _kinds(prim: CompiledPrimitive) -> tuple[str, ...]:
+    """The parts of the primitive's library (see the module's docstring)."""
+    big_margin = not prim.roa_margin.is_a("SXFunction") or prim.roa_margin.n_nodes() > INLINE_NODES
+    return (("loop",) if prim.sampled is None else ("loop_u", "solve")) + ("jump",) + \
+        (("roa_margin",) if big_margin else ())  # e.g. x*(t) looked up in a gait's table
+
+
 def _parts(prim: CompiledPrimitive) -> dict[str, ca.Function]:
-    if prim.sampled is None:
-        parts = {"loop": plain_loop(prim)}
-    else:
-        parts = {"loop_u": plain_loop(prim, True), "solve": prim.sampled.solve}
-    parts["jump"] = jump_of(prim)
-    return parts
+    make = {"loop": lambda: plain_loop(prim), "loop_u": lambda: plain_loop(prim, True),
+            "solve": lambda: prim.sampled.solve, "jump": lambda: jump_of(prim), "roa_margin": lambda: prim.roa_margin}
+    return {k: make[k]() for k in _kinds(prim)}
 
 
 def _renamed(fn: ca.Function, name: str) -> ca.Function:
@@ -92,15 +97,16 @@ def _renamed(fn: ca.Function, name: str) -> ca.Function:
     return ca.Function(name, a, fn.call(a), fn.name_in(), fn.name_out())
 
 
-def _tag(prim: CompiledPrimitive, flags: tuple[str, ...]) -> tuple[str, dict]:
-    """(the library's name: the hash of its parts, the flags and CasADi's version; the parts)."""
-    if ("looplib_parts", flags) not in prim.cache:
-        parts = _parts(prim)
-        digest = hashlib.sha256(" ".join((*flags, ca.__version__)).encode())
-        for kind, fn in parts.items():
-            digest.update(kind.encode() + fn.serialize().encode())
-        prim.cache[("looplib_parts", flags)] = (f"loop_{digest.hexdigest()[:16]}", parts)
-    return prim.cache[("looplib_parts", flags)]
+LAYOUT = 1
+"""Version of what a library holds and how its parts are built (part of its name)."""
+
+
+def _tag(prim: CompiledPrimitive, flags: tuple[str, ...]) -> str:
+    """The library's name: the hash of the closed loop's content (CompiledPrimitive.digest: every
+    Function the parts are built from), the parts, the flags, LAYOUT and CasADi's version. Cheap:
+    a process that finds the library compiled loads it without building its parts."""
+    text = " ".join((prim.digest(), *_kinds(prim), *flags, str(LAYOUT), str(INLINE_NODES), ca.__version__))
+    return f"loop_{hashlib.sha256(text.encode()).hexdigest()[:16]}"
 
 
 def _index(tag: str) -> Path:
@@ -127,16 +133,16 @@ def build_all(prims, flags: tuple[str, ...] = LOOP_FLAGS) -> None:
     for p in {id(p): p for p in prims}.values():
         if not is_large(p) or "looplib" in p.cache:
             continue
-        tag, parts = _tag(p, flags)
+        tag = _tag(p, flags)
         path = _known(tag)
         if path is not None:
-            p.cache["looplib"] = _load(tag, parts, path)
+            p.cache["looplib"] = _load(tag, _kinds(p), path)
             continue
-        named = [_renamed(fn, f"{tag}_{k}") for k, fn in parts.items()]
-        todo.append((p, tag, parts))
+        named = [_renamed(fn, f"{tag}_{k}") for k, fn in _parts(p).items()]
+        todo.append((p, tag))
         jobs.append(library_job(tag, named, flags))
-    for (p, tag, parts), path in zip(todo, compile_libraries(jobs)):
-        p.cache["looplib"] = None if path is None else _load(tag, parts, path)
+    for (p, tag), path in zip(todo, compile_libraries(jobs)):
+        p.cache["looplib"] = None if path is None else _load(tag, _kinds(p), path)
         if path is not None:
             with _LOCK:
                 _write_index(tag, path)
