@@ -59,7 +59,7 @@ class HybridFlow:
         body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn)])
         zz = ca.MX.sym("z", nx + 2)  # one compiled Function: a period, every step's state out
         self.period_fn = compile_cached(ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)]),
-                                        ("-O1",), looplib.libs_of(prim))
+                                        looplib.caller_flags(prim, ("-O1",)), looplib.libs_of(prim))
 
     def states(self, x0: np.ndarray, t0: float = 0.0) -> np.ndarray:
         """[x; t; least h] after each step of one period from x0 at clock t0 (columns)."""

@@ -25,7 +25,7 @@ import numpy as np
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .flow import active, jump_of, rk4, solve_or_keep, step_end, step_length, wrap
 from .jit import compile_cached, compile_many, cse_sx
-from .looplib import INLINE_NODES, attach, attached, build_all, libs_of, plain_loop
+from .looplib import INLINE_NODES, attach, attached, build_all, caller_flags, libs_of, plain_loop
 
 
 def _sym(f: ca.Function, prim: CompiledPrimitive | None = None):
@@ -191,8 +191,13 @@ def build_chunks(prims: list[CompiledPrimitive], dt: float, K: int, flags: tuple
     new = list({id(p): p for p in prims if key not in p.cache}.values())
     build_all(new)  # the large loops' libraries first, side by side
     raw = [build_chunk(p, dt, K, False, flags, with_state, boundaries, error) for p in new]
-    for p, c, fn in zip(new, raw, compile_many([c.fn for c in raw], flags, libs=[libs_of(p) for p in new])):
-        p.cache[key] = dataclasses.replace(c, fn=fn, _maps={}, _buffers={})
+    by_flags: dict = {}  # chunks calling a library are compiled with other flags (looplib.CALLER_FLAGS)
+    for p, c in zip(new, raw):
+        by_flags.setdefault(caller_flags(p, flags), []).append((p, c))
+    for fl, group in by_flags.items():
+        fns = compile_many([c.fn for _p, c in group], fl, libs=[libs_of(p) for p, _c in group])
+        for (p, c), fn in zip(group, fns):
+            p.cache[key] = dataclasses.replace(c, fn=fn, _maps={}, _buffers={})
     return [p.cache[key] for p in prims]
 
 
@@ -335,7 +340,7 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
                  with_state: bool, boundaries: bool) -> Chunk:
     body, nz = step_body(prim, dt, with_state, boundaries)
     fn = _accumulate("chunk_", prim, dt, K, with_state, boundaries, body, nz)
-    return Chunk(prim, dt, K, compile_cached(fn, flags, libs_of(prim)) if jit else fn, len(prim.h_names), prim.system.nu,
+    return Chunk(prim, dt, K, compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn, len(prim.h_names), prim.system.nu,
                  Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0))
 
 
@@ -398,7 +403,7 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
                     with_state: bool, boundaries: bool) -> Chunk:
     body, nz = step_body(prim, dt, with_state, boundaries, doubling=True)
     fn = _accumulate("chunk2_", prim, dt, K, with_state, boundaries, body, nz)
-    return Chunk(prim, dt, K, compile_cached(fn, flags, libs_of(prim)) if jit else fn, len(prim.h_names), prim.system.nu,
+    return Chunk(prim, dt, K, compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn, len(prim.h_names), prim.system.nu,
                  Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0, doubling=True))
 
 

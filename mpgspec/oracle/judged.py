@@ -25,7 +25,7 @@ import numpy as np
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .integrator import Rows, step_body
 from .jit import compile_cached, compile_many, cse_sx
-from .looplib import attach, libs_of
+from .looplib import attach, caller_flags, libs_of
 from .verdict import LANES, Block, Carry, Decision, evidences, lane_sum
 
 KINDS = ("", "safe", "left_C", "non_finite", "horizon", "doubt", "doubt_E")
@@ -267,7 +267,7 @@ def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: 
         if jit:  # a large loop through its compiled library
             attach(prim)
         fn, nz, lay = _judged_function(prim, dt, K, B, tol, cm, doubling)
-        prim.cache[key] = JudgedChunk(prim, dt, compile_cached(fn, flags, libs_of(prim)) if jit else fn, nz, lay, K,
+        prim.cache[key] = JudgedChunk(prim, dt, compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn, nz, lay, K,
                                       doubling)
     return prim.cache[key]
 
@@ -302,9 +302,13 @@ def prebuild(prims: list[CompiledPrimitive], dt: float, K: int, B: int, tol: flo
     for p in new:
         attach(p)  # attached libraries are found at once; build_all compiled the rest side by side
     built = [(p, *_judged_function(p, dt, K, B, tol, margins[p.name], doubling)) for p in new]
-    fns = compile_many([b[1] for b in built], flags, libs=[libs_of(p) for p in new])
-    for (p, _fn, nz, lay), fn in zip(built, fns):
-        p.cache[key(p)] = JudgedChunk(p, dt, fn, nz, lay, K, doubling)
+    by_flags: dict = {}  # chunks calling a library are compiled with other flags (looplib.CALLER_FLAGS)
+    for b in built:
+        by_flags.setdefault(caller_flags(b[0], flags), []).append(b)
+    for fl, group in by_flags.items():
+        fns = compile_many([b[1] for b in group], fl, libs=[libs_of(b[0]) for b in group])
+        for (p, _fn, nz, lay), fn in zip(group, fns):
+            p.cache[key(p)] = JudgedChunk(p, dt, fn, nz, lay, K, doubling)
 
 
 def decided_evidence(ch: JudgedChunk, J: np.ndarray, t0s, cm: float) -> list:
