@@ -59,7 +59,7 @@ def build(prim, settings, inline: bool) -> tuple:
     c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     recs = [json.loads(line) for line in open(log)]
     return p, judged, {"c_bytes": sum(r["c_bytes"] for r in recs),
-                       "lib_bytes": sum(r["c_bytes"] for r in recs if r["name"].startswith("loop_")),
+                       "lib_bytes": sum(r["c_bytes"] for r in recs if r["name"].startswith(("loop_", "margin_"))),
                        "gcc_cpu_s": (c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime)}
 
 

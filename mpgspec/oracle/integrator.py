@@ -5,7 +5,9 @@ returns, for each step's start state, the safety functions h, the RoA margin and
 The chunk is jit-compiled once with the machine's C compiler; batches of start points are
 evaluated by mapping the compiled chunk, so one Python call advances many rollouts. The step
 itself (RK4, the jump, the step-end rule, the boundaries, the windows) is oracle/flow.py's; this
-module adds the error estimates, the rates of h and the compiled chunks.
+module adds the error estimates, the rates of h and the compiled chunks. With jit, a large closed
+loop, its jump and a large RoA margin are called from the primitive's loop library (looplib.py),
+compiled once and shared by every chunk; the chunks' own code then compiles at -O0.
 
 A primitive whose law is sampled (compile/hold.py: an optimisation-based law with a control rate)
 is rolled out under a zero-order hold: the law is solved at the start of every m-th step (m =

@@ -14,6 +14,10 @@ library (a robot's dynamics, built once); compile_many(fns, flags, libs=[...]) l
 call it (casadi.external of the library) against it. The library's path, which the dependents' C
 code names through its symbols, carries the hash of its code.
 
+library_job(name, fns, flags) generates a library's code and compile_libraries(jobs) compiles
+several side by side (gcc only: it may run in a background thread); the loop libraries
+(looplib.py) are built this way.
+
 with_cse(fn) rebuilds a Function with CasADi's common-subexpression elimination (`cse`): for the
 robot's generated loops smaller C, less gcc time and faster steps (bench/bench_jit.py). cse(fn) does
 so unless CSE is off (only to measure what it saves).

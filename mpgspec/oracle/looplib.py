@@ -8,9 +8,11 @@ is compiled once per primitive, with the other large per-primitive parts the chu
   (integrator._loop), or for a sampled law loop_u (..., u_held) and the law's solve;
 - jump (x, u, t, s) -> x: the discrete update after a step (flow.jump_of);
 - roa_margin (x, t) when it is large (a setpoint looked up in a gait's table), not a small SX one.
-The dependents call them through casadi.external and are linked against the library. Its symbols
-carry the hash of the primitive's content (and of the flags and CasADi's version), its file the
-hash of its code, so what is compiled against the library changes when the loop does. The values are those of the inlined parts (the
+A large RoA margin is a library of its own (E is sized after the loop is compiled: the loop's
+library then serves both the sizing and the graph). The dependents call them through
+casadi.external and are linked against them. Symbols carry the hash of the Functions the parts are
+built from (and of the flags and CasADi's version), files the hash of their code, so what is
+compiled against a library changes when the loop does. The values are those of the inlined parts (the
 same expressions, evaluated in the same order).
 
 build_all compiles the libraries of several primitives side by side (code generated in this
@@ -52,9 +54,10 @@ _LOCK = threading.Lock()
 
 @dataclass(frozen=True)
 class LoopLibrary:
-    """A primitive's compiled loop library: its path and its Functions by kind (externals)."""
+    """A primitive's compiled loop library: its files (the loop's and, when large, the RoA margin's)
+    and its Functions by kind (externals)."""
 
-    path: Path
+    paths: tuple[Path, ...]
     fns: dict
 
     def get(self, kind: str) -> ca.Function | None:
@@ -81,17 +84,10 @@ def is_large(prim: CompiledPrimitive) -> bool:
     return not (prim.f_cl.is_a("SXFunction") and prim.f_cl.n_nodes() <= INLINE_NODES)
 
 
-def _kinds(prim: CompiledPrimitive) -> tuple[str, ...]:
-    """The parts of the primitive's library (see the module's docstring)."""
-    big_margin = not prim.roa_margin.is_a("SXFunction") or prim.roa_margin.n_nodes() > INLINE_NODES
-    return (("loop",) if prim.sampled is None else ("loop_u", "solve")) + ("jump",) + \
-        (("roa_margin",) if big_margin else ())  # e.g. x*(t) looked up in a gait's table
-
-
-def _parts(prim: CompiledPrimitive) -> dict[str, ca.Function]:
+def _parts(prim: CompiledPrimitive, kinds: tuple[str, ...]) -> dict[str, ca.Function]:
     make = {"loop": lambda: plain_loop(prim), "loop_u": lambda: plain_loop(prim, True),
             "solve": lambda: prim.sampled.solve, "jump": lambda: jump_of(prim), "roa_margin": lambda: prim.roa_margin}
-    return {k: make[k]() for k in _kinds(prim)}
+    return {k: make[k]() for k in kinds}
 
 
 def _renamed(fn: ca.Function, name: str) -> ca.Function:
@@ -107,12 +103,29 @@ LAYOUT = 1
 """Version of what a library holds and how its parts are built (part of its name)."""
 
 
-def _tag(prim: CompiledPrimitive, flags: tuple[str, ...]) -> str:
-    """The library's name: the hash of the closed loop's content (CompiledPrimitive.digest: every
-    Function the parts are built from), the parts, the flags, LAYOUT and CasADi's version. Cheap:
-    a process that finds the library compiled loads it without building its parts."""
-    text = " ".join((prim.digest(), *_kinds(prim), *flags, str(LAYOUT), str(INLINE_NODES), ca.__version__))
-    return f"loop_{hashlib.sha256(text.encode()).hexdigest()[:16]}"
+def _units(prim: CompiledPrimitive, flags: tuple[str, ...]) -> list[tuple[str, tuple[str, ...]]]:
+    """(name, kinds) of the primitive's libraries: its loop's and, when large (x*(t) looked up in a
+    gait's table), its RoA margin's, apart because E is sized after the loop is compiled. A name is
+    the hash of the Functions its parts are built from, the kinds, the flags, LAYOUT and CasADi's
+    version: a process that finds a library compiled loads it without building its parts."""
+    key = ("looplib_units", flags)
+    if key not in prim.cache:
+        kinds = (("loop",) if prim.sampled is None else ("loop_u", "solve")) + ("jump",)
+        sources = [prim.loop_raw or prim.loop, prim.f_cl, prim.loop_u, jump_of(prim)] + \
+            ([prim.sampled.solve] if prim.sampled is not None else [])
+        units = [(_name("loop", sources, kinds, flags), kinds)]
+        if not prim.roa_margin.is_a("SXFunction") or prim.roa_margin.n_nodes() > INLINE_NODES:
+            units.append((_name("margin", [prim.roa_margin], ("roa_margin",), flags), ("roa_margin",)))
+        prim.cache[key] = units
+    return prim.cache[key]
+
+
+def _name(prefix: str, sources: list, kinds: tuple[str, ...], flags: tuple[str, ...]) -> str:
+    digest = hashlib.sha256(" ".join((*kinds, *flags, str(LAYOUT), str(INLINE_NODES), ca.__version__)).encode())
+    for fn in sources:
+        if fn is not None:
+            digest.update(fn.serialize().encode())
+    return f"{prefix}_{digest.hexdigest()[:16]}"
 
 
 def _index(tag: str) -> Path:
@@ -128,30 +141,36 @@ def _known(tag: str) -> Path | None:
     return path if path.exists() else None
 
 
-def _load(tag: str, kinds, path: Path) -> LoopLibrary:
-    return LoopLibrary(path, {k: ca.external(f"{tag}_{k}", str(path)) for k in kinds})
+def _load(units: list, paths: list) -> LoopLibrary | None:
+    """The library of compiled units (None when one of them failed: the primitive stays inlined)."""
+    if any(path is None for path in paths):
+        return None
+    fns = {k: ca.external(f"{tag}_{k}", str(path)) for (tag, kinds), path in zip(units, paths) for k in kinds}
+    return LoopLibrary(tuple(paths), fns)
 
 
 def build_all(prims, flags: tuple[str, ...] = LOOP_FLAGS) -> None:
     """Compile the loop libraries of the large primitives side by side (their code generated here,
     gcc in up to the usable cores) and attach each to its primitive. A failure leaves it inlined."""
-    todo, jobs = [], []
+    todo, jobs, new = [], [], {}
     for p in {id(p): p for p in prims}.values():
         if not is_large(p) or "looplib" in p.cache:
             continue
-        tag = _tag(p, flags)
-        path = _known(tag)
-        if path is not None:
-            p.cache["looplib"] = _load(tag, _kinds(p), path)
-            continue
-        named = [_renamed(fn, f"{tag}_{k}") for k, fn in _parts(p).items()]
-        todo.append((p, tag))
-        jobs.append(library_job(tag, named, flags))
-    for (p, tag), path in zip(todo, compile_libraries(jobs)):
-        p.cache["looplib"] = None if path is None else _load(tag, _kinds(p), path)
-        if path is not None:
+        units = _units(p, flags)
+        paths = [_known(tag) for tag, _kinds in units]
+        for (tag, kinds), path in zip(units, paths):
+            if path is None and tag not in new:  # the same library for two primitives is compiled once
+                new[tag] = len(jobs)
+                jobs.append(library_job(tag, [_renamed(fn, f"{tag}_{k}") for k, fn in _parts(p, kinds).items()],
+                                        flags))
+        todo.append((p, units, paths))
+    built = compile_libraries(jobs)
+    for tag, i in new.items():
+        if built[i] is not None:
             with _LOCK:
-                _write_index(tag, path)
+                _write_index(tag, built[i])
+    for p, units, paths in todo:
+        p.cache["looplib"] = _load(units, [path or built[new[tag]] for (tag, _k), path in zip(units, paths)])
 
 
 def _write_index(tag: str, path: Path) -> None:
@@ -184,7 +203,7 @@ def caller_flags(prim: CompiledPrimitive, flags: tuple[str, ...]) -> tuple[str, 
 def libs_of(prim: CompiledPrimitive) -> tuple[Path, ...]:
     """What a Function built from the primitive's attached library links against."""
     lib = attached(prim)
-    return (lib.path,) if lib is not None else ()
+    return lib.paths if lib is not None else ()
 
 
 def windowed(prim: CompiledPrimitive, h_all, x, t, s):

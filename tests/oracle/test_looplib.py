@@ -5,13 +5,16 @@ machine evaluating prim.loop."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from mpgspec.api import compile_project
 from mpgspec.oracle import looplib
 from mpgspec.oracle.integrator import build_chunk, initial_state, start_states
 from mpgspec.oracle.judged import build_judged_chunk
+from mpgspec.spec.loader import load_project
 
 NAME = "Walk(slow)"
 
@@ -69,3 +72,21 @@ def test_crosscheck_law_equals_the_virtual_machine(walk):
             h, u = law(x, t, s_, X[0])
             np.testing.assert_array_equal(np.asarray(h, float), np.asarray(h_vm, float))
             np.testing.assert_array_equal(np.asarray(u, float), np.asarray(u_vm, float))
+
+
+def test_without_a_compiler_the_loop_stays_inlined(a1_project, tmp_path, monkeypatch):
+    """gcc failing: no library is attached (with a warning), so chunks inline the loop as before."""
+    monkeypatch.setenv("MPGSPEC_CACHE", str(tmp_path))
+    monkeypatch.setenv("CC", "false")
+    p = dataclasses.replace(a1_project[1][NAME], cache={})
+    with pytest.warns(UserWarning, match="compiling (loop|margin)_"):
+        assert looplib.attach(p) is None
+    assert looplib.libs_of(p) == () and looplib.caller_flags(p, ("-O1",)) == ("-O1",)
+    assert looplib.law(p) is None
+
+
+def test_small_loops_have_no_library(a1_project):
+    """Only loops called from MX graphs get a library; a pendulum-sized loop stays inlined SX."""
+    prims = compile_project(load_project(Path(__file__).parents[2] / "specs" / "pendulum" / "project.yaml"))
+    assert not any(looplib.is_large(p) for p in prims.values())
+    assert all(looplib.is_large(p) for p in a1_project[1].values())
