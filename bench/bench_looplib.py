@@ -1,6 +1,7 @@
 """Benchmark of the loop library (mpgspec/oracle/looplib.py): A1 primitives' oracle (judged) chunk and
 trace chunk with the closed loop and jump inlined in each against both calling one compiled loop
-library, and the cross-check's law in CasADi's virtual machine against the library, in one process.
+library, and the cross-check's law in CasADi's virtual machine against the library (per call, and
+one second of a MuJoCo replay of the first primitive), in one process.
 
     python bench/bench_looplib.py                               # Walk(slow) and Stand, a few minutes
     python bench/bench_looplib.py --prims 'Walk(slow)' Jump --no-write
@@ -35,6 +36,9 @@ import common  # noqa: E402  (bench/common.py)
 from common import markdown_table, rounds, stamp, write_section  # noqa: E402
 
 from mpgspec.api import settings_for  # noqa: E402
+from mpgspec.execute.crosscheck import CrossCheckSettings  # noqa: E402
+from mpgspec.execute.crosscheck.mjcf import build_robot  # noqa: E402
+from mpgspec.execute.crosscheck.replay import replay  # noqa: E402
 from mpgspec.oracle import looplib  # noqa: E402
 from mpgspec.oracle.integrator import build_chunk, start_states  # noqa: E402
 from mpgspec.oracle.judged import build_judged_chunk  # noqa: E402
@@ -97,6 +101,23 @@ def compare(name: str, prim, settings, n: int, repeats: int) -> list[tuple[str, 
     return rows, same
 
 
+def replay_rows(prims: dict, name: str, duration: float, repeats: int) -> tuple[list, bool]:
+    """One replay in MuJoCo of `name` from x*(0) for `duration` s: its law in CasADi's virtual machine
+    (no library attached) against the loop library; the replays' states must be equal."""
+    xs = CrossCheckSettings()
+    robot = build_robot(prims[name].system, xs)
+    sides = {"vm": dataclasses.replace(prims[name], cache={"looplib": None}),
+             "library": dataclasses.replace(prims[name], cache={})}
+    looplib.attach(sides["library"])
+    switches = [{"t": 0.0, "to": name, "clock": 0.0}]
+    runs = {k: replay(robot, {name: p}, switches, duration, xs) for k, p in sides.items()}
+    same = np.array_equal(runs["vm"].x, runs["library"].x, equal_nan=True)
+    t = {k: statistics.median(v) for k, v in rounds(
+        {k: (lambda p=p: replay(robot, {name: p}, switches, duration, xs)) for k, p in sides.items()}, repeats).items()}
+    return [(f"{name}: cross-check replay, {duration:g} s", f"virtual machine {t['vm']:.2f} s; library "
+             f"{t['library']:.2f} s, **{t['vm'] / t['library']:.2f}x** faster; states equal: {same}")], same
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--prims", nargs="+", default=["Walk(slow)", "Stand"])
@@ -113,6 +134,9 @@ def main(argv=None) -> int:
         r, same = compare(name, prims[name], settings, a.rollouts, a.repeats)
         rows += r
         ok = ok and same
+    r, same = replay_rows(prims, a.prims[0], 1.0, a.repeats)
+    rows += r
+    ok = ok and same
     table = markdown_table(rows)
     mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
     head = stamp(mach, "bench_looplib.py --prims " + " ".join(f"'{p}'" for p in a.prims), False, a.repeats,
