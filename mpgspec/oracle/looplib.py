@@ -40,8 +40,10 @@ INLINE_NODES = 4000
 in an MX graph, so each Function is generated once and jit compilation stays quick."""
 
 LOOP_FLAGS = ("-O1",)
-"""gcc flags of a loop library. Measured on Walk(slow)'s (0.8 MB of C, 2 shared cores): -O1 3.5 CPU-s,
--O2 5.1 CPU-s for judged chunks 10-20 % faster; -O1 keeps gcc low, as each build compiles eight."""
+"""gcc flags of a loop library. Measured (bench/bench_looplib.py, 2 shared cores): -O2 costs 1.3-2.5
+CPU-s more per library (Walk(slow)'s 0.8 MB: 3.5 against 5.1 s) and its judged chunks ran 0.88-1.08x
+the inlined ones' speed against 0.86-0.91x at -O1, within the machine's noise; -O1 keeps gcc low,
+as the A1 compiles eight."""
 
 CALLER_FLAGS = ("-O0",)
 """gcc flags of a Function whose large parts are calls into a loop library (a judged or trace chunk,
