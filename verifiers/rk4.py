@@ -22,7 +22,7 @@ from mpgspec.compile.primitive import CompiledPrimitive
 from mpgspec.oracle.backend import HYBRID
 from mpgspec.oracle.evidence import OracleEvidence, Reason
 from mpgspec.oracle.integrator import Chunk, build_chunk, build_first, start_states
-from mpgspec.oracle.judged import LANES, JudgedChunk, build_judged_chunk, decided_evidence
+from mpgspec.oracle.judged import LANES, JudgedChunk, build_judged_chunk, decided_evidence, prebuild
 from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidences, judge
 from mpgspec.settings import OracleSettings
 
@@ -280,6 +280,16 @@ class RK4Backend:
     @staticmethod
     def runner(prim: CompiledPrimitive, settings: OracleSettings) -> RK4Runner:
         return RK4Runner(prim, settings)
+
+    @staticmethod
+    def prebuild(prims: list[CompiledPrimitive], settings: OracleSettings) -> None:
+        """The judged chunks RK4Runner builds first, of every primitive at once (gcc side by side)."""
+        K = math.gcd(JUDGED_STEPS, settings.chunk)
+        if settings.jit and K % LANES == 0:
+            doubling = settings.error == "doubling"
+            margins = {p.name: 1.0 if doubling else margin_gain(p) for p in prims}
+            prebuild(prims, settings.dt, K, settings.chunk, settings.h_tolerance, margins, tuple(settings.jit_flags),
+                     doubling)
 
 
 backend = RK4Backend()

@@ -16,10 +16,26 @@ import numpy as np
 from ..compile.rigidbody.symmetry import reduced_monodromy
 from ..compile.contacts import Schedule
 from ..oracle.flow import LEFT, rk4_jump
+from ..oracle import looplib
 from ..oracle.jit import compile_cached, cse_sx
 
 FD = 1e-6
 S_LONG = 1e6  # time since switch-in: long after any motion profile
+
+
+def _parts(prim, xs0: np.ndarray) -> tuple:
+    """(f(x, t), k(x, t), jump, h(x, t)) of the settled loop: through the primitive's loop library
+    (looplib.py: one compiled closed loop, h with its windows applied) when it has one, else
+    f_cl, control and h inlined."""
+    lib = looplib.attach(prim)
+    if lib is not None and lib.get("loop") is not None:
+        loop = lib.get("loop")
+        h_of = lambda xx, tt: looplib.windowed(prim, loop(xx, tt, S_LONG, xs0)[1], xx, tt, S_LONG)  # noqa: E731
+        return (lambda xx, tt: loop(xx, tt, S_LONG, xs0)[0], lambda xx, tt: loop(xx, tt, S_LONG, xs0)[3],
+                lib.get("jump"), h_of)
+    f_cl, ctrl, jump, h_fn = (cse_sx(g) for g in (prim.f_cl, prim.control, prim.jump, prim.h))
+    return (lambda xx, tt: f_cl(xx, tt, S_LONG, xs0), lambda xx, tt: ctrl(xx, tt, S_LONG, xs0)[1], jump,
+            lambda xx, tt: h_fn(xx, tt, S_LONG, xs0))
 
 
 class HybridFlow:
@@ -35,17 +51,15 @@ class HybridFlow:
         xs0 = np.array(prim.setpoint(0.0), float).ravel()
         z = ca.MX.sym("z", nx + 2)  # [x; t; min h so far]
         x, t, m = z[:nx], z[nx], z[nx + 1]
-        f_cl, ctrl, jump, h_fn = (cse_sx(g) for g in (prim.f_cl, prim.control, prim.jump, prim.h))
-        f = lambda xx, tt: f_cl(xx, tt, S_LONG, xs0)  # noqa: E731
-        k = lambda xx, tt: ctrl(xx, tt, S_LONG, xs0)[1]  # noqa: E731
+        f, k, jump, h_of = _parts(prim, xs0)
         h = self.dt
         xn = rk4_jump(f, k, jump, x, t, h, LEFT if isinstance(prim.contacts, Schedule) else 0.0)
-        hv = h_fn(xn, t + h, S_LONG, xs0)
+        hv = h_of(xn, t + h)
         mn = ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
         body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn)])
         zz = ca.MX.sym("z", nx + 2)  # one compiled Function: a period, every step's state out
         self.period_fn = compile_cached(ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)]),
-                                        ("-O1",))
+                                        looplib.caller_flags(prim, ("-O1",)), looplib.libs_of(prim))
 
     def states(self, x0: np.ndarray, t0: float = 0.0) -> np.ndarray:
         """[x; t; least h] after each step of one period from x0 at clock t0 (columns)."""

@@ -33,7 +33,9 @@ class Runner(Protocol):
 
 @runtime_checkable
 class OracleBackend(Protocol):
-    """A named oracle backend with its declared capabilities and a factory of runners."""
+    """A named oracle backend with its declared capabilities and a factory of runners. It may also
+    offer prebuild(prims, settings): compile what its runners need for all primitives at once
+    (the executors call it before the oracle's tasks run; not part of the required contract)."""
 
     name: str
     description: str

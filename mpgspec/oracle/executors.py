@@ -25,7 +25,9 @@ from ..errors import UsageError
 from ..settings import OracleSettings
 from .cache import CachedExecutor
 from .evidence import OracleEvidence, Reason
+from .looplib import build_all
 from .oracle import SafetyOracle
+from .registry import get_backend
 from .tasks import Executor, Failed, Task, call
 
 TASKS_PER_WORKER = 4
@@ -61,6 +63,23 @@ def evaluate(oracles: dict, prims: dict[str, CompiledPrimitive], settings: Oracl
                 for _ in range(len(task))]
 
 
+def prebuild(prims, settings: OracleSettings, tasks) -> None:
+    """Before the tasks run: the loop libraries and what the oracle backend compiles first (when it
+    offers `prebuild`) of every target, compiled side by side in this process (its workers fork
+    from it, or find them in the compile cache). A failure here is left to the tasks, which build
+    again and report their own errors."""
+    if not (settings.jit and tasks):
+        return
+    targets = [prims[name] for name in dict.fromkeys(t.target for t in tasks)]
+    try:
+        build_all(targets)
+        fn = getattr(get_backend(settings.method), "prebuild", None)
+        if fn is not None:
+            fn(targets, settings)
+    except Exception:  # noqa: BLE001 - see the docstring
+        pass
+
+
 class InProcess:
     """All tasks in this process, one after the other; compiled oracles are kept for later calls."""
 
@@ -70,6 +89,7 @@ class InProcess:
         self.oracles: dict = {}
 
     def run(self, prims, settings, tasks, progress=None):
+        prebuild(prims, settings, tasks)
         out = []
         for k, task in enumerate(tasks):
             if progress:
@@ -133,6 +153,7 @@ class ProcessPool:
         self.workers = max(1, int(workers))
 
     def run(self, prims, settings, tasks, progress=None):
+        prebuild(prims, settings, tasks)
         pool = ProcessPoolExecutor(max_workers=self.workers, initializer=_init, initargs=(prims, settings))
         return _collect(pool, [(_run, t) for t in tasks], progress, f"oracle on {self.workers} processes")
 

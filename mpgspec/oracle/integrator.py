@@ -5,7 +5,9 @@ returns, for each step's start state, the safety functions h, the RoA margin and
 The chunk is jit-compiled once with the machine's C compiler; batches of start points are
 evaluated by mapping the compiled chunk, so one Python call advances many rollouts. The step
 itself (RK4, the jump, the step-end rule, the boundaries, the windows) is oracle/flow.py's; this
-module adds the error estimates, the rates of h and the compiled chunks.
+module adds the error estimates, the rates of h and the compiled chunks. With jit, a large closed
+loop, its jump and a large RoA margin are called from the primitive's loop library (looplib.py),
+compiled once and shared by every chunk; the chunks' own code then compiles at -O0.
 
 A primitive whose law is sampled (compile/hold.py: an optimisation-based law with a control rate)
 is rolled out under a zero-order hold: the law is solved at the start of every m-th step (m =
@@ -24,12 +26,8 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .flow import active, jump_of, rk4, solve_or_keep, step_end, step_length, wrap
-from .jit import compile_cached, compile_many, cse_sx, with_cse
-
-
-INLINE_NODES = 4000
-"""Closed loops up to this many SX nodes are inlined (fastest code); larger ones become calls
-in an MX graph, so each Function is generated once and jit compilation stays quick."""
+from .jit import compile_cached, compile_many, cse_sx
+from .looplib import INLINE_NODES, attach, attached, build_all, caller_flags, libs_of, plain_loop
 
 
 def _sym(f: ca.Function, prim: CompiledPrimitive | None = None):
@@ -176,6 +174,8 @@ def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
         prim.sampled.steps(dt)
     key = (dt, K, jit, tuple(flags), with_state, boundaries, error)
     if key not in prim.cache:
+        if jit:  # a large loop through its compiled library
+            attach(prim)
         build = _build_doubling if error == "doubling" else _build_chunk
         prim.cache[key] = build(prim, dt, K, jit, flags, with_state, boundaries)
     return prim.cache[key]
@@ -191,9 +191,15 @@ def build_chunks(prims: list[CompiledPrimitive], dt: float, K: int, flags: tuple
     other, then gcc run side by side (compile_many). Chunks remembered on a primitive are reused."""
     key = (dt, K, True, tuple(flags), with_state, boundaries, error)
     new = list({id(p): p for p in prims if key not in p.cache}.values())
+    build_all(new)  # the large loops' libraries first, side by side
     raw = [build_chunk(p, dt, K, False, flags, with_state, boundaries, error) for p in new]
-    for p, c, fn in zip(new, raw, compile_many([c.fn for c in raw], flags)):
-        p.cache[key] = dataclasses.replace(c, fn=fn, _maps={}, _buffers={})
+    by_flags: dict = {}  # chunks calling a library are compiled with other flags (looplib.CALLER_FLAGS)
+    for p, c in zip(new, raw):
+        by_flags.setdefault(caller_flags(p, flags), []).append((p, c))
+    for fl, group in by_flags.items():
+        fns = compile_many([c.fn for _p, c in group], fl, libs=[libs_of(p) for p, _c in group])
+        for (p, c), fn in zip(group, fns):
+            p.cache[key] = dataclasses.replace(c, fn=fn, _maps={}, _buffers={})
     return [p.cache[key] for p in prims]
 
 
@@ -238,15 +244,32 @@ def _at_end(prim: CompiledPrimitive, start: ca.Function) -> ca.Function:
 
 def _loop(prim: CompiledPrimitive, held: bool = False) -> ca.Function:
     """The closed loop (x, t, s, x_sw) -> (xdot, h, u_raw, u), or with `held` the open loop loop_u
-    (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u); large SX loops with common subexpressions
-    eliminated, one Function object per primitive so that its code is generated once."""
-    loop = prim.loop_u if held else (prim.loop_raw or prim.loop)
-    key = "cse_loop_u" if held else "cse_loop"
-    if loop.is_a("SXFunction") and (loop.n_nodes() if held else prim.f_cl.n_nodes()) > INLINE_NODES:
-        if key not in prim.cache:
-            prim.cache[key] = with_cse(loop)
-        return prim.cache[key]
-    return loop
+    (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): from the primitive's loop library when one is
+    attached (looplib.py), else looplib.plain_loop."""
+    lib = attached(prim)
+    ext = lib.get("loop_u" if held else "loop") if lib is not None else None
+    return ext if ext is not None else plain_loop(prim, held)
+
+
+def _jump(prim: CompiledPrimitive) -> ca.Function:
+    """flow.jump_of, from the primitive's loop library when one is attached."""
+    lib = attached(prim)
+    return lib.get("jump") if lib is not None else jump_of(prim)
+
+
+def _margin(prim: CompiledPrimitive) -> ca.Function:
+    """The RoA margin (x, t), from the primitive's loop library when it holds it."""
+    lib = attached(prim)
+    ext = lib.get("roa_margin") if lib is not None else None
+    return ext if ext is not None else prim.roa_margin
+
+
+def _sampled(prim: CompiledPrimitive):
+    """The primitive's sampled law, its solve from the loop library when one is attached."""
+    lib = attached(prim)
+    if lib is None or lib.get("solve") is None:
+        return prim.sampled
+    return dataclasses.replace(prim.sampled, solve=lib.get("solve"))
 
 
 def _xdot_of(loop: ca.Function) -> ca.Function:
@@ -298,7 +321,7 @@ def _hold(prim: CompiledPrimitive, dt: float, block, rollouts: list) -> tuple[li
     of the judged rollout (and of the companion). When c is 0 the law is solved from the warm start w
     and c restarts at m - 1 (m steps per control period); otherwise u and w are kept.
     """
-    law, nu = prim.sampled, prim.system.nu
+    law, nu = _sampled(prim), prim.system.nu
     if law is None:
         return [], block
     m, per = law.steps(dt), nu + law.nw
@@ -319,7 +342,7 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
                  with_state: bool, boundaries: bool) -> Chunk:
     body, nz = step_body(prim, dt, with_state, boundaries)
     fn = _accumulate("chunk_", prim, dt, K, with_state, boundaries, body, nz)
-    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, len(prim.h_names), prim.system.nu,
+    return Chunk(prim, dt, K, compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn, len(prim.h_names), prim.system.nu,
                  Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0))
 
 
@@ -327,8 +350,8 @@ def step_body(prim: CompiledPrimitive, dt: float, with_state: bool = False, boun
               doubling: bool = False) -> tuple[ca.Function, int]:
     """(z -> (z after one step, that step's outputs in Rows order), nz): one step of the chunk with
     error 'local' (or 'doubling'), remembered on the primitive so that every chunk built from it
-    shares it."""
-    key = ("body", dt, with_state, boundaries, doubling)
+    shares it (one body inlining the loop, one calling its library)."""
+    key = ("body", dt, with_state, boundaries, doubling, attached(prim) is not None)
     if key not in prim.cache:
         prim.cache[key] = (_doubling_body if doubling else _step_body)(prim, dt, with_state, boundaries)
     return prim.cache[key]
@@ -337,7 +360,7 @@ def step_body(prim: CompiledPrimitive, dt: float, with_state: bool = False, boun
 def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple[ca.Function, int]:
     nx, nh = prim.system.nx, len(prim.h_names)
     start, end, f = _ends(prim, prim.sampled is not None)
-    jump = jump_of(prim)
+    jump = _jump(prim)
     nz = 2 * nx + 2 + hold_size(prim)
     z = _sym(prim.f_cl, prim)("z", nz)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2]
@@ -350,7 +373,7 @@ def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries:
     _k5, h1, d1, dh, e = end(x_end, t + te, s + te, xs, *U, k4, h)
     x_next = jump(x_end, u, t + h, s + h)
     act = active(prim, wrap(prim, t + h / 2), x, s, x_next, h)  # a step lies inside or outside each window
-    out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), dh, prim.roa_margin(x, t),
+    out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), dh, _margin(prim)(x, t),
                      ca.norm_2(e), s, h, u_raw, u, *([x] if with_state else []))
     # small SX loops: cse saves 1-8 % of C; an MX graph around a large loop (itself with cse) gains
     # nothing measurable from it (bench/bench_jit.py)
@@ -382,7 +405,7 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
                     with_state: bool, boundaries: bool) -> Chunk:
     body, nz = step_body(prim, dt, with_state, boundaries, doubling=True)
     fn = _accumulate("chunk2_", prim, dt, K, with_state, boundaries, body, nz)
-    return Chunk(prim, dt, K, compile_cached(fn, flags) if jit else fn, len(prim.h_names), prim.system.nu,
+    return Chunk(prim, dt, K, compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn, len(prim.h_names), prim.system.nu,
                  Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0, doubling=True))
 
 
@@ -398,7 +421,7 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     held = prim.sampled is not None
     start, _end, f = _ends(prim, held)
     loop = _loop(prim, held)
-    jump = jump_of(prim)
+    jump = _jump(prim)
     nz = 3 * nx + 2 + hold_size(prim, doubling=True)
     z = _sym(prim.f_cl, prim)("z", nz)
     x, t, s, xs, xc = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2], z[2 * nx + 2:3 * nx + 2]
@@ -419,7 +442,7 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     h1c = loop(xc_end, t + te, s + te, xs, *Uc)[1]
     x_next, xc_next = jump(x_end, u, t + h, s + h), jump(xc_end, uc, t + h, s + h)
     act = active(prim, wrap(prim, t + h / 2), x, s, x_next, h)
-    m_f, m_c = prim.roa_margin(x, t), prim.roa_margin(xc, t)
+    m_f, m_c = _margin(prim)(x, t), _margin(prim)(xc, t)
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), ca.fabs(h1 - h1c), m_f,
                      ca.fabs(m_f - m_c), s, h, u_raw, u, *([x] if with_state else []), ca.fabs(h0 - h0c))
     return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out])), nz
@@ -435,8 +458,9 @@ def start_states(prim: CompiledPrimitive, x0s: np.ndarray, t0s: np.ndarray, doub
 
 def build_first(prim: CompiledPrimitive, dt: float, jit: bool = True) -> ca.Function:
     """z -> (h at the start with step 0's windows, RoA margin, u_raw, u), mapped over many start
-    points in one call: the data that decides rollouts already at their first sample."""
-    key = ("first", dt)
+    points in one call: the data that decides rollouts already at their first sample. A large loop
+    is not compiled here: it runs in CasADi's virtual machine, calling the loop library if attached."""
+    key = ("first", dt, attached(prim) is not None)
     if key not in prim.cache:
         nx = prim.system.nx
         start, _end, _f = _ends(prim)
@@ -448,7 +472,7 @@ def build_first(prim: CompiledPrimitive, dt: float, jit: bool = True) -> ca.Func
         act = active(prim, wrap(prim, t + h / 2), x, s, h=h)
         hm = ca.if_else(act, h0, INACTIVE) if prim.h_names else h0
         fn = ca.Function("first_" + hashlib.sha1(f"{prim.name}{dt}".encode()).hexdigest()[:10], [z],
-                         [hm, prim.roa_margin(x, t), u_raw, u])
+                         [hm, _margin(prim)(x, t), u_raw, u])
         small = prim.loop.is_a("SXFunction") and prim.f_cl.n_nodes() <= INLINE_NODES \
             and prim.roa_margin.is_a("SXFunction")
         prim.cache[key] = compile_cached(fn, ("-O1",)) if jit and small else fn  # large loops: not worth a compile

@@ -14,6 +14,10 @@ library (a robot's dynamics, built once); compile_many(fns, flags, libs=[...]) l
 call it (casadi.external of the library) against it. The library's path, which the dependents' C
 code names through its symbols, carries the hash of its code.
 
+library_job(name, fns, flags) generates a library's code and compile_libraries(jobs) compiles
+several side by side (gcc only: it may run in a background thread); the loop libraries
+(looplib.py) are built this way.
+
 with_cse(fn) rebuilds a Function with CasADi's common-subexpression elimination (`cse`): for the
 robot's generated loops smaller C, less gcc time and faster steps (bench/bench_jit.py). cse(fn) does
 so unless CSE is off (only to measure what it saves).
@@ -155,15 +159,11 @@ def _log(job: _Job) -> None:
         f.write(json.dumps(rec) + "\n")
 
 
-def compile_many(fns: list[ca.Function], flags: tuple[str, ...], n_jobs: int | None = None,
-                 libs: tuple[Path, ...] = ()) -> list[ca.Function]:
-    """fns compiled (in their order), up to n_jobs gcc at once (default: the usable cores), linked
-    against the libraries `libs` (of compile_library) whose Functions they call; each library
-    reused when its code and flags are unchanged. A Function whose compile fails comes back
-    uncompiled, with a warning."""
-    work = [_job(fn, tuple(flags), tuple(libs)) for fn in fns]
+def _run_gcc(work: list[_Job], n_jobs: int | None = None) -> dict:
+    """gcc of the jobs not yet compiled, up to n_jobs at once (default: the usable cores); the same
+    library twice is compiled once. Returns library path -> the job that compiled it."""
     todo = {}
-    for j in work:  # the same code twice in one batch is compiled once
+    for j in work:
         if not j.hit and j.lib not in todo:
             todo[j.lib] = j
     if len(todo) > 1 and (n_jobs or usable_cores()) > 1:
@@ -172,6 +172,18 @@ def compile_many(fns: list[ca.Function], flags: tuple[str, ...], n_jobs: int | N
     else:
         for j in todo.values():
             _gcc(j)
+    return todo
+
+
+def compile_many(fns: list[ca.Function], flags: tuple[str, ...], n_jobs: int | None = None,
+                 libs: tuple[Path, ...] | list[tuple[Path, ...]] = ()) -> list[ca.Function]:
+    """fns compiled (in their order), up to n_jobs gcc at once (default: the usable cores), linked
+    against the libraries `libs` (of compile_library) whose Functions they call (one tuple for all,
+    or a list with one tuple per Function); each library reused when its code and flags are
+    unchanged. A Function whose compile fails comes back uncompiled, with a warning."""
+    each = libs if isinstance(libs, list) else [tuple(libs)] * len(fns)
+    work = [_job(fn, tuple(flags), tuple(lb)) for fn, lb in zip(fns, each)]
+    todo = _run_gcc(work, n_jobs)
     out = []
     for j in work:
         done = todo.get(j.lib, j)
@@ -186,10 +198,10 @@ def compile_many(fns: list[ca.Function], flags: tuple[str, ...], n_jobs: int | N
     return out
 
 
-def compile_cached(fn: ca.Function, flags: tuple[str, ...]) -> ca.Function:
-    """fn compiled to a shared library with the system C compiler, reused when the generated C
-    code and the flags are unchanged (the library's name is the hash of both)."""
-    return compile_many([fn], flags)[0]
+def compile_cached(fn: ca.Function, flags: tuple[str, ...], libs: tuple[Path, ...] = ()) -> ca.Function:
+    """fn compiled to a shared library with the system C compiler (linked against `libs`), reused
+    when the generated C code and the flags are unchanged (the library's name is the hash of both)."""
+    return compile_many([fn], flags, libs=tuple(libs))[0]
 
 
 def compile_library(name: str, fns: list[ca.Function], flags: tuple[str, ...], reverse: bool = True,
@@ -200,12 +212,7 @@ def compile_library(name: str, fns: list[ca.Function], flags: tuple[str, ...], r
     unchanged; None when the compiler fails (with a warning). Without `wait`, gcc runs in a
     background thread (no CasADi there) and None is returned at once: a later call with the same
     code waits on the library's lock and loads it."""
-    cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
-    for fn in fns:
-        cg.add(fn)
-        if reverse:
-            cg.add(fn.reverse(1))
-    job = _library_job(name, None, cg.dump(), tuple(flags), tuple(libs), large=large)
+    job = library_job(name, fns, flags, reverse, large, libs)
     if not wait:
         if not job.hit:
             threading.Thread(target=_gcc, args=(job,), name=f"gcc {name}", daemon=True).start()
@@ -217,3 +224,30 @@ def compile_library(name: str, fns: list[ca.Function], flags: tuple[str, ...], r
         warnings.warn(f"compiling {name} failed: {job.error[:300]}")
         return None
     return job.lib
+
+
+def library_job(name: str, fns: list[ca.Function], flags: tuple[str, ...], reverse: bool = False,
+                large: bool = False, libs: tuple[Path, ...] = ()) -> _Job:
+    """The C code of one library holding fns (and each one's reverse derivative when `reverse`),
+    generated in this thread: what compile_library and compile_libraries compile."""
+    cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+    for fn in fns:
+        cg.add(fn)
+        if reverse:
+            cg.add(fn.reverse(1))
+    return _library_job(name, None, cg.dump(), tuple(flags), tuple(libs), large=large)
+
+
+def compile_libraries(jobs: list[_Job], n_jobs: int | None = None) -> list[Path | None]:
+    """The libraries of library_job, compiled side by side (up to n_jobs gcc at once, default the
+    usable cores; no CasADi here, so this may run in a background thread); None where gcc failed."""
+    todo = _run_gcc(jobs, n_jobs)
+    out = []
+    for j in jobs:
+        done = todo.get(j.lib, j)
+        j.error, j.gcc_s = done.error, done.gcc_s if done is j else 0.0
+        _log(j)
+        if j.error is not None:
+            warnings.warn(f"compiling {j.name} failed: {j.error[:300]}")
+        out.append(None if j.error is not None else j.lib)
+    return out

@@ -24,7 +24,8 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .integrator import Rows, step_body
-from .jit import compile_cached, cse_sx
+from .jit import compile_cached, compile_many, cse_sx
+from .looplib import attach, caller_flags, libs_of
 from .verdict import LANES, Block, Carry, Decision, evidences, lane_sum
 
 KINDS = ("", "safe", "left_C", "non_finite", "horizon", "doubt", "doubt_E")
@@ -263,23 +264,51 @@ def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: 
         raise ValueError(f"a judged chunk of {K} steps needs blocks of a multiple of {K} and K a multiple of {LANES}")
     key = ("judged", dt, K, B, tol, cm, jit, tuple(flags), doubling)
     if key not in prim.cache:
-        body, nz = step_body(prim, dt, doubling=doubling)
-        lay = Layout(len(prim.h_names), prim.system.nu, nz)
-        n_out = body.size1_out(1)
-        rows = Rows(lay.nh, lay.nu, doubling=doubling)
-        steps = [judge_step(lay, rows, n_out, K, first, B, tol, cm, prim.system.u_lo, prim.system.u_hi)
-                 for first in (True, False)]
-        inline = body.is_a("SXFunction") and body.n_nodes() * K <= INLINE_CHUNK
-        Z = (ca.SX.sym if inline else ca.MX.sym)("Z", nz + lay.size)
-        z, J = Z[:nz], Z[nz:]
-        for k in range(K):
-            zn, o = body(z)
-            z, J = zn, steps[k > 0](J, o, zn, float(k == K - 1))
-        name = "judged_" + hashlib.sha1(f"{prim.name}{dt}{K}{B}{tol}{cm}{doubling}".encode()).hexdigest()[:10]
-        fn = ca.Function(name, [Z], [ca.vertcat(z, J)])
-        fn = cse_sx(fn) if inline else fn
-        prim.cache[key] = JudgedChunk(prim, dt, compile_cached(fn, flags) if jit else fn, nz, lay, K, doubling)
+        if jit:  # a large loop through its compiled library
+            attach(prim)
+        fn, nz, lay = _judged_function(prim, dt, K, B, tol, cm, doubling)
+        prim.cache[key] = JudgedChunk(prim, dt, compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn, nz, lay, K,
+                                      doubling)
     return prim.cache[key]
+
+
+def _judged_function(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: float, cm: float,
+                     doubling: bool) -> tuple[ca.Function, int, Layout]:
+    """(Z -> [z; J] after K judged steps, nz, the layout of J), uncompiled."""
+    body, nz = step_body(prim, dt, doubling=doubling)
+    lay = Layout(len(prim.h_names), prim.system.nu, nz)
+    n_out = body.size1_out(1)
+    rows = Rows(lay.nh, lay.nu, doubling=doubling)
+    steps = [judge_step(lay, rows, n_out, K, first, B, tol, cm, prim.system.u_lo, prim.system.u_hi)
+             for first in (True, False)]
+    inline = body.is_a("SXFunction") and body.n_nodes() * K <= INLINE_CHUNK
+    Z = (ca.SX.sym if inline else ca.MX.sym)("Z", nz + lay.size)
+    z, J = Z[:nz], Z[nz:]
+    for k in range(K):
+        zn, o = body(z)
+        z, J = zn, steps[k > 0](J, o, zn, float(k == K - 1))
+    name = "judged_" + hashlib.sha1(f"{prim.name}{dt}{K}{B}{tol}{cm}{doubling}".encode()).hexdigest()[:10]
+    fn = ca.Function(name, [Z], [ca.vertcat(z, J)])
+    return (cse_sx(fn) if inline else fn), nz, lay
+
+
+def prebuild(prims: list[CompiledPrimitive], dt: float, K: int, B: int, tol: float, margins: dict, flags: tuple,
+             doubling: bool = False) -> None:
+    """build_judged_chunk with jit for several primitives at once (margins: name -> cm): the loop
+    libraries first, then every chunk's C code generated here and gcc run side by side. A primitive
+    that cannot be built here is left to its own runner, which reports the error."""
+    key = lambda p: ("judged", dt, K, B, tol, margins[p.name], True, tuple(flags), doubling)  # noqa: E731
+    new = [p for p in {id(p): p for p in prims}.values() if key(p) not in p.cache]
+    for p in new:
+        attach(p)  # attached libraries are found at once; build_all compiled the rest side by side
+    built = [(p, *_judged_function(p, dt, K, B, tol, margins[p.name], doubling)) for p in new]
+    by_flags: dict = {}  # chunks calling a library are compiled with other flags (looplib.CALLER_FLAGS)
+    for b in built:
+        by_flags.setdefault(caller_flags(b[0], flags), []).append(b)
+    for fl, group in by_flags.items():
+        fns = compile_many([b[1] for b in group], fl, libs=[libs_of(b[0]) for b in group])
+        for (p, _fn, nz, lay), fn in zip(group, fns):
+            p.cache[key(p)] = JudgedChunk(p, dt, fn, nz, lay, K, doubling)
 
 
 def decided_evidence(ch: JudgedChunk, J: np.ndarray, t0s, cm: float) -> list:

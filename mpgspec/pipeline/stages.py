@@ -21,6 +21,7 @@ from ..graph.build import build_graph
 from ..graph.traces import edge_traces, failure_traces
 from ..graph.transition import MotionPrimitiveGraph
 from ..oracle.executors import Executor, InProcess
+from ..oracle.looplib import build_all as build_loop_libraries
 from ..oracle.oracle import CapabilityError, require_capabilities
 from ..oracle.registry import get_backend
 from ..plan.planner import lookup_table, shortest_plan
@@ -105,6 +106,8 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     cb = of_project(progress, spec.name)
     before = dict(getattr(executor, "stats", {}))
     t0 = time.perf_counter()
+    if settings.jit:  # the large closed loops' libraries, side by side, before anything forks
+        build_loop_libraries(prims.values())
     prefetch_robust(spec, prims, settings, getattr(executor, "memo", None))  # gcc beside the oracle
     if progress:
         progress(spec.name, "oracle (JIT-compiling the rollouts unless cached)", 0, 0)

@@ -17,6 +17,7 @@ import numpy as np
 from ...compile.contacts import Events
 from ...compile.events import NEVER, happened
 from ...compile.primitive import INACTIVE, CompiledPrimitive
+from ...oracle import looplib
 from ...spec.models import PrimitiveClass
 from .mjcf import MujocoRobot
 from .settings import CrossCheckSettings
@@ -184,8 +185,12 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
 
 
 def _evaluate(p: CompiledPrimitive, x, clock: float, s: float, x_sw) -> tuple[np.ndarray, np.ndarray]:
-    """(h, u): the safety functions and the saturated input of the primitive's compiled loop."""
-    if p.loop is not None:
+    """(h, u): the safety functions and the saturated input of the primitive's compiled loop (through
+    its loop library when one is attached: compiled code, not CasADi's virtual machine)."""
+    law = looplib.law(p)
+    if law is not None:
+        hv, u = law(x, clock, s, x_sw)
+    elif p.loop is not None:
         _xdot, hv, _u_raw, u = p.loop(x, clock, s, x_sw)
     else:
         hv, u = p.h(x, clock, s, x_sw), p.control(x, clock, s, x_sw)[1]
