@@ -75,3 +75,18 @@ def test_a_project_process_that_dies_is_that_projects_error(two, tmp_path, capsy
     assert rc == 2
     assert "MPG900" in err + out and "process ended" in err + out
     assert [p.parent.name for p in (tmp_path / "o").glob("*/report.json")]  # the other project's reports
+
+
+def test_the_largest_project_starts_first(two, monkeypatch, tmp_path):
+    (two[1].parent / "table.csv").write_text("0\n" * 50_000)  # tiny_b: the larger folder
+    log = tmp_path / "started.txt"
+
+    def child(conn, queue, path, *args):  # one at a time (workers=1): the log is the order of starts
+        with open(log, "a") as f:
+            f.write(path.parent.name + "\n")
+        conn.send(RuntimeError("not run"))
+
+    monkeypatch.setattr(side_by_side, "_child", child)
+    res = side_by_side.verify_side_by_side(two, None, None, None, 1, False, 1)
+    assert log.read_text().split() == ["tiny_b", "tiny_a"]
+    assert [p.path for p in res.projects] == two and {p.status for p in res.projects} == {"error"}

@@ -5,10 +5,11 @@ between compiled calls), so a run over several projects takes about the time of 
 when a second core is free, instead of their sum. Each project runs in its own forked process with
 its own executor (`jobs` workers, as a run of that project alone would have), builds its report and
 writes its files there, and sends back its result without the compiled project (CasADi objects stay
-in the process that made them). Results keep the order of the files; progress events come back
-through a queue and reach the caller's progress callback in this process. A project whose process
-dies is that project's error and no other's; SIGINT or SIGTERM stops every project process (each
-unwinds: its executor's workers stopped, its temporary report folders removed).
+in the process that made them). The largest project folders start first (the long projects, so
+the run ends with the longest instead of after it); results keep the order of the files; progress
+events come back through a queue and reach the caller's progress callback in this process. A
+project whose process dies is that project's error and no other's; SIGINT or SIGTERM stops every
+project process (each unwinds: its executor's workers stopped, its temporary report folders removed).
 
 The reports are those of a run one project after the other: each project is computed alone, from
 the same inputs, in the same way (report.json identical apart from timing).
@@ -45,7 +46,7 @@ def verify_side_by_side(files: list[Path], out_dir: Path | None, overrides: dict
     relay.start()
     results: list = [None] * len(files)
     running: dict = {}  # connection -> (index, process)
-    pending = list(enumerate(Path(f) for f in files))
+    pending = sorted(enumerate(Path(f) for f in files), key=lambda kp: -_weight(kp[1]))
     try:
         while pending or running:
             while pending and len(running) < max(1, workers):
@@ -65,6 +66,15 @@ def verify_side_by_side(files: list[Path], out_dir: Path | None, overrides: dict
         queue.put(None)
         relay.join(GRACE_S)
     return VerifyResult(results)
+
+
+def _weight(path: Path) -> float:
+    """How long the project is expected to take, to start the longest first: the bytes of its
+    folder (gait tables, robot models, primitives: the large projects are the slow ones)."""
+    try:
+        return float(sum(f.stat().st_size for f in path.parent.rglob("*") if f.is_file()))
+    except OSError:
+        return 0.0
 
 
 def _receive(conn, path: Path) -> ProjectResult:

@@ -149,7 +149,8 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     if xcs is not None and runs:
         if progress:
             progress(spec.name, f"cross-check ({xcs.simulator})", 0, len(xcs.runs))
-        xc = crosscheck_runs(prims, runs, spec.project.sequence.duration, xcs, settings.h_tolerance, memo=memo)
+        xc = crosscheck_runs(prims, runs, spec.project.sequence.duration, xcs, settings.h_tolerance, memo=memo,
+                             executor=executor)
         if xcs.require_agreement:
             checks += agreement_assertions(xc, start=len(checks))
     t1 = time.perf_counter()

@@ -276,6 +276,23 @@ def test_comparisons_are_kept_by_content(a1, monkeypatch):
     assert again.runs["naive"]["divergence"] == first.runs["naive"]["divergence"]
 
 
+def test_runs_replayed_side_by_side_equal_the_runs_replayed_here(a1):
+    """Two runs replayed through a pool of two processes (each builds the MuJoCo model itself) give
+    the comparisons of the same runs replayed one after the other in this process."""
+    from mpgspec.oracle.executors import ProcessPool
+
+    prims, settings, robot = a1
+    seq = Sequence(start="Lie", duration=0.05, commands=[GoalCommand(t=0.02, goal="Lie")])
+    runs = {m: simulate_sequence(prims, None, None, seq, settings, "naive") for m in ("naive", "graph")}
+    xs = CrossCheckSettings(runs=("naive", "graph"), settle=0.01)
+    here = crosscheck_runs(prims, runs, seq.duration, xs, robot=robot)
+    pool = crosscheck_runs(prims, runs, seq.duration, xs, robot=robot, executor=ProcessPool(2))
+    for r in (*here.runs.values(), *pool.runs.values()):
+        assert r.pop("wall_s") > 0  # the replay's own time: the one entry that may differ
+    assert json.dumps(pool.to_dict(), default=float) == json.dumps(here.to_dict(), default=float)
+    assert list(pool.runs) == ["naive", "graph"]
+
+
 @pytest.mark.slow
 def test_falling_body_touches_down_alike(tmp_path):
     """tests/fixtures/falling_body held 0.1 m up by Air (no contacts), then Land while it falls: MuJoCo

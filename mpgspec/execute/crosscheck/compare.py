@@ -9,6 +9,7 @@ import casadi as ca
 import numpy as np
 
 from ...compile.primitive import CompiledPrimitive
+from ...oracle.tasks import Failed
 from ..sequence import SequenceRun
 from .mjcf import MujocoRobot, build_robot
 from .replay import Replay, replay
@@ -40,26 +41,43 @@ class CrossCheckResult:
 
 def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, SequenceRun], duration: float,
                     settings: CrossCheckSettings, h_tolerance: float = 0.0, robot: MujocoRobot | None = None,
-                    memo=None) -> CrossCheckResult:
+                    memo=None, executor=None) -> CrossCheckResult:
     """Replay each run named in settings.runs (that exists) for `duration` s and compare it.
 
     memo (mpgspec.oracle.cache.Memo, optional) keeps each comparison by the content hash of what
-    decides it: the run, the primitives' closed loops, the settings and the simulator's version."""
+    decides it: the run, the primitives' closed loops, the settings and the simulator's version.
+    executor (optional): the runs not in the memo are replayed side by side through its map (each
+    run alone in its process, so the comparison is the same wherever it runs)."""
     system = next(iter(prims.values())).system
     robot = robot or build_robot(system, settings)
     res = CrossCheckResult(settings.simulator, settings, dict(robot.info))
-    for mode in settings.runs:
-        if mode not in runs:
-            continue
-        key = _memo_key(memo, prims, runs[mode], duration, settings, h_tolerance, robot) if memo is not None else None
-        known = memo.get(key) if key is not None else None
-        if known is None:
-            rep = replay(robot, prims, runs[mode].switches, duration, settings, h_tolerance)
-            known = compare(prims, rep, runs[mode], settings.control_rate)
-            if key is not None:
-                memo.put(key, known)
-        res.runs[mode] = known
+    modes = [mode for mode in settings.runs if mode in runs]
+    keys = {m: _memo_key(memo, prims, runs[m], duration, settings, h_tolerance, robot) for m in modes} \
+        if memo is not None else {}
+    known = {m: memo.get(keys[m]) for m in keys}
+    todo = [m for m in modes if known.get(m) is None]
+    if executor is not None and len(todo) > 1:  # each worker builds the same MuJoCo model from the system
+        shared = (None, prims, {m: runs[m] for m in todo}, duration, settings, h_tolerance)
+        done = executor.map(_replayed, todo, label=f"cross-check ({settings.simulator})", shared=shared)
+    else:
+        done = [_replayed((robot, prims, runs, duration, settings, h_tolerance), m) for m in todo]
+    for m, out in zip(todo, done):
+        if isinstance(out, Failed):  # as a replay raising here would
+            raise RuntimeError(f"the {settings.simulator} replay of the {m} run failed: {out.error}")
+        known[m] = out
+        if m in keys:
+            memo.put(keys[m], out)
+    res.runs = {m: known[m] for m in modes}
     return res
+
+
+def _replayed(shared: tuple, mode: str) -> dict:
+    """One run replayed and compared: shared = (robot or None to build it, prims, runs, duration,
+    settings, h_tolerance)."""
+    robot, prims, runs, duration, settings, h_tolerance = shared
+    robot = robot or build_robot(next(iter(prims.values())).system, settings)
+    rep = replay(robot, prims, runs[mode].switches, duration, settings, h_tolerance)
+    return compare(prims, rep, runs[mode], settings.control_rate)
 
 
 def _memo_key(memo, prims, run: SequenceRun, duration, settings, h_tolerance, robot) -> str:
