@@ -26,7 +26,7 @@ from mpgspec.spec.loader import load_project
 SPECS = Path(__file__).parents[1] / "specs"
 A1 = SPECS / "a1" / "project.yaml"
 A1_GROUP = "a1"
-A1_MODULES = ("tests/gait/", "tests/rigidbody/", "tests/robust/test_robust_events.py")
+A1_MODULES = ("tests/gait/", "tests/rigidbody/", "tests/robust/test_robust_events.py", "tests/oracle/test_looplib.py")
 """The modules (by path prefix) whose tests use a1_project: one unit of work, so the A1 is compiled
 once per run (a module here that does not use it only runs on the same worker)."""
 
