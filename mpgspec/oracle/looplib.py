@@ -33,7 +33,7 @@ from ..compile.primitive import INACTIVE, CompiledPrimitive
 from ..compile.contacts import wrap_clock
 from ..compile.events import EventWindow
 from .flow import jump_of
-from .jit import cache_dir, compile_libraries, compile_library, library_job, with_cse
+from .jit import cache_dir, compile_libraries, library_job, with_cse
 
 INLINE_NODES = 4000
 """Closed loops up to this many SX nodes are inlined (fastest code); larger ones become calls
@@ -189,26 +189,6 @@ def attach(prim: CompiledPrimitive, flags: tuple[str, ...] = LOOP_FLAGS) -> Loop
             build_all([prim], flags)
         prim.cache.setdefault("looplib", None)
     return prim.cache["looplib"]
-
-
-def control_library(prim: CompiledPrimitive, flags: tuple[str, ...] = LOOP_FLAGS) -> LoopLibrary | None:
-    """The primitive's control law (x, t, s, x_sw) -> (u_raw, u) with its reverse derivative, a unit
-    of its loop library built on demand (by the robust steps: their push gradients go through the law,
-    and inlined each target's step compiled the law and its derivative again); None for a small loop,
-    a sampled law (held inputs: the steps call its solve) or when gcc fails. Remembered on it."""
-    if "looplib_control" not in prim.cache:
-        lib = None
-        if is_large(prim) and prim.sampled is None:
-            tag = _name("control", [prim.control], ("control", "reverse"), flags)
-            path = _known(tag)
-            if path is None:
-                path = compile_library(tag, [_renamed(prim.control, f"{tag}_control")], flags, reverse=True)
-                if path is not None:
-                    with _LOCK:
-                        _write_index(tag, path)
-            lib = _load([(tag, ("control",))], [path])
-        prim.cache["looplib_control"] = lib
-    return prim.cache["looplib_control"]
 
 
 def attached(prim: CompiledPrimitive) -> LoopLibrary | None:

@@ -121,25 +121,21 @@ def compiled_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[st
 def loop_parts(prim: CompiledPrimitive, lib: RobotLibrary | None,
                reverse: bool) -> tuple[dict[str, ca.Function], tuple[Path, ...]]:
     """(the compiled parts a robust step calls instead of inlining them, by kind; the libraries they
-    are in): a sampled law's solve, the control law (with its reverse derivative, looplib's control
-    unit) and, when no gradient goes through it (`reverse` false), a large RoA margin, from the
-    primitive's loop library; none without the robot's library (the step is not a library of its own)
-    or a loop library."""
+    are in), from the primitive's loop library: a sampled law's solve (the ID-QP: most of a step's
+    code) and, when no gradient goes through it (`reverse` false: its unit has no reverse derivative),
+    a large RoA margin; none without the robot's library (the step is then no library of its own) or
+    a loop library. The control law stays inlined: measured (bench/bench_rstep.py), a unit of its own
+    with its reverse derivative costs more gcc at -O1 than it saves, and at -O0 slows the gradient
+    1.3x."""
     loops = looplib.attach(prim) if lib is not None else None
     if loops is None:
         return {}, ()
-    called, paths = {}, []
+    called = {}
     if prim.sampled is not None and loops.get("solve") is not None:
         called["solve"] = loops.get("solve")
     if not reverse and loops.get("roa_margin") is not None:
         called["roa_margin"] = loops.get("roa_margin")
-    control = looplib.control_library(prim)
-    if control is not None:
-        called["control"] = control.get("control")
-        paths += control.paths
-    if not called:
-        return {}, ()
-    return called, (*loops.paths, *paths)
+    return called, tuple(loops.paths) if called else ()
 
 
 def shared_step(parts: tuple, lib: RobotLibrary | None, settings, gradient: bool = True,
@@ -173,7 +169,7 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     """(step (z, d) -> (z next, [h; RoA margin]), first (x0, t0, s0, theta, d) -> ([h; margin], hold), nth,
     nd, hold size) of one oracle step on the perturbed plant, z = [x; t; s; x_sw; theta; hold]; lib:
     the robot's library the plant and the contact events are called from (inlined without); called:
-    compiled parts (loop_parts: solve, control, roa_margin) called instead of the primitive's own."""
+    compiled parts (loop_parts: solve, roa_margin) called instead of the primitive's own."""
     sys = prim.system
     nx, nu = sys.nx, sys.nu
     nth, nd = len(names), 3 if push else 0
@@ -195,8 +191,7 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     # the SX pieces the step calls, each generated once, with common subexpressions eliminated
     plant_fn, jump = cse_sx(plant_fn), cse_sx(robust_jump(prim, frame, lib))
     h_fn, kept = robust_h(prim, rows)
-    ctrl = called["control"] if "control" in called else cse_sx(prim.control)
-    loop = cse_sx(h_fn)
+    ctrl, loop = cse_sx(prim.control), cse_sx(h_fn)
     held = hold[1:1 + nu] if law is not None else None
 
     def control(xx, tt, ss, u_held):  # (u_raw, u) at a state; a sampled law holds its input
