@@ -1,15 +1,21 @@
 """Benchmark of the robust step libraries calling the primitive's loop library: A1 targets' robust
-rollouts with the control law, the sampled law's solve and a large RoA margin compiled again into each
-step library (inline) against calls into the loop library (called), in one process.
+rollouts with the sampled law's solve (and, without a gradient, a large RoA margin) compiled again into
+each step library (inline) against calls into the loop library (called), in one process.
 
-    python bench/bench_rstep.py                                  # Walk(slow), Stand, Jump
-    python bench/bench_rstep.py --targets "Walk(slow)" --no-write
+    python bench/bench_rstep.py                                  # Stand, about 2 minutes
+    python bench/bench_rstep.py --targets Stand "Walk(slow)" --no-gradient --no-write
+
+A walk's gradient step calls nothing (its RoA margin's unit has no reverse derivative): both sides are
+the same library. Measured before choosing the parts (Walk(slow), push gradient): the trot law with
+its reverse derivative as a loop-library unit of its own takes 2.9 CPU-s of gcc at -O1 and leaves a
+step library of 0.62 MB (1.4 s, full -O1 below 1 MB) against 3.3 s for the 1.10 MB step with it
+inlined (LARGE_CODE_FLAGS); at -O0 the unit takes 0.6 s but rollouts run 1.17x and gradients 1.32x
+the time. Moving the margin's table out likewise brings the step under 1 MB: 5.5 s against 3.6 s.
 
 The robot library and the loop libraries (built by the oracle before the robust stage) are compiled
 first in a private cache and not counted. Then each side builds the target's RigidRobustRollout
 (first sample, 100-step chunk, push gradient where taken) in a copy of that cache: C bytes of the step
-library (rstep_*) and of the control unit (control_*), gcc CPU seconds of everything the side
-compiled (the children's rusage), then runs the same scenarios (rollouts to their horizon and one
+library (rstep_*), gcc CPU seconds of everything the side compiled (the children's rusage), then runs the same scenarios (rollouts to their horizon and one
 gradient call), interleaved rounds, median run time. The outputs of both sides must be equal.
 
 Prints a table and replaces (or appends) the section "A1 robust step libraries" of bench/RESULTS.md.
@@ -52,18 +58,17 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def build(prim, settings, base: str, inline: bool) -> tuple[rigid.RigidRobustRollout, dict]:
+def build(prim, settings, base: str, inline: bool, gradient: bool) -> tuple[rigid.RigidRobustRollout, dict]:
     """The target's robust rollout built in a copy of the base cache; its compile figures."""
     cache, log = tempfile.mkdtemp(prefix="mpgspec-rstep-"), tempfile.mktemp(suffix=".jsonl")
     shutil.copytree(base, cache, dirs_exist_ok=True)
     os.environ["MPGSPEC_CACHE"], os.environ["MPGSPEC_JIT_LOG"] = cache, log
-    prim.cache.pop("looplib_control", None)
     real = rigid.loop_parts
     if inline:
         rigid.loop_parts = lambda p, lib, reverse: ({}, ())
     try:
         c0 = _cpu()
-        rr = rigid.RigidRobustRollout(prim, NAMES, "trunk", True, 4, settings, 1.0, 0.2)
+        rr = rigid.RigidRobustRollout(prim, NAMES, "trunk", True, 4, settings, 1.0, 0.2, gradient=gradient)
         cpu = _cpu() - c0
     finally:
         rigid.loop_parts = real
@@ -71,7 +76,7 @@ def build(prim, settings, base: str, inline: bool) -> tuple[rigid.RigidRobustRol
 
     def size(prefix):
         return sum(r["c_bytes"] for r in recs if r["name"].startswith(prefix))
-    return rr, {"rstep": size("rstep_"), "control": size("control_"), "all": size(""), "gcc_cpu_s": cpu}
+    return rr, {"rstep": size("rstep_"), "all": size(""), "gcc_cpu_s": cpu}
 
 
 def scenarios(prim, rr, n: int, rng) -> tuple:
@@ -81,9 +86,9 @@ def scenarios(prim, rr, n: int, rng) -> tuple:
     return np.tile(x0, (n, 1)), np.zeros(n), TH, D
 
 
-def measure(prim, settings, base: str, n: int, repeats: int) -> list[tuple[str, str]]:
-    """Rows of the table for one target."""
-    sides = {k: build(prim, settings, base, k == "inline") for k in ("inline", "called")}
+def measure(prim, settings, base: str, n: int, repeats: int, gradient: bool) -> tuple[list[tuple[str, str]], bool]:
+    """Rows of the table for one target; whether both sides' outputs are equal."""
+    sides = {k: build(prim, settings, base, k == "inline", gradient) for k in ("inline", "called")}
     args = scenarios(prim, sides["inline"][0], n, np.random.default_rng(0))
     steps = min(200, sides["inline"][0].N)
     limit, run = np.full(n, steps), dict(tol=1e9, until_entry=False)  # every rollout runs its steps
@@ -96,9 +101,8 @@ def measure(prim, settings, base: str, n: int, repeats: int) -> list[tuple[str, 
         same = same and np.array_equal(*(rr.gradients(*grad_args) for rr, _ in sides.values()))
     t = {k: statistics.median(v) for k, v in rounds(timed, repeats).items()}
     i, c = sides["inline"][1], sides["called"][1]
-    rows = [("step library C bytes", f"{i['rstep'] / 1e6:.2f} MB", f"{c['rstep'] / 1e6:.2f} MB + control unit "
-             f"{c['control'] / 1e6:.2f} MB"),
-            ("gcc CPU-s (step library, control unit, robust chunks)", f"{i['gcc_cpu_s']:.1f} s", f"{c['gcc_cpu_s']:.1f} s"),
+    rows = [("step library C bytes", f"{i['rstep'] / 1e6:.2f} MB", f"{c['rstep'] / 1e6:.2f} MB"),
+            ("gcc CPU-s (step library, robust chunks)", f"{i['gcc_cpu_s']:.1f} s", f"{c['gcc_cpu_s']:.1f} s"),
             (f"{n} rollouts x {steps} steps", f"{t['run inline'] * 1e3:.0f} ms",
              f"{t['run called'] * 1e3:.0f} ms ({t['run called'] / t['run inline']:.2f}x the time)")]
     if "grad inline" in t:
@@ -110,7 +114,8 @@ def measure(prim, settings, base: str, n: int, repeats: int) -> list[tuple[str, 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--targets", nargs="+", default=["Walk(slow)", "Stand", "Jump"])
+    ap.add_argument("--targets", nargs="+", default=["Stand"])
+    ap.add_argument("--no-gradient", action="store_true", help="rollouts without a push gradient")
     ap.add_argument("--rollouts", type=int, default=16)
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--no-write", action="store_true")
@@ -127,11 +132,12 @@ def main(argv=None) -> int:
     rows, ok = [], True
     for p in targets:
         print(f"measuring {p.name} ...", flush=True)
-        got, same = measure(p, settings, base, a.rollouts, a.repeats)
+        got, same = measure(p, settings, base, a.rollouts, a.repeats, not a.no_gradient)
         rows += got
         ok = ok and same
     mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
-    head = stamp(mach, "bench_rstep.py " + " ".join(f"'{t}'" for t in a.targets), False, a.repeats,
+    cmd = "bench_rstep.py --targets " + " ".join(f"'{t}'" for t in a.targets) + " --no-gradient" * a.no_gradient
+    head = stamp(mach, cmd, False, a.repeats,
                  time.perf_counter() - t_start)
     table = markdown_table(rows)
     print(head + "\n\n" + table)

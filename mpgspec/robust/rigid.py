@@ -20,8 +20,8 @@ import casadi as ca
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive, saturate
 from ..compile.rigidbody.system import no_slip
-from ..oracle.flow import LEFT, active, jump_of, rk4, solve_or_keep, wrap
 from ..oracle import looplib
+from ..oracle.flow import LEFT, active, jump_of, rk4, solve_or_keep, wrap
 from ..oracle.jit import cse, cse_sx
 from .library import (RobotLibrary, library_jump, library_plant, library_schedule_jump, robot_library,
                       step_library)
