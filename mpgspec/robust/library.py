@@ -16,7 +16,9 @@ against it changes when the robot does. The values are those of the inlined plan
 expressions, evaluated in the same order).
 
 step_library compiles one primitive's robust step and first sample the same way, once: its robust
-rollouts (chunks and gradient) and its uncertain-sequence stepper call the same library.
+rollouts (chunks and gradient) and its uncertain-sequence stepper call the same library. It is linked
+against the primitive's loop library too (oracle/looplib.py) where the step calls its parts (a sampled
+law's solve, a large RoA margin: rigid.loop_parts) instead of compiling them again.
 """
 from __future__ import annotations
 

@@ -13,12 +13,14 @@ compiled one.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import casadi as ca
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive, saturate
 from ..compile.rigidbody.system import no_slip
+from ..oracle import looplib
 from ..oracle.flow import LEFT, active, jump_of, rk4, solve_or_keep, wrap
 from ..oracle.jit import cse, cse_sx
 from .library import (RobotLibrary, library_jump, library_plant, library_schedule_jump, robot_library,
@@ -96,22 +98,58 @@ class RigidRobustRollout(RobustRollout):
         super().__init__(prim, self.plant_fn, [], segments, settings, horizon, duration, gradient)
 
     def _loop(self, prim, plant_fn, dist_inputs, dt):
-        parts = rigid_step(prim, plant_fn, self.names, self.frame, self.push, dt, self.lib)
-        step, first, path = shared_step(parts, self.lib, self.settings, self.gradient)
+        parts, path = compiled_step(prim, plant_fn, self.names, self.frame, self.push, self.settings, self.lib,
+                                    self.gradient)
         self.libs += (path,) if path is not None else ()
-        return (step, first, *parts[2:])
+        return parts
 
 
-def shared_step(parts: tuple, lib: RobotLibrary | None, settings,
-                gradient: bool = True) -> tuple[ca.Function, ca.Function, Path | None]:
+def compiled_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str], frame: str, push: bool, settings,
+                  lib: RobotLibrary | None, gradient: bool = True) -> tuple[tuple, Path | None]:
+    """(rigid_step's parts with step and first from shared_step, the step library's path or None):
+    with the robot's library the step calls the primitive's loop library where it has one
+    (loop_parts); if the step library fails, the step is built again with everything inlined."""
+    called, paths = loop_parts(prim, lib, gradient and push and prim.sampled is None)
+    parts = rigid_step(prim, plant_fn, names, frame, push, settings.dt, lib, called)
+    step, first, path = shared_step(parts, lib, settings, gradient, paths)
+    if path is None and called:
+        parts = rigid_step(prim, plant_fn, names, frame, push, settings.dt, lib)
+        step, first = parts[:2]
+    return (step, first, *parts[2:]), path
+
+
+def loop_parts(prim: CompiledPrimitive, lib: RobotLibrary | None,
+               reverse: bool) -> tuple[dict[str, ca.Function], tuple[Path, ...]]:
+    """(the compiled parts a robust step calls instead of inlining them, by kind; the libraries they
+    are in), from the primitive's loop library: a sampled law's solve (the ID-QP: most of a step's
+    code) and, when no gradient goes through it (`reverse` false: its unit has no reverse derivative),
+    a large RoA margin; none without the robot's library (the step is then no library of its own) or
+    a loop library. The control law stays inlined: measured (bench/bench_rstep.py), a unit of its own
+    with its reverse derivative costs more gcc at -O1 than it saves, and at -O0 slows the gradient
+    1.3x."""
+    loops = looplib.attach(prim) if lib is not None else None
+    if loops is None:
+        return {}, ()
+    called = {}
+    if prim.sampled is not None and loops.get("solve") is not None:
+        called["solve"] = loops.get("solve")
+    if not reverse and loops.get("roa_margin") is not None:
+        called["roa_margin"] = loops.get("roa_margin")
+    return called, tuple(loops.paths) if called else ()
+
+
+def shared_step(parts: tuple, lib: RobotLibrary | None, settings, gradient: bool = True,
+                libs: tuple[Path, ...] = ()) -> tuple[ca.Function, ca.Function, Path | None]:
     """(step, first, library path) of rigid_step's parts: with the robot's library, compiled once per
     primitive into one library (with reverse derivatives where a push gradient is taken: `gradient`,
-    the adversarial search runs, and the law holds no input) that its robust rollouts and its
-    sequence stepper share; else as they are (path None)."""
+    the adversarial search runs, and the law holds no input), linked against it and `libs` (the loop
+    library's parts it calls), that its robust rollouts and its sequence stepper share; else as they
+    are (path None)."""
     step, first, _nth, nd, nhold = parts
     if lib is None:
         return step, first, None
-    shared = step_library(step, first, gradient and bool(nd) and nhold == 0, tuple(settings.jit_flags), (lib.path,))
+    shared = step_library(step, first, gradient and bool(nd) and nhold == 0, tuple(settings.jit_flags),
+                          (lib.path, *libs))
     return shared if shared is not None else (step, first, None)
 
 
@@ -127,14 +165,19 @@ def robust_h(prim: CompiledPrimitive, rows: dict) -> tuple[ca.Function, list[int
 
 
 def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str], frame: str, push: bool, dt: float,
-               lib: RobotLibrary | None = None):
+               lib: RobotLibrary | None = None, called: dict | None = None):
     """(step (z, d) -> (z next, [h; RoA margin]), first (x0, t0, s0, theta, d) -> ([h; margin], hold), nth,
     nd, hold size) of one oracle step on the perturbed plant, z = [x; t; s; x_sw; theta; hold]; lib:
-    the robot's library the plant and the contact events are called from (inlined without)."""
+    the robot's library the plant and the contact events are called from (inlined without); called:
+    compiled parts (loop_parts: solve, roa_margin) called instead of the primitive's own."""
     sys = prim.system
     nx, nu = sys.nx, sys.nu
     nth, nd = len(names), 3 if push else 0
+    called = called or {}
     law = prim.sampled
+    if law is not None and "solve" in called:
+        law = replace(law, solve=called["solve"])
+    margin = called.get("roa_margin", prim.roa_margin)
     nw = law.nw if law is not None else 0
     nhold = 1 + nu + nw if law is not None else 0
     z, d = ca.MX.sym("z", 2 * nx + 2 + nth + nhold), ca.MX.sym("d", nd)
@@ -187,13 +230,13 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     if len(prim.h_names):
         hs = ca.if_else(act, hs, INACTIVE)
     hold_next = _hold_next(law, hold, xn, t + dt, s + dt, xsw, held, dt) if law is not None else ca.MX(0, 1)
-    out = ca.vertcat(hs, prim.roa_margin(xn, t + dt))
+    out = ca.vertcat(hs, margin(xn, t + dt))
     step = cse(ca.Function("robust_rigid_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th, hold_next), out]))
     # the first sample: h at the step's start, windowed at that instant
     h_start = h_of(x, t, s, ur0, lam0, c0)
     if len(prim.h_names):
         h_start = ca.if_else(active(prim, wrap(prim, t), x, s, x, 0.0), h_start, INACTIVE)
-    first = _first(prim, ca.Function("o", [z, d], [h_start]), nth, nd)
+    first = _first(law, sys.nx, margin, ca.Function("o", [z, d], [h_start]), nth, nd)
     return step, first, nth, nd, nhold
 
 
@@ -210,10 +253,9 @@ def _hold_next(law, hold, xn, t, s, xsw, held, dt: float):
     return ca.vertcat(c_next, u_next, w_next)
 
 
-def _first(prim: CompiledPrimitive, h_start: ca.Function, nth: int, nd: int) -> ca.Function:
+def _first(law, nx: int, margin: ca.Function, h_start: ca.Function, nth: int, nd: int) -> ca.Function:
     """(x0, t0, s0, theta0, d0) -> ([h; RoA margin] at switch-in, the hold's entries then), h_start
     (z, d) -> h evaluated on z0 = [x0; t0; s0; x0; theta0; hold0]; a sampled law is solved at once."""
-    law, nx = prim.sampled, prim.system.nx
     x0, t0, s0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("s0")
     th0, d0 = ca.MX.sym("th0", nth), ca.MX.sym("d0", nd)
     if law is not None:
@@ -222,5 +264,5 @@ def _first(prim: CompiledPrimitive, h_start: ca.Function, nth: int, nd: int) -> 
     else:
         hold0 = ca.MX(0, 1)
     out0 = h_start(ca.vertcat(x0, t0, s0, x0, th0, hold0), d0 if nd else ca.MX(0, 1))
-    return ca.Function("robust_rigid_first", [x0, t0, s0, th0, d0], [ca.vertcat(out0, prim.roa_margin(x0, t0)),
+    return ca.Function("robust_rigid_first", [x0, t0, s0, th0, d0], [ca.vertcat(out0, margin(x0, t0)),
                                                                  hold0])

@@ -286,7 +286,7 @@ def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], lis
     """Each primitive's mapped step over `runs` on the perturbed plant, the uncertain parameters'
     names, the disturbance's size and bound."""
     from .scenarios import searched
-    from .rigid import library_for, rigid_step, robust_plant, shared_step
+    from .rigid import compiled_step, library_for, robust_plant
     from .rollout import plant
 
     unc, sys = spec.project.uncertainty, next(iter(prims.values())).system
@@ -297,8 +297,9 @@ def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], lis
         built, shared = {}, {}
         for name, p in prims.items():
             lib = library_for(p, settings)
-            parts = rigid_step(p, robust_plant(p, frame, lib), names, frame, force is not None, settings.dt, lib)
-            step, first, path = shared_step(parts, lib, settings, searched(unc))
+            parts, path = compiled_step(p, robust_plant(p, frame, lib), names, frame, force is not None, settings,
+                                        lib, searched(unc))
+            step, first = parts[:2]
             (built if path is None else shared)[name] = (step, first)
         out = {**_compiled(built, runs, True, settings),
                **{name: _Stepper(step, first, runs, True) for name, (step, first) in shared.items()}}
