@@ -159,9 +159,9 @@ def _log(job: _Job) -> None:
         f.write(json.dumps(rec) + "\n")
 
 
-def _run_gcc(work: list[_Job], n_jobs: int | None = None) -> dict:
+def _run_gcc(work: list[_Job], n_jobs: int | None = None) -> None:
     """gcc of the jobs not yet compiled, up to n_jobs at once (default: the usable cores); the same
-    library twice is compiled once. Returns library path -> the job that compiled it."""
+    library twice is compiled once, its twin taking its outcome. Every job is logged."""
     todo = {}
     for j in work:
         if not j.hit and j.lib not in todo:
@@ -172,7 +172,9 @@ def _run_gcc(work: list[_Job], n_jobs: int | None = None) -> dict:
     else:
         for j in todo.values():
             _gcc(j)
-    return todo
+    for j in work:
+        j.error = todo.get(j.lib, j).error
+        _log(j)
 
 
 def compile_many(fns: list[ca.Function], flags: tuple[str, ...], n_jobs: int | None = None,
@@ -183,13 +185,9 @@ def compile_many(fns: list[ca.Function], flags: tuple[str, ...], n_jobs: int | N
     unchanged. A Function whose compile fails comes back uncompiled, with a warning."""
     each = libs if isinstance(libs, list) else [tuple(libs)] * len(fns)
     work = [_job(fn, tuple(flags), tuple(lb)) for fn, lb in zip(fns, each)]
-    todo = _run_gcc(work, n_jobs)
+    _run_gcc(work, n_jobs)
     out = []
     for j in work:
-        done = todo.get(j.lib, j)
-        if j is not done:
-            j.error = done.error
-        _log(j)
         if j.error is not None:  # no compiler: CasADi's virtual machine
             warnings.warn(f"compiling {j.name} failed, running it uncompiled: {j.error[:300]}")
             out.append(j.fn)
@@ -217,13 +215,7 @@ def compile_library(name: str, fns: list[ca.Function], flags: tuple[str, ...], r
         if not job.hit:
             threading.Thread(target=_gcc, args=(job,), name=f"gcc {name}", daemon=True).start()
         return None
-    if not job.hit:
-        _gcc(job)
-    _log(job)
-    if job.error is not None:
-        warnings.warn(f"compiling {name} failed: {job.error[:300]}")
-        return None
-    return job.lib
+    return compile_libraries([job])[0]
 
 
 def library_job(name: str, fns: list[ca.Function], flags: tuple[str, ...], reverse: bool = False,
@@ -241,12 +233,9 @@ def library_job(name: str, fns: list[ca.Function], flags: tuple[str, ...], rever
 def compile_libraries(jobs: list[_Job], n_jobs: int | None = None) -> list[Path | None]:
     """The libraries of library_job, compiled side by side (up to n_jobs gcc at once, default the
     usable cores; no CasADi here, so this may run in a background thread); None where gcc failed."""
-    todo = _run_gcc(jobs, n_jobs)
+    _run_gcc(jobs, n_jobs)
     out = []
     for j in jobs:
-        done = todo.get(j.lib, j)
-        j.error, j.gcc_s = done.error, done.gcc_s if done is j else 0.0
-        _log(j)
         if j.error is not None:
             warnings.warn(f"compiling {j.name} failed: {j.error[:300]}")
         out.append(None if j.error is not None else j.lib)
