@@ -26,8 +26,9 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .flow import active, jump_of, rk4, solve_or_keep, step_end, step_length, wrap
-from .jit import compile_cached, compile_many, cse_sx
-from .looplib import INLINE_NODES, attach, attached, build_all, caller_flags, libs_of, plain_loop
+from .jit import compile_cached, cse_sx
+from .looplib import (INLINE_NODES, attach, attached, build_all, caller_flags, compile_callers, libs_of, part,
+                      plain_loop)
 
 
 def _sym(f: ca.Function, prim: CompiledPrimitive | None = None):
@@ -193,13 +194,8 @@ def build_chunks(prims: list[CompiledPrimitive], dt: float, K: int, flags: tuple
     new = list({id(p): p for p in prims if key not in p.cache}.values())
     build_all(new)  # the large loops' libraries first, side by side
     raw = [build_chunk(p, dt, K, False, flags, with_state, boundaries, error) for p in new]
-    by_flags: dict = {}  # chunks calling a library are compiled with other flags (looplib.CALLER_FLAGS)
-    for p, c in zip(new, raw):
-        by_flags.setdefault(caller_flags(p, flags), []).append((p, c))
-    for fl, group in by_flags.items():
-        fns = compile_many([c.fn for _p, c in group], fl, libs=[libs_of(p) for p, _c in group])
-        for (p, c), fn in zip(group, fns):
-            p.cache[key] = dataclasses.replace(c, fn=fn, _maps={}, _buffers={})
+    for p, c, fn in zip(new, raw, compile_callers(new, [c.fn for c in raw], flags)):
+        p.cache[key] = dataclasses.replace(c, fn=fn, _maps={}, _buffers={})
     return [p.cache[key] for p in prims]
 
 
@@ -246,30 +242,26 @@ def _loop(prim: CompiledPrimitive, held: bool = False) -> ca.Function:
     """The closed loop (x, t, s, x_sw) -> (xdot, h, u_raw, u), or with `held` the open loop loop_u
     (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): from the primitive's loop library when one is
     attached (looplib.py), else looplib.plain_loop."""
-    lib = attached(prim)
-    ext = lib.get("loop_u" if held else "loop") if lib is not None else None
+    ext = part(prim, "loop_u" if held else "loop")
     return ext if ext is not None else plain_loop(prim, held)
 
 
 def _jump(prim: CompiledPrimitive) -> ca.Function:
     """flow.jump_of, from the primitive's loop library when one is attached."""
-    lib = attached(prim)
-    return lib.get("jump") if lib is not None else jump_of(prim)
+    ext = part(prim, "jump")
+    return ext if ext is not None else jump_of(prim)
 
 
 def _margin(prim: CompiledPrimitive) -> ca.Function:
     """The RoA margin (x, t), from the primitive's loop library when it holds it."""
-    lib = attached(prim)
-    ext = lib.get("roa_margin") if lib is not None else None
+    ext = part(prim, "roa_margin")
     return ext if ext is not None else prim.roa_margin
 
 
 def _sampled(prim: CompiledPrimitive):
     """The primitive's sampled law, its solve from the loop library when one is attached."""
-    lib = attached(prim)
-    if lib is None or lib.get("solve") is None:
-        return prim.sampled
-    return dataclasses.replace(prim.sampled, solve=lib.get("solve"))
+    ext = part(prim, "solve")
+    return prim.sampled if ext is None else dataclasses.replace(prim.sampled, solve=ext)
 
 
 def _xdot_of(loop: ca.Function) -> ca.Function:
@@ -342,7 +334,8 @@ def _build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags: t
                  with_state: bool, boundaries: bool) -> Chunk:
     body, nz = step_body(prim, dt, with_state, boundaries)
     fn = _accumulate("chunk_", prim, dt, K, with_state, boundaries, body, nz)
-    return Chunk(prim, dt, K, compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn, len(prim.h_names), prim.system.nu,
+    fn = compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn
+    return Chunk(prim, dt, K, fn, len(prim.h_names), prim.system.nu,
                  Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0))
 
 
@@ -405,7 +398,8 @@ def _build_doubling(prim: CompiledPrimitive, dt: float, K: int, jit: bool, flags
                     with_state: bool, boundaries: bool) -> Chunk:
     body, nz = step_body(prim, dt, with_state, boundaries, doubling=True)
     fn = _accumulate("chunk2_", prim, dt, K, with_state, boundaries, body, nz)
-    return Chunk(prim, dt, K, compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn, len(prim.h_names), prim.system.nu,
+    fn = compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn
+    return Chunk(prim, dt, K, fn, len(prim.h_names), prim.system.nu,
                  Rows(len(prim.h_names), prim.system.nu, prim.system.nx if with_state else 0, doubling=True))
 
 

@@ -24,8 +24,8 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .integrator import Rows, step_body
-from .jit import compile_cached, compile_many, cse_sx
-from .looplib import attach, caller_flags, libs_of
+from .jit import compile_cached, cse_sx
+from .looplib import attach, caller_flags, compile_callers, libs_of
 from .verdict import LANES, Block, Carry, Decision, evidences, lane_sum
 
 KINDS = ("", "safe", "left_C", "non_finite", "horizon", "doubt", "doubt_E")
@@ -267,8 +267,8 @@ def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: 
         if jit:  # a large loop through its compiled library
             attach(prim)
         fn, nz, lay = _judged_function(prim, dt, K, B, tol, cm, doubling)
-        prim.cache[key] = JudgedChunk(prim, dt, compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn, nz, lay, K,
-                                      doubling)
+        fn = compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) if jit else fn
+        prim.cache[key] = JudgedChunk(prim, dt, fn, nz, lay, K, doubling)
     return prim.cache[key]
 
 
@@ -301,14 +301,9 @@ def prebuild(prims: list[CompiledPrimitive], dt: float, K: int, B: int, tol: flo
     new = [p for p in {id(p): p for p in prims}.values() if key(p) not in p.cache]
     for p in new:
         attach(p)  # attached libraries are found at once; build_all compiled the rest side by side
-    built = [(p, *_judged_function(p, dt, K, B, tol, margins[p.name], doubling)) for p in new]
-    by_flags: dict = {}  # chunks calling a library are compiled with other flags (looplib.CALLER_FLAGS)
-    for b in built:
-        by_flags.setdefault(caller_flags(b[0], flags), []).append(b)
-    for fl, group in by_flags.items():
-        fns = compile_many([b[1] for b in group], fl, libs=[libs_of(b[0]) for b in group])
-        for (p, _fn, nz, lay), fn in zip(group, fns):
-            p.cache[key(p)] = JudgedChunk(p, dt, fn, nz, lay, K, doubling)
+    built = [_judged_function(p, dt, K, B, tol, margins[p.name], doubling) for p in new]
+    for p, (_fn, nz, lay), fn in zip(new, built, compile_callers(new, [b[0] for b in built], flags)):
+        p.cache[key(p)] = JudgedChunk(p, dt, fn, nz, lay, K, doubling)
 
 
 def decided_evidence(ch: JudgedChunk, J: np.ndarray, t0s, cm: float) -> list:

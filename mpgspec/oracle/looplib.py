@@ -33,7 +33,7 @@ from ..compile.primitive import INACTIVE, CompiledPrimitive
 from ..compile.contacts import wrap_clock
 from ..compile.events import EventWindow
 from .flow import jump_of
-from .jit import cache_dir, compile_libraries, library_job, with_cse
+from .jit import cache_dir, compile_libraries, compile_many, library_job, with_cse
 
 INLINE_NODES = 4000
 """Closed loops up to this many SX nodes are inlined (fastest code); larger ones become calls
@@ -194,6 +194,26 @@ def attach(prim: CompiledPrimitive, flags: tuple[str, ...] = LOOP_FLAGS) -> Loop
 def attached(prim: CompiledPrimitive) -> LoopLibrary | None:
     """The loop library attached to the primitive, if any (nothing is built)."""
     return prim.cache.get("looplib")
+
+
+def part(prim: CompiledPrimitive, kind: str) -> ca.Function | None:
+    """The compiled part `kind` (loop, loop_u, solve, jump, roa_margin) of the primitive's attached
+    loop library, None without one or when it does not hold that part."""
+    lib = attached(prim)
+    return lib.get(kind) if lib is not None else None
+
+
+def compile_callers(prims: list[CompiledPrimitive], fns: list[ca.Function], flags: tuple[str, ...]) -> list:
+    """fns (each built from the primitive beside it) compiled side by side, in their order: those
+    calling a loop library at CALLER_FLAGS and linked against it, the others at `flags`."""
+    groups: dict = {}
+    for k, p in enumerate(prims):
+        groups.setdefault(caller_flags(p, flags), []).append(k)
+    out: list = [None] * len(fns)
+    for fl, ks in groups.items():
+        for k, fn in zip(ks, compile_many([fns[k] for k in ks], fl, libs=[libs_of(prims[k]) for k in ks])):
+            out[k] = fn
+    return out
 
 
 def caller_flags(prim: CompiledPrimitive, flags: tuple[str, ...]) -> tuple[str, ...]:
