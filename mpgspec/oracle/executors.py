@@ -202,6 +202,11 @@ def _stop_pool(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
     """Cancel what has not started, then terminate the workers (kill those that linger)."""
     procs = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
+    stop_processes(procs, grace)
+
+
+def stop_processes(procs: list, grace: float = 2.0) -> None:
+    """SIGTERM to each process, then kill each one still alive after `grace` seconds."""
     for p in procs:
         try:
             p.terminate()

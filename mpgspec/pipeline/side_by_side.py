@@ -23,7 +23,7 @@ import threading
 from multiprocessing.connection import wait
 from pathlib import Path
 
-from ..oracle.executors import _worker_signals, make_executor
+from ..oracle.executors import _worker_signals, make_executor, stop_processes
 from ..progress import Progress
 from .results import ProjectResult, VerifyResult, write_reports
 
@@ -62,7 +62,7 @@ def verify_side_by_side(files: list[Path], out_dir: Path | None, overrides: dict
                 results[k] = _receive(conn, files[k])
                 proc.join()
     finally:
-        _stop([proc for _, proc in running.values()])
+        stop_processes([proc for _, proc in running.values()], GRACE_S)  # each unwinds, or is killed
         queue.put(None)
         relay.join(GRACE_S)
     return VerifyResult(results)
@@ -85,17 +85,6 @@ def _receive(conn, path: Path) -> ProjectResult:
         res = err
     conn.close()
     return res if isinstance(res, ProjectResult) else _died(path, res)
-
-
-def _stop(procs: list) -> None:
-    """SIGTERM to each running project process (it unwinds), then kill what outlives GRACE_S."""
-    for p in procs:
-        p.terminate()
-    for p in procs:
-        p.join(GRACE_S)
-        if p.is_alive():
-            p.kill()
-            p.join()
 
 
 def _relay(queue, progress: Progress | None) -> None:
