@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import common  # noqa: E402  (bench/common.py)
-from common import markdown_table, rounds, stamp, write_section  # noqa: E402
+from common import markdown_table, rounds  # noqa: E402
 
 from mpgspec.api import settings_for  # noqa: E402
 from mpgspec.pipeline.stages import compile_project  # noqa: E402
@@ -118,11 +118,8 @@ def main(argv=None) -> int:
                      f"largest difference {gdiff:.1e}"))
     table = markdown_table([(m, f"inline {x}; library {y}") for m, x, y in rows])
     mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
-    head = stamp(mach, f"bench_library.py --target '{a.target}'", False, a.repeats,
-                 time.perf_counter() - t_start)
-    print(head + "\n\n" + table)
-    if not a.no_write:
-        write_section(ROOT / "bench" / "RESULTS.md", HEADING, HEADING + "\n\n" + head + "\n\n" + table + "\n")
+    common.publish(HEADING, mach, f"bench_library.py --target '{a.target}'", a.repeats, time.perf_counter() - t_start,
+                   table, not a.no_write)
     return 0 if same else 1
 
 

@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import common  # noqa: E402  (bench/common.py)
-from common import markdown_table, rounds, stamp, write_section  # noqa: E402
+from common import markdown_table, rounds  # noqa: E402
 
 from mpgspec.api import settings_for  # noqa: E402
 from mpgspec.execute.crosscheck import CrossCheckSettings  # noqa: E402
@@ -139,11 +139,8 @@ def main(argv=None) -> int:
     ok = ok and same
     table = markdown_table(rows)
     mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
-    head = stamp(mach, "bench_looplib.py --prims " + " ".join(f"'{p}'" for p in a.prims), False, a.repeats,
-                 time.perf_counter() - t_start)
-    print(head + "\n\n" + table)
-    if not a.no_write:
-        write_section(ROOT / "bench" / "RESULTS.md", HEADING, HEADING + "\n\n" + head + "\n\n" + table + "\n")
+    common.publish(HEADING, mach, "bench_looplib.py --prims " + " ".join(f"'{p}'" for p in a.prims), a.repeats,
+                   time.perf_counter() - t_start, table, not a.no_write)
     return 0 if ok else 1
 
 

@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import common  # noqa: E402  (bench/common.py)
-from common import markdown_table, rounds, stamp, write_section  # noqa: E402
+from common import markdown_table, rounds  # noqa: E402
 
 from mpgspec.api import settings_for  # noqa: E402
 from mpgspec.oracle import looplib  # noqa: E402
@@ -137,12 +137,7 @@ def main(argv=None) -> int:
         ok = ok and same
     mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
     cmd = "bench_rstep.py --targets " + " ".join(f"'{t}'" for t in a.targets) + " --no-gradient" * a.no_gradient
-    head = stamp(mach, cmd, False, a.repeats,
-                 time.perf_counter() - t_start)
-    table = markdown_table(rows)
-    print(head + "\n\n" + table)
-    if not a.no_write:
-        write_section(ROOT / "bench" / "RESULTS.md", HEADING, HEADING + "\n\n" + head + "\n\n" + table + "\n")
+    common.publish(HEADING, mach, cmd, a.repeats, time.perf_counter() - t_start, markdown_table(rows), not a.no_write)
     return 0 if ok else 1
 
 

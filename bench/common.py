@@ -120,3 +120,11 @@ def write_section(results: Path, heading: str, section: str) -> None:
     else:
         text = text.rstrip("\n") + "\n\n" + section
     results.write_text(text)
+
+
+def publish(heading: str, mach: dict, script: str, repeats: int, seconds: float, table: str, write: bool) -> None:
+    """Print a benchmark's section (its stamp and table) and, with `write`, put it in bench/RESULTS.md."""
+    head = stamp(mach, script, False, repeats, seconds)
+    print(head + "\n\n" + table)
+    if write:
+        write_section(Path(__file__).parent / "RESULTS.md", heading, heading + "\n\n" + head + "\n\n" + table + "\n")
