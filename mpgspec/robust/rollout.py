@@ -142,16 +142,17 @@ class RobustRollout:
         return self._maps[key]
 
     def _call(self, fn: ca.Function, n: int, args: list[np.ndarray]) -> np.ndarray:
-        """fn on n columns, in mapped batches of at most BATCH (the last padded), called through a
-        FunctionBuffer on numpy arrays (column-major, no DM copies)."""
-        m = min(n, self.BATCH)
-        F = self._map(fn, m)
+        """fn on n columns, in mapped batches of at most BATCH (the last one as wide as what is left:
+        no column is computed twice), called through a FunctionBuffer on numpy arrays (column-major,
+        no DM copies)."""
+        if not n:
+            return np.zeros((fn.size1_out(0), 0))
         widths = [a.shape[1] // n if a.size else 0 for a in args]
-        rows = F.size1_out(0)
-        per = F.size2_out(0) // m
-        out = np.zeros((rows, n * per))
-        for start in range(0, n, m):
-            cols = np.minimum(np.arange(start, start + m), n - 1)  # pad with the last column
+        out = None
+        for start in range(0, n, self.BATCH):
+            m = min(self.BATCH, n - start)
+            F = self._map(fn, m)
+            cols = np.arange(start, start + m)
             ins = []
             for a, w in zip(args, widths):
                 sel = a[:, (cols[:, None] * w + np.arange(w)).ravel()] if w else a
@@ -162,8 +163,10 @@ class RobustRollout:
                 buf.set_arg(i, memoryview(a))
             buf.set_res(0, memoryview(res))
             ev()
-            k = min(m, n - start)
-            out[:, start * per:(start + k) * per] = res.reshape(rows, m * per, order="F")[:, : k * per]
+            rows, per = F.size1_out(0), F.size2_out(0) // m
+            if out is None:
+                out = np.zeros((rows, n * per))
+            out[:, start * per:(start + m) * per] = res.reshape(rows, m * per, order="F")
         return out
 
     def run(self, X0: np.ndarray, T0: np.ndarray, TH: np.ndarray, D: np.ndarray,

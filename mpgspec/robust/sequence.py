@@ -48,25 +48,32 @@ def _step(prim: CompiledPrimitive, plant_fn: ca.Function, Bd: np.ndarray, dt: fl
 
 class _Stepper:
     """One primitive's mapped step over the runs: init (x0, clock, theta, d) -> z and step (z, theta,
-    d) -> (z next, h, RoA margin), on columns (runs); z = [x; clock; s; x_sw; ...]."""
+    d) -> (z next, h, RoA margin), on columns (runs); z = [x; clock; s; x_sw; ...]. Each call maps
+    the step over exactly the columns given (the runs in this primitive), not over every run."""
 
     def __init__(self, step: ca.Function, first: ca.Function | None, runs: int, rigid: bool):
         self.rigid, self.nz = rigid, step.size1_in(0)
-        self.step = _Bound(step.map(runs))
-        self.first = _Bound(first.map(runs)) if first is not None else None
+        self.fns = {"step": step, "first": first}
+        self._bound: dict[tuple[str, int], _Bound] = {}
+
+    def _fn(self, kind: str, width: int) -> _Bound:
+        if (kind, width) not in self._bound:
+            self._bound[kind, width] = _Bound(self.fns[kind].map(width))
+        return self._bound[kind, width]
 
     def init(self, X0, T0, TH, D) -> np.ndarray:
         z = np.vstack([X0, T0[None, :], np.zeros((1, X0.shape[1])), X0])
         if not self.rigid:
             return z
-        out, hold = self.first(X0, T0[None, :], np.zeros((1, X0.shape[1])), TH, D)
+        out, hold = self._fn("first", X0.shape[1])(X0, T0[None, :], np.zeros((1, X0.shape[1])), TH, D)
         return np.vstack([z, TH, hold])
 
     def __call__(self, Z, TH, D):
+        step = self._fn("step", Z.shape[1])
         if self.rigid:  # theta rides in z; the step's outputs are (z, [h; margin])
-            z, out = self.step(Z[:self.nz], D)
+            z, out = step(Z[:self.nz], D)
             return z, out[:-1], out[-1]
-        z, h, m = self.step(Z[:self.nz], TH, D)
+        z, h, m = step(Z[:self.nz], TH, D)
         return z, h, m.ravel()
 
 
@@ -113,16 +120,15 @@ class DisturbedSequences:
         self.nz = max(f.nz for f in steppers.values())
 
     def _apply(self, fn, cols: np.ndarray, args: list[np.ndarray]):
-        """fn on the columns `cols` of args (padded to the mapped width with the last), and the columns
-        whose call failed (a control law that found no solution): each is re-run alone."""
-        sel = np.resize(cols, self.n)
+        """fn on the columns `cols` of args, and the columns whose call failed (a control law that
+        found no solution): each is re-run alone."""
         try:
-            return [np.atleast_2d(o)[:, :len(cols)] for o in fn(*[a[:, sel] for a in args])], []
+            return [np.atleast_2d(o) for o in fn(*[a[:, cols] for a in args])], []
         except RuntimeError:
             outs, failed = None, []
             for q, c in enumerate(cols):
                 try:
-                    res = fn(*[np.repeat(a[:, [c]], self.n, axis=1) for a in args])
+                    res = fn(*[a[:, [c]] for a in args])
                 except RuntimeError:
                     failed.append(q)
                     continue
