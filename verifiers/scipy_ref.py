@@ -83,15 +83,25 @@ class ScipyRunner:
                     v += p.period
         return sorted(set(out))
 
+    def __getstate__(self):
+        return {k: v for k, v in self.__dict__.items() if k != "_fast"}
+
+    def _buffers(self) -> tuple[_Buffered, _Buffered]:
+        """f_cl and the RoA margin called through FunctionBuffers (the solver calls them thousands of
+        times per rollout: no DM conversions), made once per process."""
+        if getattr(self, "_fast", None) is None:
+            self._fast = (_Buffered(self.prim.f_cl), _Buffered(self.prim.roa_margin))
+        return self._fast
+
     def one(self, x0: np.ndarray, t0: float, T: float) -> OracleEvidence:
-        p = self.prim
+        f_cl, margin = self._buffers()
 
         def rhs(s, x):
-            return np.asarray(p.f_cl(x, t0 + s, s, x0)).ravel()
+            return f_cl(x, t0 + s, s, x0)
 
         def enter(s, x):  # inside E by more than the margin's error estimate (as the judge asks)
             err = self.c_margin * np.linalg.norm(_tolerance_error(x))
-            return float(p.roa_margin(x, t0 + s)) - 2 * err - 1e-9
+            return float(margin(x, t0 + s)[0]) - 2 * err - 1e-9
 
         enter.terminal, enter.direction = True, 1
         edges = [0.0, *self._cuts(t0, T), T]
@@ -171,6 +181,24 @@ class ScipyRunner:
         ev = evidence(p, blk, c, d, 0, t0, self.c_margin, "solver failed" if failed else "")
         ev.steps = int(N)
         return ev
+
+
+class _Buffered:
+    """A Function evaluated on numpy inputs through a FunctionBuffer; returns a copy of its first output."""
+
+    def __init__(self, fn: ca.Function):
+        self.buf, self.ev = fn.buffer()
+        self.ins = [np.zeros(fn.nnz_in(i)) for i in range(fn.n_in())]
+        self.out = np.zeros(fn.nnz_out(0))
+        for i, a in enumerate(self.ins):
+            self.buf.set_arg(i, memoryview(a))
+        self.buf.set_res(0, memoryview(self.out))
+
+    def __call__(self, *args) -> np.ndarray:
+        for a, v in zip(self.ins, args):
+            a[...] = v
+        self.ev()
+        return self.out.copy()
 
 
 def _tolerance_error(x: np.ndarray) -> np.ndarray:

@@ -41,6 +41,11 @@ LIBRARY_FLAGS = ("-O2",)
 than at -O1 without its superlinear passes, the flags of the large per-primitive loops
 (bench/bench_jit.py)."""
 
+STEP_FLAGS = ("-O1",)
+"""gcc flags of the robust steps (rstep libraries, the analytic rollouts' chunks and the uncertain
+sequences' steppers), whatever settings.jit_flags say: each is run for thousands of rollouts, and
+measured on the pendulum the robust stage runs about 2x faster than at -O0 for about 2 CPU-s more gcc."""
+
 _BUILT: dict[int, tuple] = {}
 """id of the system -> (a weak reference to it, the Future of its library): built once per process
 and system; an id reused by another system after the first is freed is not mistaken for it."""

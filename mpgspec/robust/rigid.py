@@ -23,7 +23,7 @@ from ..compile.rigidbody.system import no_slip
 from ..oracle import looplib
 from ..oracle.flow import LEFT, active, jump_of, rk4, solve_or_keep, wrap
 from ..oracle.jit import cse, cse_sx
-from .library import (RobotLibrary, library_jump, library_plant, library_schedule_jump, robot_library,
+from .library import (STEP_FLAGS, RobotLibrary, library_jump, library_plant, library_schedule_jump, robot_library,
                       step_library)
 from .rollout import RobustRollout
 
@@ -148,7 +148,7 @@ def shared_step(parts: tuple, lib: RobotLibrary | None, settings, gradient: bool
     step, first, _nth, nd, nhold = parts
     if lib is None:
         return step, first, None
-    shared = step_library(step, first, gradient and bool(nd) and nhold == 0, tuple(settings.jit_flags),
+    shared = step_library(step, first, gradient and bool(nd) and nhold == 0, STEP_FLAGS,
                           (lib.path, *libs))
     return shared if shared is not None else (step, first, None)
 

@@ -20,6 +20,7 @@ from ..compile.system import compile_analytic
 from ..oracle.flow import rk4
 from ..oracle.jit import compile_many, cse
 from ..settings import OracleSettings
+from .library import STEP_FLAGS
 
 
 def plant(spec, names: list[str]) -> ca.Function:
@@ -107,7 +108,7 @@ class RobustRollout:
             fns.append(ca.Function(name + "_grad", [x0, t0, TH, D, w], [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))]))
         fns = [cse(fn) for fn in fns]
         if settings.jit:  # the three libraries compile side by side
-            fns = compile_many(fns, settings.jit_flags, libs=self.libs)
+            fns = compile_many(fns, STEP_FLAGS, libs=self.libs)
         self.first, self.chunk = fns[:2]
         self.grad = fns[2] if len(fns) > 2 else None
         self._maps: dict[tuple, ca.Function] = {}

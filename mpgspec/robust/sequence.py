@@ -24,6 +24,7 @@ from ..oracle.flow import rk4
 from ..oracle.jit import compile_many, cse
 from ..oracle.tasks import Failed
 from ..spec.models import PrimitiveClass
+from .library import STEP_FLAGS
 
 HOLD = 0.5
 """Seconds the sampled disturbance holds each value."""
@@ -283,7 +284,7 @@ class _Runs:
 def _compiled(built: dict, runs: int, rigid: bool, settings) -> dict[str, _Stepper]:
     """Steppers of the (step, first) pairs of every primitive, all compiled side by side."""
     fns = [f for pair in built.values() for f in pair if f is not None]
-    fns = iter(compile_many(fns, settings.jit_flags) if settings.jit else fns)
+    fns = iter(compile_many(fns, STEP_FLAGS) if settings.jit else fns)
     return {name: _Stepper(next(fns), next(fns) if first is not None else None, runs, rigid)
             for name, (_step_fn, first) in built.items()}
 
