@@ -134,9 +134,16 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
             X0 = np.stack([sys.project_to_contacts(X0[:, j], held(k[j] * flow.dt), W) for j in range(n)], 1)
         return X0, k * flow.dt
 
+    def decided(X, hmin):  # a start already left C or blew up: this radius fails whatever follows
+        return bool((hmin < 0).any() or not np.isfinite(X).all())
+
     def ok(r):
         X0, t0 = starts(r)
-        XT, hmin = flow.run(X0, t0, periods)
+        XT, hmin, ran = flow.run_until(X0, t0, periods, decided)
+        if ran < periods:
+            bad = (hmin < 0) | ~np.isfinite(XT).all(axis=0)
+            log.append({"r": r, "failed": int(bad.sum()), "unsafe": int((hmin < 0).sum()), "stopped_after_periods": ran})
+            return False
         ks = np.round(t0 / flow.dt).astype(int)
         E = XT - Xs[:, ks]
         dist = np.sqrt(np.einsum("ij,ik,kj->j", E, W, E))

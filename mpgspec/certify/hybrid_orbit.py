@@ -67,12 +67,20 @@ class HybridFlow:
 
     def run(self, X0: np.ndarray, t0: np.ndarray, periods: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """End states and least h of rollouts from the columns of X0 at clocks t0."""
+        XT, hmin, _ = self.run_until(X0, t0, periods)
+        return XT, hmin
+
+    def run_until(self, X0: np.ndarray, t0: np.ndarray, periods: int, stop=None) -> tuple[np.ndarray, np.ndarray, int]:
+        """(states, least h, periods run) of rollouts from the columns of X0 at clocks t0: `periods`
+        periods, or fewer when stop(states, least h) says after one that the outcome is decided."""
         n, N = X0.shape[1], self.steps
         Z = np.vstack([X0, t0[None, :], np.full((1, n), np.inf)])
         fn = self.period_fn.map(n)
-        for _ in range(periods):
+        for k in range(periods):
             Z = np.array(fn(Z), float)[:, N - 1::N]
-        return Z[:-2], Z[-1]
+            if stop is not None and k + 1 < periods and stop(Z[:-2], Z[-1]):
+                return Z[:-2], Z[-1], k + 1
+        return Z[:-2], Z[-1], periods
 
 
 def orbit(flow: HybridFlow, W: np.ndarray) -> tuple[np.ndarray, float, float]:

@@ -92,15 +92,27 @@ class _LinearFlow:
         self.prim = SimpleNamespace(system=None, contacts=None)
 
     def run(self, X0, t0, periods):
+        return self.run_until(X0, t0, periods)[:2]
+
+    def run_until(self, X0, t0, periods, stop=None):
         X, hmin = X0.copy(), 1 - np.abs(X0).max(0)
-        for _ in range(periods):
+        for k in range(periods):
             X = self.M @ X
             hmin = np.minimum(hmin, 1 - np.abs(X).max(0))
-        return X, hmin
+            if stop is not None and k + 1 < periods and stop(X, hmin):
+                return X, hmin, k + 1
+        return X, hmin, periods
 
 
-def _size(M, o=None):
-    flow = _LinearFlow(M)
+class _NoStop(_LinearFlow):
+    """The same flow, every rollout run for all its periods."""
+
+    def run_until(self, X0, t0, periods, stop=None):
+        return super().run_until(X0, t0, periods)
+
+
+def _size(M, o=None, flow_type=None):
+    flow = (flow_type or _LinearFlow)(M)
     rho = float(np.abs(np.linalg.eigvals(M)).max())
     return floquet_hybrid._size(flow, None, np.zeros((2, flow.steps)), np.eye(2), rho, dict(o or {}))
 
@@ -113,6 +125,17 @@ def test_slow_transient_gets_more_periods():
     assert tube["periods_tried"][0] == {"periods": 6, "radius": 0.0}  # the first count: rho^n < conv/4
     assert tube["periods"] > 6 and r >= COLLAPSE * 0.05
     assert r == pytest.approx(0.1, rel=0.1)  # the transient's peak (10 r at n = 1) reaches |x| = 1
+
+
+def test_stopping_a_failed_radius_early_changes_no_radius():
+    """A radius whose starts already left C after some periods fails whatever follows: stopping its
+    rollouts there gives the same radius and period count as running every period."""
+    for M in (SLOW, np.diag([0.4, 0.3]), np.array([[0.5, 3.0], [0.0, 0.6]])):
+        r, tube = _size(M)
+        r_all, tube_all = _size(M, flow_type=_NoStop)
+        assert r == r_all and tube["periods"] == tube_all["periods"]
+    stopped = [e for e in tube["bisection"] if "stopped_after_periods" in e]
+    assert stopped and all(e["unsafe"] > 0 and e["stopped_after_periods"] < tube["periods"] for e in stopped)
 
 
 def test_given_periods_are_kept():
