@@ -22,6 +22,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from mpgspec.compile.contacts import wrap_clock
+from mpgspec.compile.numeric import numeric
 from mpgspec.compile.primitive import INACTIVE, CompiledPrimitive
 from mpgspec.oracle.evidence import OracleEvidence, Reason
 from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidence, judge
@@ -48,6 +49,8 @@ class ScipyRunner:
         self.sample = ca.Function("sample", a + [delta], [hv, hdot, dh, u_raw, u])
         self._maps: dict[int, ca.Function] = {}
         self._fine: ScipyRunner | None = None
+        # the solver calls these thousands of times per rollout: on numpy buffers, no DM conversions
+        self.f_cl, self.margin = numeric(prim.f_cl), numeric(prim.roa_margin)
 
     def evaluate(self, x0s, t0s, horizons, level: int = 0) -> list[OracleEvidence]:
         x0s, t0s = np.atleast_2d(np.asarray(x0s, float)), np.atleast_1d(np.asarray(t0s, float))
@@ -83,25 +86,15 @@ class ScipyRunner:
                     v += p.period
         return sorted(set(out))
 
-    def __getstate__(self):
-        return {k: v for k, v in self.__dict__.items() if k != "_fast"}
-
-    def _buffers(self) -> tuple[_Buffered, _Buffered]:
-        """f_cl and the RoA margin called through FunctionBuffers (the solver calls them thousands of
-        times per rollout: no DM conversions), made once per process."""
-        if getattr(self, "_fast", None) is None:
-            self._fast = (_Buffered(self.prim.f_cl), _Buffered(self.prim.roa_margin))
-        return self._fast
-
     def one(self, x0: np.ndarray, t0: float, T: float) -> OracleEvidence:
-        f_cl, margin = self._buffers()
+        f_cl, margin = self.f_cl, self.margin
 
         def rhs(s, x):
-            return f_cl(x, t0 + s, s, x0)
+            return f_cl(x, t0 + s, s, x0)[0]
 
         def enter(s, x):  # inside E by more than the margin's error estimate (as the judge asks)
             err = self.c_margin * np.linalg.norm(_tolerance_error(x))
-            return float(margin(x, t0 + s)[0]) - 2 * err - 1e-9
+            return float(margin(x, t0 + s)[0][0]) - 2 * err - 1e-9
 
         enter.terminal, enter.direction = True, 1
         edges = [0.0, *self._cuts(t0, T), T]
@@ -181,24 +174,6 @@ class ScipyRunner:
         ev = evidence(p, blk, c, d, 0, t0, self.c_margin, "solver failed" if failed else "")
         ev.steps = int(N)
         return ev
-
-
-class _Buffered:
-    """A Function evaluated on numpy inputs through a FunctionBuffer; returns a copy of its first output."""
-
-    def __init__(self, fn: ca.Function):
-        self.buf, self.ev = fn.buffer()
-        self.ins = [np.zeros(fn.nnz_in(i)) for i in range(fn.n_in())]
-        self.out = np.zeros(fn.nnz_out(0))
-        for i, a in enumerate(self.ins):
-            self.buf.set_arg(i, memoryview(a))
-        self.buf.set_res(0, memoryview(self.out))
-
-    def __call__(self, *args) -> np.ndarray:
-        for a, v in zip(self.ins, args):
-            a[...] = v
-        self.ev()
-        return self.out.copy()
 
 
 def _tolerance_error(x: np.ndarray) -> np.ndarray:

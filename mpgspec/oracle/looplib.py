@@ -32,6 +32,7 @@ import casadi as ca
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from ..compile.contacts import wrap_clock
 from ..compile.events import EventWindow
+from ..compile.numeric import NumericFunction, numeric
 from .flow import jump_of
 from .jit import cache_dir, compile_libraries, compile_many, library_job, with_cse
 
@@ -247,14 +248,14 @@ def windowed(prim: CompiledPrimitive, h_all, x, t, s):
     return ca.Function("windows", [hs, xs, ts, ss], [ca.vertcat(*out)])(h_all, x, t, s)
 
 
-def law(prim: CompiledPrimitive) -> ca.Function | None:
+def law(prim: CompiledPrimitive) -> NumericFunction | None:
     """(x, t, s, x_sw) -> (h with its windows, u) through the attached library's loop (None without
-    one): what prim.loop gives the cross-check, evaluated in compiled code."""
+    one): what prim.loop gives the cross-check, evaluated in compiled code on numpy buffers."""
     lib = attached(prim)
     if lib is None or lib.get("loop") is None:
         return None
     if "looplib_law" not in prim.cache:
         a = [ca.MX.sym(n, *prim.loop.sparsity_in(i).shape) for i, n in enumerate(("x", "t", "s", "x_sw"))]
         _xdot, h_all, _u_raw, u = lib.get("loop").call(a)
-        prim.cache["looplib_law"] = ca.Function("law", a, [windowed(prim, h_all, a[0], a[1], a[2]), u])
+        prim.cache["looplib_law"] = numeric(ca.Function("law", a, [windowed(prim, h_all, a[0], a[1], a[2]), u]))
     return prim.cache["looplib_law"]
