@@ -70,8 +70,8 @@ def test_crosscheck_law_equals_the_virtual_machine(walk):
         for s_ in (0.0, 0.3):  # before and after the windows anchored on time since switch-in open
             _xdot, h_vm, _ur, u_vm = lib.loop(x, t, s_, X[0])
             h, u = law(x, t, s_, X[0])
-            np.testing.assert_array_equal(np.asarray(h, float), np.asarray(h_vm, float))
-            np.testing.assert_array_equal(np.asarray(u, float), np.asarray(u_vm, float))
+            np.testing.assert_array_equal(np.asarray(h, float).ravel(), np.asarray(h_vm, float).ravel())
+            np.testing.assert_array_equal(np.asarray(u, float).ravel(), np.asarray(u_vm, float).ravel())
 
 
 def test_without_a_compiler_the_loop_stays_inlined(a1_project, tmp_path, monkeypatch):
