@@ -490,7 +490,11 @@ def _run_job(job: tuple) -> tuple:
 
 
 def default_workers() -> int:
-    return int(os.environ.get("ADVERSARIAL_WORKERS", min(2, os.cpu_count() or 1)))
+    """ADVERSARIAL_WORKERS, else 1 inside a pytest-xdist worker (the suite already runs one worker
+    per core: spawning more only adds their start-up), else up to 2 processes."""
+    if "ADVERSARIAL_WORKERS" in os.environ:
+        return int(os.environ["ADVERSARIAL_WORKERS"])
+    return 1 if os.environ.get("PYTEST_XDIST_WORKER") else min(2, os.cpu_count() or 1)
 
 
 def run_campaign(n_per_family: int = CASES_PER_FAMILY, backends=BACKENDS, presets=PRESETS,

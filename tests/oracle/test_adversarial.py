@@ -5,7 +5,8 @@ The families, the exact reference and the runner are in adversarial.py (read its
 undershoots), each with an exact answer computed without mpgspec. Every case runs through the
 "rk4" backend at every preset; the "scipy" backend (one Python rollout at a time) runs a fixed
 random subset of 75 cases per family, 300 per preset, the same subset for every preset. The two
-backends' jobs run in two spawned processes (ADVERSARIAL_WORKERS overrides).
+backends' jobs run in two spawned processes, in this one inside a pytest-xdist worker (ADVERSARIAL_WORKERS
+overrides).
 
 The summary table (family x backend x preset: cases, false safe, false unsafe, inconclusive,
 agreement, safe-recall) is printed in pytest's terminal summary, also with -q:
