@@ -28,7 +28,8 @@ class OracleSettings:
     # gcc flags of the oracle's and the traces' chunks. -O0: their code is mostly the judge's bookkeeping
     # (a robot's loop is called from its loop library, compiled at LOOP_FLAGS); on the pendulum and the
     # cart, -O0 against -O1 cuts gcc 3.5x (judged chunks 24.9 -> 7.2 CPU-s) and a cold verify of both
-    # from 52 to 32 CPU-s, for oracle calls about 1.2x slower. The robust steps keep STEP_FLAGS.
+    # from 52 to 32 CPU-s; warm, the pendulum's graph takes 1.15x the time (a chunk's compiled step up
+    # to 3x), so give ("-O1",) for long runs on a small loop. The robust steps keep STEP_FLAGS.
     jit_flags: tuple[str, ...] = ("-O0",)
     error: str = "local"
 
