@@ -17,7 +17,7 @@ from ..compile.rigidbody.symmetry import reduced_monodromy
 from ..compile.contacts import Schedule
 from ..oracle.flow import LEFT, rk4_jump
 from ..oracle import looplib
-from ..oracle.jit import compile_cached, cse_sx
+from ..oracle.jit import compile_many, cse_sx
 
 FD = 1e-6
 S_LONG = 1e6  # time since switch-in: long after any motion profile
@@ -57,9 +57,11 @@ class HybridFlow:
         hv = h_of(xn, t + h)
         mn = ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
         body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn)])
-        zz = ca.MX.sym("z", nx + 2)  # one compiled Function: a period, every step's state out
-        self.period_fn = compile_cached(ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)]),
-                                        looplib.caller_flags(prim, ("-O1",)), looplib.libs_of(prim))
+        zz = ca.MX.sym("z", nx + 2)  # a period with every step's state out, and with the last one only
+        self.period_fn, self.period_end = compile_many(
+            [ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)]),
+             ca.Function("hybrid_period_end", [zz], [body.fold(self.steps)(zz)])],
+            looplib.caller_flags(prim, ("-O1",)), libs=looplib.libs_of(prim))
 
     def states(self, x0: np.ndarray, t0: float = 0.0) -> np.ndarray:
         """[x; t; least h] after each step of one period from x0 at clock t0 (columns)."""
@@ -73,11 +75,11 @@ class HybridFlow:
     def run_until(self, X0: np.ndarray, t0: np.ndarray, periods: int, stop=None) -> tuple[np.ndarray, np.ndarray, int]:
         """(states, least h, periods run) of rollouts from the columns of X0 at clocks t0: `periods`
         periods, or fewer when stop(states, least h) says after one that the outcome is decided."""
-        n, N = X0.shape[1], self.steps
+        n = X0.shape[1]
         Z = np.vstack([X0, t0[None, :], np.full((1, n), np.inf)])
-        fn = self.period_fn.map(n)
+        fn = self.period_end.map(n)
         for k in range(periods):
-            Z = np.array(fn(Z), float)[:, N - 1::N]
+            Z = np.array(fn(Z), float)
             if stop is not None and k + 1 < periods and stop(Z[:-2], Z[-1]):
                 return Z[:-2], Z[-1], k + 1
         return Z[:-2], Z[-1], periods
