@@ -97,7 +97,7 @@ def main(argv=None) -> int:
     ds = {}
     for n in (1, 8):
         t = time.perf_counter()
-        f, names, nd, bnd = steppers(small, prims, st, n)
+        f, names, nd, bnd = steppers(small, prims, st)
         ds[n] = DisturbedSequences(prims, f, names, nd, bnd, unc, st, seq, n, unc.seed)
         log(f"sequence steppers for {n} runs: {time.perf_counter() - t:.1f} s")
         fns[f"sequence {n}"] = lambda d=ds[n]: d.run(None, {}, "naive")

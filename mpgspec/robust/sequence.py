@@ -52,7 +52,7 @@ class _Stepper:
     d) -> (z next, h, RoA margin), on columns (runs); z = [x; clock; s; x_sw; ...]. Each call maps
     the step over exactly the columns given (the runs in this primitive), not over every run."""
 
-    def __init__(self, step: ca.Function, first: ca.Function | None, runs: int, rigid: bool):
+    def __init__(self, step: ca.Function, first: ca.Function | None, rigid: bool):
         self.rigid, self.nz = rigid, step.size1_in(0)
         self.fns = {"step": step, "first": first}
         self._bound: dict[tuple[str, int], _Bound] = {}
@@ -281,17 +281,17 @@ class _Runs:
         return None
 
 
-def _compiled(built: dict, runs: int, rigid: bool, settings) -> dict[str, _Stepper]:
+def _compiled(built: dict, rigid: bool, settings) -> dict[str, _Stepper]:
     """Steppers of the (step, first) pairs of every primitive, all compiled side by side."""
     fns = [f for pair in built.values() for f in pair if f is not None]
     fns = iter(compile_many(fns, STEP_FLAGS) if settings.jit else fns)
-    return {name: _Stepper(next(fns), next(fns) if first is not None else None, runs, rigid)
+    return {name: _Stepper(next(fns), next(fns) if first is not None else None, rigid)
             for name, (_step_fn, first) in built.items()}
 
 
-def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], list[str], int, np.ndarray]:
-    """Each primitive's mapped step over `runs` on the perturbed plant, the uncertain parameters'
-    names, the disturbance's size and bound."""
+def steppers(spec, prims, settings) -> tuple[dict[str, _Stepper], list[str], int, np.ndarray]:
+    """Each primitive's step on the perturbed plant (mapped over the runs it is given), the uncertain
+    parameters' names, the disturbance's size and bound."""
     from .scenarios import searched
     from .rigid import compiled_step, library_for, robust_plant
     from .rollout import plant
@@ -308,8 +308,8 @@ def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], lis
                                         lib, searched(unc))
             step, first = parts[:2]
             (built if path is None else shared)[name] = (step, first)
-        out = {**_compiled(built, runs, True, settings),
-               **{name: _Stepper(step, first, runs, True) for name, (step, first) in shared.items()}}
+        out = {**_compiled(built, True, settings),
+               **{name: _Stepper(step, first, True) for name, (step, first) in shared.items()}}
         out = {name: out[name] for name in prims}
         return out, names, 3 if force is not None else 0, np.asarray(force.bound if force else [], float)
     dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
@@ -318,7 +318,7 @@ def steppers(spec, prims, settings, runs: int) -> tuple[dict[str, _Stepper], lis
     for k, i in enumerate(dist_idx):
         Bd[i, k] = 1.0
     P = plant(spec, names)
-    out = _compiled({name: (_step(p, P, Bd, settings.dt), None) for name, p in prims.items()}, runs, False, settings)
+    out = _compiled({name: (_step(p, P, Bd, settings.dt), None) for name, p in prims.items()}, False, settings)
     return out, names, len(dist_idx), bound
 
 
@@ -338,7 +338,7 @@ class ModeJob:
 def run_modes(prims: dict, job: ModeJob) -> dict:
     """mode -> statistics of the job's modes, on the same seeded draws (the function an executor maps)."""
     spec, settings = job.spec, job.settings
-    fns, names, nd, bound = steppers(spec, prims, settings, job.runs)
+    fns, names, nd, bound = steppers(spec, prims, settings)
     ds = DisturbedSequences(prims, fns, names, nd, bound, spec.project.uncertainty, settings,
                             spec.project.sequence, job.runs, job.seed)
     return {m: ds.run(g, table, "naive" if g is None else "graph") for m, g, table in job.modes}
