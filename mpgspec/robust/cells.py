@@ -139,7 +139,7 @@ def _search(rr, worst: list[dict], sc: Scenarios, nsteps: np.ndarray, tol: float
         live = [c for c in range(len(worst)) if worst[c]["all_safe"]]
         if not live:
             break
-        if rr.grad is None:  # no gradient through the law (a sampled ID-QP, a rigid body): flip one piece
+        if not rr.searchable:  # no gradient through the law (a sampled ID-QP, a rigid body): flip one piece
             cand = [(c, _flipped(worst[c]["D"], sc.bound, a, k)) for c in live
                     for a in range(len(sc.bound)) if sc.bound[a] != 0 for k in range(sc.K)]
         else:
@@ -157,10 +157,10 @@ def _search(rr, worst: list[dict], sc: Scenarios, nsteps: np.ndarray, tol: float
             w = worst[c]
             if (ok, m) < (w["safe"], w["margin"]):
                 w.update(margin=m, safe=ok, entry=k_e, D=Dn, Y=Yc[q], kind="adversarial bang-bang disturbance"
-                         + ("" if rr.grad is not None else " (coordinate search)"))
+                         + ("" if rr.searchable else " (coordinate search)"))
                 w["all_safe"] = w["all_safe"] and ok
                 moved = True
-        if not moved and rr.grad is None:  # the coordinate search sits at a local worst
+        if not moved and not rr.searchable:  # the coordinate search sits at a local worst
             break
     return n_roll
 

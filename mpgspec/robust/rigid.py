@@ -98,20 +98,32 @@ class RigidRobustRollout(RobustRollout):
         super().__init__(prim, self.plant_fn, [], segments, settings, horizon, duration, gradient)
 
     def _loop(self, prim, plant_fn, dist_inputs, dt):
-        parts, path = compiled_step(prim, plant_fn, self.names, self.frame, self.push, self.settings, self.lib,
-                                    self.gradient)
+        parts, path = compiled_step(prim, plant_fn, self.names, self.frame, self.push, self.settings, self.lib)
         self.libs += (path,) if path is not None else ()
         return parts
 
+    def _reverse_parts(self):
+        """The step with its reverse derivative: compiled into a library of its own where the forward
+        step is the robot's library's (only the targets whose search takes a gradient pay for it)."""
+        if self.lib is None:
+            return self._step, self._first
+        parts, path = compiled_step(self.prim, self.plant_fn, self.names, self.frame, self.push, self.settings,
+                                    self.lib, reverse=True)
+        self.libs += (path,) if path is not None else ()
+        return parts[:2]
+
 
 def compiled_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str], frame: str, push: bool, settings,
-                  lib: RobotLibrary | None, gradient: bool = True) -> tuple[tuple, Path | None]:
+                  lib: RobotLibrary | None, reverse: bool = False) -> tuple[tuple, Path | None]:
     """(rigid_step's parts with step and first from shared_step, the step library's path or None):
     with the robot's library the step calls the primitive's loop library where it has one
-    (loop_parts); if the step library fails, the step is built again with everything inlined."""
-    called, paths = loop_parts(prim, lib, gradient and push and prim.sampled is None)
+    (loop_parts); if the step library fails, the step is built again with everything inlined.
+    `reverse`: with the reverse derivatives a push gradient takes (a library of its own, built only
+    when a search needs it; the rollouts and the sequence stepper share the forward one)."""
+    reverse = reverse and push and prim.sampled is None
+    called, paths = loop_parts(prim, lib, reverse)
     parts = rigid_step(prim, plant_fn, names, frame, push, settings.dt, lib, called)
-    step, first, path = shared_step(parts, lib, settings, gradient, paths)
+    step, first, path = shared_step(parts, lib, settings, reverse, paths)
     if path is None and called:
         parts = rigid_step(prim, plant_fn, names, frame, push, settings.dt, lib)
         step, first = parts[:2]
@@ -138,17 +150,16 @@ def loop_parts(prim: CompiledPrimitive, lib: RobotLibrary | None,
     return called, tuple(loops.paths) if called else ()
 
 
-def shared_step(parts: tuple, lib: RobotLibrary | None, settings, gradient: bool = True,
+def shared_step(parts: tuple, lib: RobotLibrary | None, settings, reverse: bool = False,
                 libs: tuple[Path, ...] = ()) -> tuple[ca.Function, ca.Function, Path | None]:
     """(step, first, library path) of rigid_step's parts: with the robot's library, compiled once per
-    primitive into one library (with reverse derivatives where a push gradient is taken: `gradient`,
-    the adversarial search runs, and the law holds no input), linked against it and `libs` (the loop
-    library's parts it calls), that its robust rollouts and its sequence stepper share; else as they
-    are (path None)."""
+    primitive into one library (with reverse derivatives when `reverse`, a push gradient goes through
+    it and the law holds no input), linked against it and `libs` (the loop library's parts it calls),
+    that its robust rollouts and its sequence stepper share; else as they are (path None)."""
     step, first, _nth, nd, nhold = parts
     if lib is None:
         return step, first, None
-    shared = step_library(step, first, gradient and bool(nd) and nhold == 0, STEP_FLAGS,
+    shared = step_library(step, first, reverse and bool(nd) and nhold == 0, STEP_FLAGS,
                           (lib.path, *libs))
     return shared if shared is not None else (step, first, None)
 

@@ -10,6 +10,7 @@ margin reached (<= 0), and -inf for a blow-up. These are sampled verdicts of cho
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import casadi as ca
@@ -86,6 +87,7 @@ class RobustRollout:
         n = np.arange(self.N)
         self.seg = np.where(n < na, np.minimum((n * self.K) // na, self.K - 1), self.K)
         step, first, self.nth, self.nd, self.nhold = self._loop(prim, plant_fn, dist_inputs, dt)
+        self._step, self._first = step, first
         nx = prim.system.nx
         x0, t0, s0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("s0")
         TH, D = ca.MX.sym("theta", self.nth), ca.MX.sym("D", self.nd, self.K)
@@ -97,20 +99,12 @@ class RobustRollout:
         zL, outs_c = step.mapaccum("robust_chunk", self.CHUNK)(zc, Dc)
         fns = [ca.Function(name + "_first", [x0, t0, s0, TH, D], [ca.vertcat(*f0)]),
                ca.Function(name + "_chunk", [zc, Dc], [ca.vertcat(zL[:, -1], ca.vec(outs_c))])]
-        if gradient and self.nd and self.nhold == 0:  # reverse mode: the gradient of one weighted sample w'vec(Y) wrt D
-            S = np.zeros((self.K, self.N))
-            on = self.seg < self.K
-            S[self.seg[on], n[on]] = 1.0
-            z0 = ca.vertcat(x0, t0, ca.MX(0), x0, TH)
-            _, outs = step.mapaccum("robust_acc", self.N)(z0, ca.mtimes(D, ca.DM(S)))
-            Y = ca.horzcat(first(x0, t0, 0, TH, D[:, 0])[0], outs)  # (nh + 1) x (N + 1), from switch-in
-            w = ca.MX.sym("w", Y.numel())
-            fns.append(ca.Function(name + "_grad", [x0, t0, TH, D, w], [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))]))
+        self.searchable = bool(gradient and self.nd and self.nhold == 0)  # a push gradient exists (built on first use)
+        self._name = name
         fns = [cse(fn) for fn in fns]
-        if settings.jit:  # the three libraries compile side by side
+        if settings.jit:  # the two libraries compile side by side
             fns = compile_many(fns, STEP_FLAGS, libs=self.libs)
-        self.first, self.chunk = fns[:2]
-        self.grad = fns[2] if len(fns) > 2 else None
+        self.first, self.chunk = fns
         self._maps: dict[tuple, ca.Function] = {}
 
     def _loop(self, prim: CompiledPrimitive, plant_fn: ca.Function, dist_inputs: list[int], dt: float):
@@ -135,6 +129,35 @@ class RobustRollout:
         first = cse(ca.Function("robust_first", [x, t, s, th, d], [ca.vertcat(prim.h(x, t, s, x),
                                                                            prim.roa_margin(x, t)), ca.SX(0, 1)]))
         return step, first, nth, nd, 0
+
+    @functools.cached_property
+    def grad(self) -> ca.Function | None:
+        """(x0, t0, theta, D, w) -> d(w' vec(Y))/d vec(D): the push gradient of one weighted sample, in
+        reverse mode; compiled on first use (most targets' searches end before it is needed), None
+        where no gradient goes through the law."""
+        if not self.searchable:
+            return None
+        name = self._name
+        step, first = self._reverse_parts()
+        nx = self.prim.system.nx
+        x0, t0 = ca.MX.sym("x0", nx), ca.MX.sym("t0")
+        TH, D = ca.MX.sym("theta", self.nth), ca.MX.sym("D", self.nd, self.K)
+        n = np.arange(self.N)
+        S = np.zeros((self.K, self.N))
+        on = self.seg < self.K
+        S[self.seg[on], n[on]] = 1.0
+        z0 = ca.vertcat(x0, t0, ca.MX(0), x0, TH)
+        _, outs = step.mapaccum("robust_acc", self.N)(z0, ca.mtimes(D, ca.DM(S)))
+        Y = ca.horzcat(first(x0, t0, 0, TH, D[:, 0])[0], outs)  # (nh + 1) x (N + 1), from switch-in
+        w = ca.MX.sym("w", Y.numel())
+        fn = cse(ca.Function(name + "_grad", [x0, t0, TH, D, w], [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))]))
+        if self.settings.jit:
+            fn = compile_many([fn], STEP_FLAGS, libs=self.libs)[0]
+        return fn
+
+    def _reverse_parts(self) -> tuple[ca.Function, ca.Function]:
+        """(step, first) with reverse derivatives, for the gradient: here the step's own."""
+        return self._step, self._first
 
     def _map(self, fn: ca.Function, n: int) -> ca.Function:
         key = (fn.name(), n)
