@@ -130,7 +130,7 @@ def prefetch_robust(spec, prims: dict, settings, memo=None) -> None:
     prim = next((p for p in prims.values() if uses_library(p, settings)), None)
     if prim is None or (memo is not None and memo.has(_key(spec, prims, settings, memo))):
         return
-    prefetch(prim.system)
+    prefetch(prim.system, reverse=searched(spec.project.uncertainty))
 
 
 @dataclass(frozen=True)

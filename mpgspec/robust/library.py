@@ -10,13 +10,15 @@ and gcc time). Here they are compiled once per robot:
   impact, lift-off on the perturbed plant, event clocks);
 - touchdown(q, v, j, c) -> (q+, v+): feet flagged in j put on the ground by their legs and a plastic
   impact with the feet of c (a contact schedule's update at a step's end),
-each with its reverse derivative. The step's own Functions call them through casadi.external and are
-linked against the library; its path and symbols carry the hash of its code, so what is compiled
-against it changes when the robot does. The values are those of the inlined plant (the same
-expressions, evaluated in the same order).
+in two variants: as they are (LIBRARY_FLAGS), what the rollouts and steppers call, and with their
+reverse derivatives (GRADIENT_FLAGS), built only where a search takes a push gradient. The step's own
+Functions call them through casadi.external and are linked against the library; its path and symbols
+carry the hash of its code, so what is compiled against it changes when the robot does. The values
+are those of the inlined plant (the same expressions, evaluated in the same order).
 
 step_library compiles one primitive's robust step and first sample the same way, once: its robust
-rollouts (chunks and gradient) and its uncertain-sequence stepper call the same library. It is linked
+rollouts and its uncertain-sequence stepper call the same library (a push gradient, a twin with
+reverse derivatives linked against the robot's reverse variant). It is linked
 against the primitive's loop library too (oracle/looplib.py) where the step calls its parts (a sampled
 law's solve, a large RoA margin: rigid.loop_parts) instead of compiling them again.
 """
@@ -46,9 +48,16 @@ STEP_FLAGS = ("-O1",)
 sequences' steppers), whatever settings.jit_flags say: each is run for thousands of rollouts, and
 measured on the pendulum the robust stage runs about 2x faster than at -O0 for about 2 CPU-s more gcc."""
 
-_BUILT: dict[int, tuple] = {}
-"""id of the system -> (a weak reference to it, the Future of its library): built once per process
-and system; an id reused by another system after the first is freed is not mistaken for it."""
+GRADIENT_FLAGS = ("-O0",)
+"""gcc flags of what only a push gradient calls (the robot library's reverse derivatives, a step's
+reverse-derivative twin, the gradient itself): evaluated for the few cells a search reaches (on the
+A1, 8 of the robust stage's rollouts), where the reverse derivatives are three quarters of the
+robot library's C code; at -O2 they took 34 CPU-s of gcc, at -O0 2.6 (bench/RESULTS.md)."""
+
+_BUILT: dict[tuple[int, bool], tuple] = {}
+"""(id of the system, with reverse derivatives) -> (a weak reference to it, the Future of its
+library): built once per process and system; an id reused by another system after the first is
+freed is not mistaken for it."""
 _LOCK = threading.Lock()
 
 
@@ -62,35 +71,38 @@ class RobotLibrary:
     touchdown: ca.Function
 
 
-def robot_library(sys) -> RobotLibrary | None:
+def robot_library(sys, reverse: bool = False) -> RobotLibrary | None:
     """The robot's library, built once per process and system, waiting for a build under way (None
-    when gcc fails: the caller inlines the dynamics)."""
+    when gcc fails: the caller inlines the dynamics). `reverse`: the variant with reverse derivatives
+    (GRADIENT_FLAGS) a push gradient goes through; the rollouts call the one without (LIBRARY_FLAGS)."""
+    key = (id(sys), reverse)
     with _LOCK:
-        ref, fut = _BUILT.get(id(sys), (None, None))
+        ref, fut = _BUILT.get(key, (None, None))
         mine = ref is None or ref() is not sys
         if mine:
             fut = Future()
-            _BUILT[id(sys)] = (weakref.ref(sys), fut)
+            _BUILT[key] = (weakref.ref(sys), fut)
     if mine:
         try:
-            fut.set_result(_build(sys, LIBRARY_FLAGS))
+            fut.set_result(_build(sys, reverse))
         except Exception as err:  # noqa: BLE001 - every waiter sees the same failure
             fut.set_exception(err)
     return fut.result()
 
 
-def prefetch(sys) -> None:
+def prefetch(sys, reverse: bool = False) -> None:
     """Generate the robot library's C code now and leave its gcc running in the background (beside
-    the stages before the robust one); robot_library later finds it compiled, or waits for it. The
-    CasADi work stays in this thread: a process forked while another thread runs CasADi can inherit
-    its locks held and hang."""
+    the stages before the robust one), with the reverse-derivative variant when a search will take a
+    gradient; robot_library later finds them compiled, or waits for them. The CasADi work stays in
+    this thread: a process forked while another thread runs CasADi can inherit its locks held and hang."""
     try:
-        _build(sys, LIBRARY_FLAGS, wait=False)
+        for rev in (False, True) if reverse else (False,):
+            _build(sys, rev, wait=False)
     except Exception:  # noqa: BLE001 - the robust stage builds again and reports its own failure
         pass
 
 
-def _build(sys, flags: tuple[str, ...], wait: bool = True) -> RobotLibrary | None:
+def _build(sys, reverse: bool, wait: bool = True) -> RobotLibrary | None:
     m = sys.model
     q, v, u = ca.SX.sym("q", m.nq), ca.SX.sym("v", m.nv), ca.SX.sym("u", m.nu)
     c, k, w = ca.SX.sym("c", len(m.contact_frames)), ca.SX.sym("k"), ca.SX.sym("w", m.nv)
@@ -106,9 +118,9 @@ def _build(sys, flags: tuple[str, ...], wait: bool = True) -> RobotLibrary | Non
     digest = hashlib.sha256()
     for name, (ins, outs) in parts.items():
         digest.update(ca.Function(name, ins, outs).serialize().encode())
-    tag = f"robot_{digest.hexdigest()[:16]}"
+    tag = f"robot_{digest.hexdigest()[:16]}" + ("r" if reverse else "")
     fns = [ca.Function(f"{tag}_{name}", ins, outs, {"cse": True}) for name, (ins, outs) in parts.items()]
-    path = compile_library(tag, fns, flags, wait=wait)
+    path = compile_library(tag, fns, GRADIENT_FLAGS if reverse else LIBRARY_FLAGS, reverse=reverse, wait=wait)
     if path is None:
         return None
     ext = {name: ca.external(f"{tag}_{name}", str(path)) for name in parts}

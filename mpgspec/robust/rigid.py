@@ -23,7 +23,7 @@ from ..compile.rigidbody.system import no_slip
 from ..oracle import looplib
 from ..oracle.flow import LEFT, active, jump_of, rk4, solve_or_keep, wrap
 from ..oracle.jit import cse, cse_sx
-from .library import (STEP_FLAGS, RobotLibrary, library_jump, library_plant, library_schedule_jump, robot_library,
+from .library import (GRADIENT_FLAGS, STEP_FLAGS, RobotLibrary, library_jump, library_plant, library_schedule_jump, robot_library,
                       step_library)
 from .rollout import RobustRollout
 
@@ -34,12 +34,13 @@ def plant_feet(prim: CompiledPrimitive) -> list[str]:
     return list(frames) if prim.contacts.varies else list(prim.contacts.feet)
 
 
-def library_for(prim: CompiledPrimitive, settings) -> RobotLibrary | None:
-    """The robot's compiled library when the primitive's plant is the masked one (a contact schedule
-    or contact events) and loops are compiled; None: the dynamics are inlined."""
+def library_for(prim: CompiledPrimitive, settings, reverse: bool = False) -> RobotLibrary | None:
+    """The robot's compiled library (`reverse`: its variant with reverse derivatives) when the
+    primitive's plant is the masked one (a contact schedule or contact events) and loops are
+    compiled; None: the dynamics are inlined."""
     if not uses_library(prim, settings):
         return None
-    return robot_library(prim.system)
+    return robot_library(prim.system, reverse)
 
 
 def uses_library(prim: CompiledPrimitive, settings) -> bool:
@@ -89,6 +90,8 @@ class RigidRobustRollout(RobustRollout):
     """RobustRollout of a rigid-body target: theta holds the named parameters (mass_scale,
     friction), d the push's world force (3 entries, or none)."""
 
+    GRAD_FLAGS = GRADIENT_FLAGS
+
     def __init__(self, prim: CompiledPrimitive, names: list[str], frame: str, push: bool, segments: int,
                  settings, horizon: float, duration: float | None = None, gradient: bool = True):
         self.names, self.push, self.frame = list(names), push, frame
@@ -103,13 +106,15 @@ class RigidRobustRollout(RobustRollout):
         return parts
 
     def _reverse_parts(self):
-        """The step with its reverse derivative: compiled into a library of its own where the forward
-        step is the robot's library's (only the targets whose search takes a gradient pay for it)."""
+        """The step with its reverse derivative where the forward step is in a library: a twin of it
+        compiled against the robot's reverse variant (only the targets whose search takes a
+        gradient pay for either)."""
         if self.lib is None:
             return self._step, self._first
-        parts, path = compiled_step(self.prim, self.plant_fn, self.names, self.frame, self.push, self.settings,
-                                    self.lib, reverse=True)
-        self.libs += (path,) if path is not None else ()
+        lib = library_for(self.prim, self.settings, reverse=True)
+        parts, path = compiled_step(self.prim, robust_plant(self.prim, self.frame, lib), self.names, self.frame,
+                                    self.push, self.settings, lib, reverse=True)
+        self.libs += tuple(p for p in (lib.path if lib is not None else None, path) if p is not None)
         return parts[:2]
 
 
@@ -159,8 +164,8 @@ def shared_step(parts: tuple, lib: RobotLibrary | None, settings, reverse: bool 
     step, first, _nth, nd, nhold = parts
     if lib is None:
         return step, first, None
-    shared = step_library(step, first, reverse and bool(nd) and nhold == 0, STEP_FLAGS,
-                          (lib.path, *libs))
+    reverse = reverse and bool(nd) and nhold == 0
+    shared = step_library(step, first, reverse, GRADIENT_FLAGS if reverse else STEP_FLAGS, (lib.path, *libs))
     return shared if shared is not None else (step, first, None)
 
 

@@ -73,6 +73,7 @@ class RobustRollout:
 
     BATCH = 128
     CHUNK = 100  # steps per compiled call; rollouts stop once decided
+    GRAD_FLAGS = STEP_FLAGS  # the push gradient's gcc flags (a rigid body's: its gradient-only code)
     libs: tuple = ()  # compiled libraries the step calls (the robot's dynamics), linked in
 
     def __init__(self, prim: CompiledPrimitive, plant_fn, dist_inputs: list[int], segments: int,
@@ -152,7 +153,7 @@ class RobustRollout:
         w = ca.MX.sym("w", Y.numel())
         fn = cse(ca.Function(name + "_grad", [x0, t0, TH, D, w], [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))]))
         if self.settings.jit:
-            fn = compile_many([fn], STEP_FLAGS, libs=self.libs)[0]
+            fn = compile_many([fn], self.GRAD_FLAGS, libs=self.libs)[0]
         return fn
 
     def _reverse_parts(self) -> tuple[ca.Function, ca.Function]:

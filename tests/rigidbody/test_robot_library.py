@@ -57,7 +57,8 @@ def test_a_scheduled_touchdown_through_the_library_moves_the_state(a1):
 
 
 def test_one_library_for_every_target_and_its_gradient(a1):
-    """Two targets share the robot's library; the push gradient through it equals the inlined one."""
+    """Two targets share the robot's library; the push gradient, through its variant with reverse
+    derivatives (built on the first gradient), equals the inlined one."""
     _, prims, settings = a1
     short = dict(segments=4, settings=settings, horizon=0.05, duration=0.04)
     rr = RigidRobustRollout(prims["Walk(slow)"], NAMES, "trunk", True, **short)
@@ -69,6 +70,7 @@ def test_one_library_for_every_target_and_its_gradient(a1):
     args = (x0, np.zeros(1), np.array([[1.05, 0.5]]), np.full((1, 3, 4), 2.0), [0], [rr.N])
     g, g0 = rr.gradients(*args), rr0.gradients(*args)
     assert np.abs(g).max() > 0
+    assert len(rr.libs) == 4 and rr.lib.path not in rr.libs[2:]  # the reverse variant and the step's twin
     np.testing.assert_allclose(g, g0, rtol=1e-9, atol=1e-12)
 
 
@@ -82,10 +84,10 @@ def test_requests_build_once_per_system(monkeypatch):
 
     calls = []
 
-    def build(sys, flags):
-        calls.append(sys)
+    def build(sys, reverse):
+        calls.append((sys, reverse))
         time.sleep(0.2)
-        return f"library of {sys.name}"
+        return f"library of {sys.name}" + (" with reverse derivatives" if reverse else "")
 
     class System:
         def __init__(self, name):
@@ -101,7 +103,8 @@ def test_requests_build_once_per_system(monkeypatch):
         t.join()
     assert got == ["library of a"] * 3
     assert library.robot_library(b) == "library of b"
-    assert calls == [a, b]
+    assert library.robot_library(a, True) == library.robot_library(a, True) == "library of a with reverse derivatives"
+    assert calls == [(a, False), (b, False), (a, True)]
 
 
 def test_a_library_compiled_in_the_background_is_loaded_once_done(tmp_path, monkeypatch):
