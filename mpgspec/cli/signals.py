@@ -4,14 +4,14 @@ from __future__ import annotations
 import contextlib
 import signal
 
+from ..oracle.unwind import unwinding
+
 
 class Terminated(SystemExit):
     """SIGTERM (or SIGHUP) arrived: raised in the main thread so that every finally-block runs (report
     temporaries removed, worker processes terminated); exits with 128 + the signal number."""
 
 
-def _on_signal(signum, frame):
-    raise Terminated(128 + signum)
 
 
 @contextlib.contextmanager
@@ -22,7 +22,7 @@ def _signal_handlers():
         if s is None:
             continue
         try:
-            saved[s] = signal.signal(s, _on_signal)
+            saved[s] = signal.signal(s, unwinding(Terminated))
         except (ValueError, OSError):  # not the main thread: leave signals alone
             pass
     try:

@@ -24,6 +24,7 @@ from multiprocessing.connection import wait
 from pathlib import Path
 
 from ..oracle.executors import _worker_signals, make_executor, stop_processes
+from ..oracle.unwind import unwinding
 from ..progress import Progress
 from .results import ProjectResult, VerifyResult, write_reports
 
@@ -101,7 +102,7 @@ def _child(conn, queue, path: Path, *args) -> None:
     """A project process: Ctrl-C is the parent's to handle; SIGTERM unwinds the project; the
     parent's death sends SIGTERM."""
     _worker_signals()
-    signal.signal(signal.SIGTERM, _unwind)
+    signal.signal(signal.SIGTERM, unwinding(SystemExit))
     _queue[:] = [queue]
     try:
         res = _verify_one(path, *args)
@@ -112,10 +113,6 @@ def _child(conn, queue, path: Path, *args) -> None:
     except Exception as err:  # noqa: BLE001 - e.g. a result that does not pickle
         conn.send(RuntimeError(f"its result could not be sent back: {type(err).__name__}: {err}"))
     conn.close()
-
-
-def _unwind(signum, frame):
-    raise SystemExit(128 + signum)
 
 
 def _progress(project: str, what: str, i: int, n: int) -> None:
