@@ -2,9 +2,10 @@
 
 A step of length h from clock t (time s since switch-in) is classical RK4 on xdot = f(x, t, s)
 (`rk4`), then the jump (`jump_of`: back onto the state manifold, contact events, touchdowns of a
-contact schedule) with the input of the step's start. Under a contact schedule the last stage
-and the end sample are taken just before the step's end (`step_end`, LEFT), so a mode switching
-there is not yet on. The step is shortened to end on the clock's next switching time
+contact schedule) with the input of the step's start. Under a contact schedule, and for every
+primitive on a step that ends on a switching time or a window's edge, the last stage and the end
+sample are taken just before the step's end (`step_end`, LEFT), so a mode, a law or a safety
+function switching there is not yet on. The step is shortened to end on the clock's next switching time
 (`step_length`), and a safety function counts for a step when its window holds over it
 (`active`). The oracle's chunks (oracle/integrator.py), the robust rollouts (robust/), the gait
 orbits and the verifiers all build their steps from these functions.
@@ -20,8 +21,8 @@ from ..compile.events import EventWindow
 
 LEFT = 1e-8
 """The last RK4 stage and the end sample of a step are taken this long before the step's end, so a
-step that ends on a contact switch runs wholly in its own mode (modes switch 1e-9 s early, SNAP);
-the jump then applies the new mode at the end."""
+step that ends on a contact switch, a law's switching time or a window's edge runs wholly on its
+own side of it (modes switch 1e-9 s early, SNAP); the jump then applies the new mode at the end."""
 
 
 def rk4(f, x, clocks: tuple, h, te=None, k1=None):
@@ -46,10 +47,15 @@ def _along(x, a, k):
     return tuple(xi + a * ki for xi, ki in zip(x, k)) if isinstance(x, tuple) else x + a * k
 
 
-def step_end(prim: CompiledPrimitive, h):
-    """Where a step's last stage and end sample sit: under a contact schedule the end is seen from
-    inside the step (LEFT before it), so a mode switching there is not yet on."""
-    return h - ca.fmin(LEFT, h / 2) if isinstance(prim.contacts, Schedule) else h
+def step_end(prim: CompiledPrimitive, h, edge=None):
+    """Where a step's last stage and end sample sit: seen from inside the step (LEFT before its end)
+    under a contact schedule, and for any primitive when the step ends on a switching time of its
+    clock or an edge of a window (`edge`, from step_length), so a mode, a law or a safety function
+    switching there is not yet on; elsewhere at the end."""
+    inside = h - ca.fmin(LEFT, h / 2)
+    if isinstance(prim.contacts, Schedule):
+        return inside
+    return h if edge is None else ca.if_else(edge, inside, h)
 
 
 def jump_of(prim: CompiledPrimitive) -> ca.Function:
@@ -87,19 +93,27 @@ def switched_flow(prim: CompiledPrimitive, x0: np.ndarray, t0: float, dt: float,
     return X
 
 
-def step_length(prim: CompiledPrimitive, dt: float, tc, x=None, s=None):
+def step_length(prim: CompiledPrimitive, dt: float, tc, x=None, s=None, edge: bool = False):
     """dt, shortened so that the step ends on the next switching time of the clock and, once a
     contact event has happened, on the next edge of a window anchored on it (T_E + eps): x is the
-    state at the step's start (its event clocks), s the time since switch-in."""
+    state at the step's start (its event clocks), s the time since switch-in. With `edge`, the pair
+    (step, 1 when the step ends on such a time) for step_end."""
     anchored = [w for w in prim.windows if isinstance(w, EventWindow) and w.edges]
     if anchored and x is None:
         raise ValueError("windows anchored on contact events need the state to place the step's end")
-    step = ca.DM(dt)
+    gap = ca.DM(ca.inf)
     for w in anchored:
-        step = ca.fmin(step, w.gap(x[w.clock], s))
+        gap = ca.fmin(gap, w.gap(x[w.clock], s))
     B = prim.boundaries
-    if not B:
-        return step
+    if B:
+        gap = ca.fmin(gap, _clock_gap(prim, tc))
+    step = ca.fmin(ca.DM(dt), gap)
+    return (step, gap <= dt) if edge else step
+
+
+def _clock_gap(prim: CompiledPrimitive, tc):
+    """Time from tc to the clock's next switching time (prim.boundaries, each period's)."""
+    B = prim.boundaries
     eps = SNAP  # a clock this close below a switching time is at it (as for the contact mode)
     if prim.period is not None:  # the next b + k T ahead of tc (tc may sit within eps below T)
         P = prim.period
@@ -109,7 +123,7 @@ def step_length(prim: CompiledPrimitive, dt: float, tc, x=None, s=None):
     gap = nxt[0]
     for v in nxt[1:]:
         gap = ca.fmin(gap, v)
-    return ca.fmin(step, gap - tc)
+    return gap - tc
 
 
 def active(prim: CompiledPrimitive, tc, x=None, s=None, x_next=None, h=0.0):

@@ -359,9 +359,9 @@ def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries:
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2]
     U, hold_next = _hold(prim, dt, z[2 * nx + 2:], [(x, t, s, xs)])  # U: [u] of a sampled law, else []
     tc = wrap(prim, t)
-    h = step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
+    h, edge = step_length(prim, dt, tc, x, s, edge=True) if boundaries else (ca.DM(dt), None)
     k1, h0, d0, u_raw, u = start(x, t, s, xs, *U)
-    te = step_end(prim, h)
+    te = step_end(prim, h, edge)
     x_end, k4 = rk4(lambda xx, tt, ss: f(xx, tt, ss, xs, *U), x, (t, s), h, te, k1)
     _k5, h1, d1, dh, e = end(x_end, t + te, s + te, xs, *U, k4, h)
     x_next = jump(x_end, u, t + h, s + h)
@@ -424,8 +424,8 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     Uj, Uc = U[:1], U[1:]
     fj, fc = (lambda xx, tt, ss: f(xx, tt, ss, xs, *Uj)), (lambda xx, tt, ss: f(xx, tt, ss, xs, *Uc))
     tc = wrap(prim, t)
-    h = step_length(prim, dt, tc, x, s) if boundaries else ca.DM(dt)
-    te = step_end(prim, h)
+    h, edge = step_length(prim, dt, tc, x, s, edge=True) if boundaries else (ca.DM(dt), None)
+    te = step_end(prim, h, edge)
     k1, h0, d0, u_raw, u = start(x, t, s, xs, *Uj)
     kc1, h0c, _uc_raw, uc = loop(xc, t, s, xs, *Uc)
     hh = h / 2

@@ -68,3 +68,36 @@ def test_a_function_never_evaluated_in_its_window_is_an_error(tmp_path):
     e = SafetyOracle(blind, OracleSettings(horizon=3.0, dt=0.01, refinements=0, jit=False))(np.array([0.0]), 0.0)
     assert (e.status, e.reason, e.verdict) == ("inconclusive", Reason.ERROR, 0)
     assert e.violated == "brief" and "never evaluated" in e.message and not e.checked
+
+
+
+def _switching(tmp_path, T: float, safe_set: str):
+    law = f"if_else(t < {T}, -1, -2*(x - 1))"
+    return one(tmp_path, GOAL.replace("-2*(x - 1)", law) + "  safe_set:\n" + safe_set)
+
+
+@pytest.mark.parametrize("T", [0.5, 0.5037])  # a whole number of steps, and inside a step
+@pytest.mark.parametrize("error", ["local", "doubling"])
+@pytest.mark.parametrize("accuracy", ["low", "medium", "high", "very_high"])
+def test_a_law_switching_where_a_window_ends_is_judged_on_its_own_side(tmp_path, T, error, accuracy):
+    """u = -1 until the clock reaches T, then -2 (x - 1), and a window of C ends at T, so a step ends
+    there. From x0 = 0.8, x is least at T: x(T) = 0.8 - T exactly (RK4 is exact on a constant rate),
+    and h = x - c with c = x(T) + 3e-5 is violated there by 3e-5. A step that takes its last stage
+    with the law of after T overshoots x(T) by about 0.4 h and misses it; taken inside the step, the
+    answer is the exact one: unsafe, margin -3e-5 (3e-5 to spare: safe once refined). With h itself required only
+    until T (its window [0, T)), h(T-) = -3e-5 shows as the bound over the window's last step."""
+    settings = OracleSettings.with_accuracy(accuracy, horizon=3.0, dt=0.01, error=error, jit=False)
+    c = 0.8 - T + 3e-5
+    edge = f'    - {{name: until_T, h: "1", when: [0, {T}]}}\n'
+    e = SafetyOracle(_switching(tmp_path, T, f'    - {{name: low, h: "x - {c!r}"}}\n' + edge), settings)(
+        np.array([0.8]), 0.0)
+    assert (e.status, e.violated) == ("unsafe", "low"), e
+    assert e.margin == pytest.approx(-3e-5, abs=1e-9) and e.t_stop == pytest.approx(T, abs=1e-9)
+    spare = _switching(tmp_path, T, f'    - {{name: low, h: "x - {c - 6e-5!r}"}}\n' + edge)
+    held = SafetyOracle(spare, settings)(np.array([0.8]), 0.0)
+    # low refines nothing: the bound over the step after T (h rising at 1.4 from 3e-5) dips below 0
+    assert held.status == ("inconclusive" if accuracy == "low" else "safe"), held
+    e = SafetyOracle(_switching(tmp_path, T, f'    - {{name: low, h: "x - {c!r}", when: [0, {T}]}}\n'), settings)(
+        np.array([0.8]), 0.0)
+    assert e.status != "safe" and e.violated == "low", e
+    assert e.lower_bounds["low"] == pytest.approx(-3e-5, abs=1e-9)
