@@ -12,8 +12,6 @@ class Terminated(SystemExit):
     temporaries removed, worker processes terminated); exits with 128 + the signal number."""
 
 
-
-
 @contextlib.contextmanager
 def _signal_handlers():
     """SIGTERM/SIGHUP raise Terminated while the command runs (Ctrl-C already raises KeyboardInterrupt)."""

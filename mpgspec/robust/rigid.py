@@ -114,7 +114,10 @@ class RigidRobustRollout(RobustRollout):
         lib = library_for(self.prim, self.settings, reverse=True)
         parts, path = compiled_step(self.prim, robust_plant(self.prim, self.frame, lib), self.names, self.frame,
                                     self.push, self.settings, lib, reverse=True)
-        self.libs += tuple(p for p in (lib.path if lib is not None else None, path) if p is not None)
+        if lib is not None:
+            self.libs += (lib.path,)
+        if path is not None:
+            self.libs += (path,)
         return parts[:2]
 
 
@@ -158,13 +161,13 @@ def loop_parts(prim: CompiledPrimitive, lib: RobotLibrary | None,
 def shared_step(parts: tuple, lib: RobotLibrary | None, settings, reverse: bool = False,
                 libs: tuple[Path, ...] = ()) -> tuple[ca.Function, ca.Function, Path | None]:
     """(step, first, library path) of rigid_step's parts: with the robot's library, compiled once per
-    primitive into one library (with reverse derivatives when `reverse`, a push gradient goes through
-    it and the law holds no input), linked against it and `libs` (the loop library's parts it calls),
-    that its robust rollouts and its sequence stepper share; else as they are (path None)."""
-    step, first, _nth, nd, nhold = parts
+    primitive into one library (with reverse derivatives when `reverse`: compiled_step sets it only
+    where a push goes through a law that holds no input), linked against it and `libs` (the loop
+    library's parts it calls), that its robust rollouts and its sequence stepper share; else as they
+    are (path None)."""
+    step, first = parts[:2]
     if lib is None:
         return step, first, None
-    reverse = reverse and bool(nd) and nhold == 0
     shared = step_library(step, first, reverse, GRADIENT_FLAGS if reverse else STEP_FLAGS, (lib.path, *libs))
     return shared if shared is not None else (step, first, None)
 
