@@ -19,6 +19,7 @@ import numpy as np
 from ..spec.models import PrimitiveClass
 from .contacts import ContactPlan
 from .events import EventWindow
+from .guards import Guards
 from .hold import SampledLaw
 from .system import CompiledSystem
 
@@ -57,6 +58,7 @@ class CompiledPrimitive:
     sampled: SampledLaw | None = None  # a law the oracle solves at a control rate and holds in between
     loop_u: ca.Function | None = None  # (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): the open loop under a
     # given input, every safety function active (as loop_raw); set with `sampled`
+    guards: Guards = field(default_factory=Guards)  # where f_cl switches or kinks (compile/guards.py)
     cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
 
     def __reduce__(self):

@@ -18,6 +18,7 @@ from .closed_loop import CompiledPrimitive, function_name, roa_margin_function
 from .contacts import ContactPlan, Events, Fixed, Schedule, clock_phase, plan_jump, wrap_clock
 from .events import event_window
 from .exprs import ExprCompiler
+from .guards import collect
 from .laws.base import ControlContext
 from .laws.kind import Setup
 from .laws.registry import controller_kind
@@ -177,7 +178,7 @@ def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, cl
         radius=radius, f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, W=W, info=info,
         contacts=cm.plan, jump=jump, loop=loop_fn, loop_raw=loop_raw, windows=windows,
         boundaries=_boundaries(windows, cm.plan, clock.period, clock.domain),
-        hybrid=sys.events or cm.schedule is not None, sampled=ctx.sampled, loop_u=loop_u,
+        hybrid=sys.events or cm.schedule is not None, sampled=ctx.sampled, loop_u=loop_u, guards=collect(f_cl),
     )
 
 

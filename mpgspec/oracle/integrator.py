@@ -26,6 +26,7 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .flow import active, jump_of, rk4, solve_or_keep, step_end, step_length, wrap
+from .pieces import guarded, guarded_body, guarded_doubling_body
 from .jit import compile_cached, cse_sx
 from .looplib import (INLINE_NODES, attach, attached, build_all, caller_flags, compile_callers, libs_of, part,
                       plain_loop)
@@ -351,6 +352,8 @@ def step_body(prim: CompiledPrimitive, dt: float, with_state: bool = False, boun
 
 
 def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple[ca.Function, int]:
+    if guarded(prim):
+        return _guarded_body(prim, dt, with_state, boundaries)
     nx, nh = prim.system.nx, len(prim.h_names)
     start, end, f = _ends(prim, prim.sampled is not None)
     jump = _jump(prim)
@@ -371,6 +374,15 @@ def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries:
     # small SX loops: cse saves 1-8 % of C; an MX graph around a large loop (itself with cse) gains
     # nothing measurable from it (bench/bench_jit.py)
     return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out])), nz
+
+
+def _guarded_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple[ca.Function, int]:
+    """_step_body for a loop with guards: the step ends where a guard first crosses (pieces.py)."""
+    nx, nh = prim.system.nx, len(prim.h_names)
+    start, end, f = _ends(prim)
+    return guarded_body(prim, dt, start, end, _jump(prim), _margin(prim), with_state, boundaries,
+                        lambda h0, h1, d0, d1, h, act: (*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)),)), \
+        2 * nx + 2
 
 
 def _sample_bound(h0, h1, d0, d1, h):
@@ -412,6 +424,12 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     really propagates: it shrinks where the loop contracts instead of adding up step by step.
     The augmented state is [x; t; s; x_sw; x_c] and a sampled law's hold (hold_size)."""
     nx, nh = prim.system.nx, len(prim.h_names)
+    if guarded(prim):
+        start = _ends(prim)[0]
+        body = guarded_doubling_body(prim, dt, start, _at_end(prim, start), _loop(prim), _jump(prim), _margin(prim),
+                                     with_state, boundaries,
+                                     lambda h0, h1, d0, d1, h, act: (*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)),))
+        return body, 3 * nx + 2
     held = prim.sampled is not None
     start, _end, f = _ends(prim, held)
     loop = _loop(prim, held)

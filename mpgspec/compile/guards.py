@@ -1,0 +1,116 @@
+"""Guards: where a closed loop stops being smooth, as functions that change sign there.
+
+RK4 and its error estimates assume a smooth right-hand side. A law that switches (`if_else`, a
+comparison, `sign`), a kink (`abs`, `min`/`max`, `clip`, input saturation) or a jump (`floor`,
+`ceil`, `fmod`) breaks that assumption between samples. Each such point of the closed loop's
+expression graph is a guard g(x, t, s, x_sw) whose sign changes exactly where the loop switches
+branch: the difference of a comparison's sides, the argument of `sign`/`abs`, the difference of
+`min`/`max`'s arguments (input saturation: u_raw minus its bound), sin(pi a) for `floor(a)`.
+The oracle (oracle/integrator.py) integrates piece by piece between the guards' crossings.
+
+Guards are collected from an SX closed loop only: a loop that calls a compiled Function (an
+optimisation-based law, a large robot loop) is not expanded, and its guards are reported as not
+exposed, with the reason.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+
+_DIFF = {ca.OP_LT: "<", ca.OP_LE: "<=", ca.OP_EQ: "==", ca.OP_NE: "!=", ca.OP_FMIN: "min", ca.OP_FMAX: "max"}
+_ARG = {ca.OP_SIGN: "sign", ca.OP_FABS: "abs", ca.OP_IF_ELSE_ZERO: "if_else"}
+_PERIODIC = {ca.OP_FLOOR: "floor", ca.OP_CEIL: "ceil"}
+_RATIO = {ca.OP_FMOD: "fmod", ca.OP_REMAINDER: "remainder"}
+_LOGIC = (ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_AND, ca.OP_OR, ca.OP_NOT)
+MAX_NODES = 4000
+"""Loops larger than this many SX nodes are stepped through their compiled library (the oracle's
+INLINE_NODES); their expression graph is not searched."""
+MAX_GUARDS = 64
+"""More distinct guards than this in one loop are not located one by one (the loop is reported as
+not exposed): each is evaluated at every RK4 stage."""
+
+
+@dataclass
+class Guards:
+    """The guards of one closed loop.
+
+    fn: (x, t, s, x_sw) -> g (one row per guard), None when none are exposed; names: what each
+    guard is (the operation and its expression, shortened); exposed: the loop's expression graph
+    could be searched; why: the reason when it could not.
+    """
+
+    fn: ca.Function | None = None
+    names: list[str] = field(default_factory=list)
+    exposed: bool = True
+    why: str = ""
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def record(self) -> dict:
+        """The report's record: the guards by name, or why none could be exposed."""
+        return {"exposed": self.exposed, "guards": list(self.names), **({"why": self.why} if self.why else {})}
+
+
+def collect(f: ca.Function, inputs: int = 4) -> Guards:
+    """The guards of f's outputs as functions of its first `inputs` inputs (x, t, s, x_sw)."""
+    if not f.is_a("SXFunction"):
+        return Guards(exposed=False, why="the loop calls a compiled function (an optimisation-based law or a "
+                                         "large robot loop): its switching points are not exposed")
+    if f.n_nodes() > MAX_NODES:
+        return Guards(exposed=False, why=f"a large loop ({f.n_nodes()} nodes, stepped through its compiled "
+                                         "library): its switching points are not searched")
+    a = f.sx_in()
+    outs = [o for o in f.call(a) if o.numel()]
+    roots = ca.vertcat(*[ca.vec(o) for o in outs]) if outs else ca.SX(0, 1)
+    found: dict[str, tuple[ca.SX, str]] = {}
+    seen: set[int] = set()
+    stack = [roots[i] for i in range(roots.numel())]
+    while stack:
+        e = stack.pop()
+        key = e.element_hash()
+        if key in seen or e.is_leaf():
+            continue
+        seen.add(key)
+        deps = [e.dep(i) for i in range(e.n_dep())]
+        stack.extend(deps)
+        g = _guard(e.op(), deps)
+        if g is not None and not g[0].is_constant():
+            found.setdefault(str(g[0]), g)  # the same test written twice is one guard
+    live = ca.vertcat(*a[:inputs])
+    gs = [(g, name) for g, name in found.values() if ca.depends_on(g, live) and not _is_logic(g)]
+    if len(gs) > MAX_GUARDS:
+        return Guards(exposed=False, why=f"{len(gs)} switching points (more than {MAX_GUARDS})")
+    if not gs:
+        return Guards()
+    gs.sort(key=lambda p: p[1])
+    fn = ca.Function("guards", a[:inputs], [ca.vertcat(*[g for g, _ in gs])], ["x", "t", "s", "x_sw"][:inputs], ["g"])
+    return Guards(fn, [name for _, name in gs])
+
+
+def _guard(op: int, deps: list) -> tuple[ca.SX, str] | None:
+    """(g, name) for a non-smooth operation, else None."""
+    if op in _DIFF:
+        g = deps[1] - deps[0] if op in (ca.OP_LT, ca.OP_LE) else deps[0] - deps[1]
+        return g, f"{_DIFF[op]}: {_short(deps[0])} vs {_short(deps[1])}"
+    if op in _ARG:
+        return deps[0], f"{_ARG[op]}: {_short(deps[0])}"
+    if op == ca.OP_COPYSIGN:
+        return deps[1], f"copysign: {_short(deps[1])}"
+    if op in _PERIODIC:
+        return ca.sin(ca.pi * deps[0]), f"{_PERIODIC[op]}: {_short(deps[0])}"
+    if op in _RATIO:
+        return ca.sin(ca.pi * deps[0] / deps[1]), f"{_RATIO[op]}: {_short(deps[0])} / {_short(deps[1])}"
+    return None
+
+
+def _is_logic(g: ca.SX) -> bool:
+    """A guard that is itself a condition (the argument of if_else is a comparison, whose own
+    guard is the difference of its sides)."""
+    return g.is_scalar() and not g.is_leaf() and g.op() in _LOGIC
+
+
+def _short(e: ca.SX, n: int = 60) -> str:
+    s = str(e)
+    return s if len(s) <= n else s[:n - 3] + "..."

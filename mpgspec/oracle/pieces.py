@@ -1,0 +1,297 @@
+"""Steps that end where a guard crosses: RK4 on smooth pieces of a non-smooth closed loop.
+
+RK4's embedded error estimate dt/6 (k4 - f(x_next)) means what it says only where f is smooth over
+the step. When a law switches or an input saturates between samples, both ends may sit on the same
+branch and the estimate maps no error onto h although the step's stages straddled the kink. For a
+loop with guards (compile/guards.py) every step is first tried whole: the guards are evaluated at
+its three inner stage states and at its end, and compared with their side just after its start
+(at x + NUDGE dt f(x)). If none changes sign, the step is taken as it is. Otherwise the crossing is
+located by BISECTIONS bisections on the length of the RK4 step (each trial step checked at its
+stages and end as the whole one was), and the step ends just before it: the piece is smooth, its
+estimate valid. The next step starts at the guard; its first stage is then evaluated just after
+its start, on the new branch, as every later stage is. A crossing that cannot be resolved (a piece
+shorter than MIN_PIECE: a guard that chatters, a pulse shorter than that) gives the step the error
+estimate UNRESOLVED, so the rollout can never be judged safe.
+
+The trial step, the location (a conditional: its code runs only on a step where a guard crosses)
+and the step's outputs are three compiled parts called from one MX step.
+"""
+from __future__ import annotations
+
+import casadi as ca
+
+from ..compile.primitive import CompiledPrimitive
+from .flow import active, step_end, step_length, wrap
+from .jit import cse_sx
+
+BISECTIONS = 36
+"""Bisections of a step where a guard crosses: the piece ends within dt 2^-36 (1.5e-13 s at dt = 0.01)
+of the crossing."""
+NUDGE = 1e-9
+"""A step's first stage is evaluated NUDGE dt after its start where a guard changes sign in between
+(the step starts on a guard): on the branch the step runs on, at a cost of order NUDGE dt |f'|."""
+MIN_PIECE = 1e-9
+"""A located piece shorter than this (seconds) is not resolved: the step gets UNRESOLVED."""
+UNRESOLVED = 1e30
+"""The error estimate of a step whose crossing could not be resolved: no safe verdict survives it."""
+
+
+def guarded(prim: CompiledPrimitive) -> bool:
+    """The primitive's steps are taken piece by piece: it has guards, a small SX loop inlined in the
+    step (not a compiled loop library) and a law evaluated continuously (not sampled)."""
+    return prim.guards.fn is not None and prim.sampled is None and prim.loop.is_a("SXFunction")
+
+
+def _with_guards(prim: CompiledPrimitive) -> ca.Function:
+    """(x, t, s, x_sw) -> (xdot, g): the closed loop and its guards sharing their subexpressions."""
+    a = prim.f_cl.sx_in()
+    return ca.Function("f_and_g", a, [prim.f_cl(*a), prim.guards.fn(*a)])
+
+
+def _crossed(r, gs: list):
+    """1 when a guard value in gs lies strictly on the other side of its reference sign r."""
+    flips = [r * g < 0 for g in gs]
+    v = ca.vertcat(*flips)
+    return ca.mmax(v) if v.shape[0] else ca.DM(0)
+
+
+def _trial(fg: ca.Function, x, t, s, xs, k1, tau, te, spread: bool = False):
+    """(x_end, k4, guard values at the three inner stages and the end) of one RK4 step of tau; with
+    `spread`, also the range (max - min, entry by entry) of the rates at the stages and the end."""
+    k2, g2 = fg(x + tau / 2 * k1, t + tau / 2, s + tau / 2, xs)
+    k3, g3 = fg(x + tau / 2 * k2, t + tau / 2, s + tau / 2, xs)
+    k4, g4 = fg(x + tau * k3, t + te, s + te, xs)
+    x_end = x + tau / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    k5, g5 = fg(x_end, t + te, s + te, xs)
+    if not spread:
+        return x_end, k4, [g2, g3, g4, g5]
+    hi, lo = k1, k1
+    for k in (k2, k3, k4, k5):
+        hi, lo = ca.fmax(hi, k), ca.fmin(lo, k)
+    return x_end, k4, [g2, g3, g4, g5], hi - lo
+
+
+class _Parts:
+    """The compiled parts every guarded step shares: the loop with its guards, the bisection of a
+    step's length and one RK4 step of a given length."""
+
+    def __init__(self, prim: CompiledPrimitive):
+        self.prim, self.nx, self.ng, self.nh = prim, prim.system.nx, len(prim.guards), len(prim.h_names)
+        self.fg, self.G = _with_guards(prim), prim.guards.fn
+        x, k1, xs, r = self.sx("x"), self.sx("k1"), self.sx("x_sw"), ca.SX.sym("r", self.ng)
+        t, s, lohi = ca.SX.sym("t"), ca.SX.sym("s"), ca.SX.sym("lohi", 2)
+        mid = (lohi[0] + lohi[1]) / 2
+        cut = _crossed(r, _trial(self.fg, x, t, s, xs, k1, mid, mid)[2])
+        self.bisect = ca.Function("bisect", [lohi, x, t, s, xs, k1, r],
+                                  [ca.vertcat(ca.if_else(cut, lohi[0], mid), ca.if_else(cut, mid, lohi[1]))])
+        tau, te = ca.SX.sym("tau"), ca.SX.sym("te")
+        xe, k4, gs, spread = _trial(self.fg, x, t, s, xs, k1, tau, te, spread=True)
+        self.rk4 = ca.Function("rk4_checked", [x, t, s, xs, k1, tau, te, r], [xe, k4, _crossed(r, gs), spread])
+        a = prim.loop.sx_in()
+        e = self.sx("e")
+        hv = prim.loop(*a)[1]
+        self.onto_h = ca.Function("onto_h", [*a, e], [ca.mtimes(ca.fabs(ca.jacobian(hv, a[0])), e)])
+        k1n, rn, _on = self.nudged(x, t, s, xs, tau)
+        self.first = ca.Function("first_stage", [x, t, s, xs, tau], [k1n, rn])
+
+    def sx(self, name: str):
+        return ca.SX.sym(name, self.nx)
+
+    def nudged(self, x, t, s, xs, h):
+        """(k1, r, on_guard) for a step of h from x: each guard's side r just after the start, the
+        first stage f(x), or f just after the start where a guard changes sign in between (the step
+        starts on a guard: on_guard = 1)."""
+        k1 = self.fg(x, t, s, xs)[0]
+        d = NUDGE * h
+        k1n, r = self.fg(x + d * k1, t + d, s + d, xs)
+        on = _crossed(self.G(x, t, s, xs), [r])
+        return ca.if_else(on, k1n, k1), r, on
+
+    def located(self, x, t, s, xs, k1, h, r):
+        """MX: (lo, hi, short): the bracket of the first crossing of a step of h from x after
+        BISECTIONS bisections, and 1 when the piece before it is shorter than MIN_PIECE."""
+        b = self.bisect.fold(BISECTIONS)(ca.vertcat(0, h), x, t, s, xs, k1, r)
+        return b[0], b[1], b[0] < MIN_PIECE
+
+    def sliver(self, x, t, s, xs, k1, hi, h, r):
+        """MX: a step just across a crossing right after the start, of twice the bracket's end:
+        (its length, x after it, its k4, the bound tau * (range of its rates) of its error, that
+        error mapped onto h)."""
+        tau = ca.fmin(2 * hi, h)
+        xe, k4, _c, spread = self.rk4(x, t, s, xs, k1, tau, tau, r)
+        extra = tau * spread
+        return tau, xe, k4, ca.norm_2(extra), self.onto_h(xe, t + tau, s + tau, xs, extra)
+
+
+def _locate(parts: _Parts) -> ca.Function:
+    """(cross, x, t, s, x_sw, k1, h, te, x_end, k4, r, on_guard) -> (piece, end stage, x_end, k4,
+    unresolved, extra error norm, extra error of h): where a guard crosses, the bisected piece
+    before the first crossing; a crossing right after the start is stepped across by a sliver
+    (_Parts.sliver) unless the step starts on a guard (it would chatter: the whole step,
+    unresolved); else the step as tried."""
+    M = [ca.MX.sym(n, *shape) for n, shape in (("x", (parts.nx, 1)), ("t", (1, 1)), ("s", (1, 1)),
+                                                ("x_sw", (parts.nx, 1)), ("k1", (parts.nx, 1)), ("h", (1, 1)),
+                                                ("te", (1, 1)), ("x_end", (parts.nx, 1)), ("k4", (parts.nx, 1)),
+                                                ("r", (parts.ng, 1)), ("on_guard", (1, 1)))]
+    mx, mt, ms, mxs, mk1, mh, mte, mxe, mk4, mr, mon = M
+    lo, hi, short = parts.located(mx, mt, ms, mxs, mk1, mh, mr)
+    xe_p, k4_p, _c, _sp = parts.rk4(mx, mt, ms, mxs, mk1, lo, lo, mr)
+    ts, xs_s, k4_s, en_s, eh_s = parts.sliver(mx, mt, ms, mxs, mk1, hi, mh, mr)
+    bad = ca.logic_and(short, mon)
+    sl = ca.logic_and(short, ca.logic_not(mon))
+
+    def pick(a, b, c):  # unresolved, sliver, piece
+        return ca.if_else(bad, a, ca.if_else(sl, b, c))
+
+    nh = parts.nh
+    out = [pick(mh, ts, lo), pick(mte, ts, lo), pick(mxe, xs_s, xe_p), pick(mk4, k4_s, k4_p), bad,
+           ca.if_else(sl, en_s, 0), ca.if_else(sl, eh_s, ca.MX.zeros(nh))]
+    located = ca.Function("locate", M, out)
+    whole = ca.Function("whole", M, [mh, mte, mxe, mk4, ca.MX(0), ca.MX(0), ca.MX.zeros(nh)])
+    return ca.Function.if_else("piece_or_whole", located, whole)
+
+
+def _split(parts: _Parts) -> ca.Function:
+    """(again, x, t, s, x_sw, k1, tau, te, x_end, r) -> (x after tau, unresolved, extra error norm,
+    extra error of h): when `again`, a step of tau from x in two RK4 pieces split at its first
+    crossing (unresolved when the second piece crosses again), or whole with the error bound
+    tau * (range of its rates) when the crossing is right after the start; else x_end as given."""
+    M = [ca.MX.sym(n, *shape) for n, shape in (("x", (parts.nx, 1)), ("t", (1, 1)), ("s", (1, 1)),
+                                                ("x_sw", (parts.nx, 1)), ("k1", (parts.nx, 1)), ("tau", (1, 1)),
+                                                ("te", (1, 1)), ("x_end", (parts.nx, 1)), ("r", (parts.ng, 1)))]
+    mx, mt, ms, mxs, mk1, mtau, mte, mxe, mr = M
+    whole, _k4, cross, spread = parts.rk4(mx, mt, ms, mxs, mk1, mtau, mte, mr)
+    lo, _hi, short = parts.located(mx, mt, ms, mxs, mk1, mtau, mr)
+    x1, _k4, _c, _sp = parts.rk4(mx, mt, ms, mxs, mk1, lo, lo, mr)
+    rest = mtau - lo
+    k1b, rb = parts.first(x1, mt + lo, ms + lo, mxs, rest)
+    x2, _k4, again, _sp = parts.rk4(x1, mt + lo, ms + lo, mxs, k1b, rest, mte - lo, rb)
+    two = ca.logic_and(cross, ca.logic_not(short))
+    extra = ca.if_else(ca.logic_and(cross, short), mtau * spread, ca.MX.zeros(parts.nx))
+    x_end = ca.if_else(two, x2, whole)
+    split = ca.Function("split", M, [x_end, ca.logic_and(two, again), ca.norm_2(extra),
+                                     parts.onto_h(x_end, mt + mte, ms + mte, mxs, extra)])
+    keep = ca.Function("as_tried", M, [mxe, ca.MX(0), ca.MX(0), ca.MX.zeros(parts.nh)])
+    return ca.Function.if_else("split_or_keep", split, keep)
+
+
+def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca.Function, jump: ca.Function,
+                 margin: ca.Function, with_state: bool, boundaries: bool, h_rows) -> ca.Function:
+    """integrator.step_body's step for a loop with guards (see the module's docstring): z -> (z after
+    the step, its outputs in Rows order). h_rows(h0, h1, d0, d1, step, act) gives the h and lower
+    bound rows; the error rows of an unresolved step are UNRESOLVED."""
+    nx = prim.system.nx
+    parts = _Parts(prim)
+    fg = parts.fg
+    # part 1: the step's start and its whole trial
+    z = ca.SX.sym("z", 2 * nx + 2)
+    x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2]
+    tc = wrap(prim, t)
+    h, edge = step_length(prim, dt, tc, x, s, edge=True) if boundaries else (ca.DM(dt), None)
+    te = step_end(prim, h, edge)
+    _k1, h0, d0, u_raw, u = start(x, t, s, xs)
+    k1, r, on = parts.nudged(x, t, s, xs, h)
+    x_end, k4, gs = _trial(fg, x, t, s, xs, k1, h, te)
+    cross = _crossed(r, gs)
+    trial = cse_sx(ca.Function("trial", [z], [h, te, k1, h0, d0, u_raw, u, x_end, k4, cross, r, on]))
+    # part 3: the step's outputs from the piece taken
+    tau, tep, xe, k4p, bad = (ca.SX.sym("tau"), ca.SX.sym("te"), ca.SX.sym("x_end", nx), ca.SX.sym("k4", nx),
+                             ca.SX.sym("unresolved"))
+    en_x, eh_x = ca.SX.sym("extra"), ca.SX.sym("extra_h", parts.nh)
+    k1s, h0s, d0s = ca.SX.sym("k1", nx), ca.SX.sym("h0", h0.shape[0]), ca.SX.sym("d0", d0.shape[0])
+    urs, us = ca.SX.sym("u_raw", u_raw.shape[0]), ca.SX.sym("u", u.shape[0])
+    _k5, h1, d1, dh, e = end(xe, t + tep, s + tep, xs, k4p, tau)
+    x_next = jump(xe, us, t + tau, s + tau)
+    act = active(prim, wrap(prim, t + tau / 2), x, s, x_next, tau)
+    worse = bad * UNRESOLVED
+    out = ca.vertcat(*h_rows(h0s, h1, d0s, d1, tau, act), dh + eh_x + worse, margin(x, t),
+                     ca.norm_2(e) + en_x + worse, s, tau, urs, us, *([x] if with_state else []))
+    finish = cse_sx(ca.Function("finish", [z, tau, tep, xe, k4p, bad, en_x, eh_x, k1s, h0s, d0s, urs, us],
+                                [ca.vertcat(x_next, t + tau, s + tau, xs), out]))
+    # the step: trial, the conditional location, the outputs
+    Z = ca.MX.sym("z", 2 * nx + 2)
+    (hM, teM, k1M, h0M, d0M, urM, uM, xeM, k4M, crM, rM, onM) = trial(Z)
+    Xm, Tm, Sm, XSm = Z[:nx], Z[nx], Z[nx + 1], Z[nx + 2:2 * nx + 2]
+    pc = _locate(parts)(crM, Xm, Tm, Sm, XSm, k1M, hM, teM, xeM, k4M, rM, onM)
+    z_next, o = finish(Z, *pc, k1M, h0M, d0M, urM, uM)
+    return ca.Function("body", [Z], [z_next, o])
+
+
+def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function, at_end: ca.Function,
+                          loop: ca.Function, jump: ca.Function, margin: ca.Function, with_state: bool,
+                          boundaries: bool, h_rows) -> ca.Function:
+    """integrator.step_body's step-doubling step for a loop with guards: the judged rollout's two
+    half steps are tried; where a guard crosses, the step ends just before the first crossing of its
+    single-step trial and both halves are taken again over that piece. The companion advances by the
+    same length, split in two RK4 pieces where one of its own guards crosses (its state differs from
+    the judged one by its error, so its crossing does too). A crossing that cannot be resolved gives
+    the step's estimates UNRESOLVED. z = [x; t; s; x_sw; x_c], as for the unguarded step."""
+    nx = prim.system.nx
+    parts = _Parts(prim)
+    fg = parts.fg
+    z = ca.SX.sym("z", 3 * nx + 2)
+    x, t, s, xs, xc = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2], z[2 * nx + 2:3 * nx + 2]
+    tc = wrap(prim, t)
+    h, edge = step_length(prim, dt, tc, x, s, edge=True) if boundaries else (ca.DM(dt), None)
+    te = step_end(prim, h, edge)
+    _k1, h0, d0, u_raw, u = start(x, t, s, xs)
+    _kc, h0c, _ucr, uc = loop(xc, t, s, xs)
+    k1, r, on = parts.nudged(x, t, s, xs, h)
+    kc1, rc, _on = parts.nudged(xc, t, s, xs, h)
+    hh = h / 2
+    x_mid, _k4, ga = _trial(fg, x, t, s, xs, k1, hh, hh)
+    km, rm, _on = parts.nudged(x_mid, t + hh, s + hh, xs, hh)
+    x_end, _k4, gb = _trial(fg, x_mid, t + hh, s + hh, xs, km, hh, te - hh)
+    cross = ca.logic_or(_crossed(r, ga), _crossed(rm, gb))
+    xc_end, _k4, cross_c, _sp = parts.rk4(xc, t, s, xs, kc1, h, te, rc)
+    trial = cse_sx(ca.Function("trial2", [z], [h, te, k1, h0, d0, u_raw, u, x_end, cross, h0c, uc, kc1, rc,
+                                               xc_end, cross_c, r, on]))
+    # the judged rollout: the piece before its first crossing, both halves again over it (or a sliver
+    # across a crossing right after the start, or the whole step unresolved when it starts on a guard)
+    M = [ca.MX.sym(n, *shape) for n, shape in (("x", (nx, 1)), ("t", (1, 1)), ("s", (1, 1)), ("x_sw", (nx, 1)),
+                                                ("k1", (nx, 1)), ("h", (1, 1)), ("te", (1, 1)),
+                                                ("x_end", (nx, 1)), ("r", (parts.ng, 1)), ("on_guard", (1, 1)))]
+    mx, mt, ms, mxs, mk1, mh, mte, mxe, mr, mon = M
+    lo, hi, short = parts.located(mx, mt, ms, mxs, mk1, mh, mr)
+    x2, _k4, _c, _sp = parts.rk4(mx, mt, ms, mxs, mk1, lo / 2, lo / 2, mr)
+    km2, rm2 = parts.first(x2, mt + lo / 2, ms + lo / 2, mxs, lo / 2)
+    x4, _k4, _c, _sp = parts.rk4(x2, mt + lo / 2, ms + lo / 2, mxs, km2, lo / 2, lo / 2, rm2)
+    ts, xs_s, _k4s, en_s, eh_s = parts.sliver(mx, mt, ms, mxs, mk1, hi, mh, mr)
+    bad = ca.logic_and(short, mon)
+    sl = ca.logic_and(short, ca.logic_not(mon))
+
+    def pick(a, b, c):  # unresolved, sliver, piece
+        return ca.if_else(bad, a, ca.if_else(sl, b, c))
+
+    nh = parts.nh
+    located = ca.Function("halves", M, [pick(mh, ts, lo), pick(mte, ts, lo), pick(mxe, xs_s, x4), bad,
+                                        ca.if_else(sl, en_s, 0), ca.if_else(sl, eh_s, ca.MX.zeros(nh))])
+    whole = ca.Function("whole2", M, [mh, mte, mxe, ca.MX(0), ca.MX(0), ca.MX.zeros(nh)])
+    halves = ca.Function.if_else("halves_or_whole", located, whole)
+    # the step: trial, the judged piece, the companion over it, the outputs
+    Z = ca.MX.sym("z", 3 * nx + 2)
+    (hM, teM, k1M, h0M, d0M, urM, uM, xeM, crM, h0cM, ucM, kc1M, rcM, xceM, crcM, rM, onM) = trial(Z)
+    Xm, Tm, Sm, XSm, XCm = Z[:nx], Z[nx], Z[nx + 1], Z[nx + 2:2 * nx + 2], Z[2 * nx + 2:3 * nx + 2]
+    tau, tep, xe, bad, en_j, eh_j = halves(crM, Xm, Tm, Sm, XSm, k1M, hM, teM, xeM, rM, onM)
+    again = ca.logic_or(crcM, tau < hM)  # the companion crosses, or its step is the shorter piece
+    xce, bad_c, en_c, eh_c = _split(parts)(again, XCm, Tm, Sm, XSm, kc1M, tau, tep, xceM, rcM)
+    # the outputs, as the unguarded doubling step forms them
+    T_, te_, xe_, xce_, b_ = ca.SX.sym("tau"), ca.SX.sym("te"), parts.sx("x_end"), parts.sx("xc_end"), ca.SX.sym("bad")
+    h0s, d0s = ca.SX.sym("h0", h0.shape[0]), ca.SX.sym("d0", d0.shape[0])
+    h0cs, urs, us, ucs = ca.SX.sym("h0c", h0.shape[0]), ca.SX.sym("u_raw", u.shape[0]), ca.SX.sym("u", u.shape[0]), \
+        ca.SX.sym("uc", u.shape[0])
+    h1, d1 = at_end(xe_, t + te_, s + te_, xs)
+    h1c = loop(xce_, t + te_, s + te_, xs)[1]
+    x_next, xc_next = jump(xe_, us, t + T_, s + T_), jump(xce_, ucs, t + T_, s + T_)
+    act = active(prim, wrap(prim, t + T_ / 2), x, s, x_next, T_)
+    m_f, m_c = margin(x, t), margin(xc, t)
+    worse = b_ * UNRESOLVED
+    en_, eh_ = ca.SX.sym("extra"), ca.SX.sym("extra_h", h0.shape[0])
+    out = ca.vertcat(*h_rows(h0s, h1, d0s, d1, T_, act), ca.fabs(h1 - h1c) + eh_ + worse, m_f,
+                     ca.fabs(m_f - m_c) + en_ + worse, s, T_, urs, us, *([x] if with_state else []),
+                     ca.fabs(h0s - h0cs) + worse)
+    finish = cse_sx(ca.Function("finish2", [z, T_, te_, xe_, xce_, b_, en_, eh_, h0s, d0s, h0cs, urs, us, ucs],
+                                [ca.vertcat(x_next, t + T_, s + T_, xs, xc_next), out]))
+    z_next, o = finish(Z, tau, tep, xe, xce, ca.logic_or(bad, bad_c), en_j + en_c, eh_j + eh_c, h0M, d0M, h0cM,
+                       urM, uM, ucM)
+    return ca.Function("body2", [Z], [z_next, o])
