@@ -49,8 +49,9 @@ def _with_guards(prim: CompiledPrimitive) -> ca.Function:
 
 
 def _crossed(r, gs: list):
-    """1 when a guard value in gs lies strictly on the other side of its reference sign r."""
-    flips = [r * g < 0 for g in gs]
+    """1 when a guard value in gs is zero or on the other side of its reference sign r (at zero a
+    law may already take either branch; a guard with r = 0 never counts)."""
+    flips = [ca.logic_and(r * g <= 0, r != 0) for g in gs]
     v = ca.vertcat(*flips)
     return ca.mmax(v) if v.shape[0] else ca.DM(0)
 
@@ -93,6 +94,10 @@ class _Parts:
         self.onto_h = ca.Function("onto_h", [*a, e], [ca.mtimes(ca.fabs(ca.jacobian(hv, a[0])), e)])
         k1n, rn, _on = self.nudged(x, t, s, xs, tau)
         self.first = ca.Function("first_stage", [x, t, s, xs, tau], [k1n, rn])
+        a = prim.loop.sx_in()
+        k = self.sx("k")
+        arg = ca.vertcat(a[0], a[1], a[2])
+        self.rate = ca.Function("h_rate", [*a, k], [ca.jtimes(prim.loop(*a)[1], arg, ca.vertcat(k, 1, 1))])
 
     def sx(self, name: str):
         return ca.SX.sym(name, self.nx)
@@ -100,12 +105,22 @@ class _Parts:
     def nudged(self, x, t, s, xs, h):
         """(k1, r, on_guard) for a step of h from x: each guard's side r just after the start, the
         first stage f(x), or f just after the start where a guard changes sign in between (the step
-        starts on a guard: on_guard = 1)."""
+        starts on a guard: on_guard = 1; its error: nudge_error)."""
         k1 = self.fg(x, t, s, xs)[0]
         d = NUDGE * h
         k1n, r = self.fg(x + d * k1, t + d, s + d, xs)
-        on = _crossed(self.G(x, t, s, xs), [r])
+        on = _crossed(r, [self.G(x, t, s, xs)])
         return ca.if_else(on, k1n, k1), r, on
+
+    def nudge_error(self, x, t, s, xs, h):
+        """(its norm, its bound on h, the error itself) of taking the new branch from a step's start on
+        a guard: the guard lies within NUDGE dt of the start (the last piece ended within the bracket
+        before it), so the state may be off by up to NUDGE dt (f(x) - f(x + NUDGE dt f))."""
+        k1 = self.fg(x, t, s, xs)[0]
+        d = NUDGE * h
+        k1n, r = self.fg(x + d * k1, t + d, s + d, xs)
+        e = ca.if_else(_crossed(r, [self.G(x, t, s, xs)]), d * (k1 - k1n), ca.DM.zeros(self.nx))
+        return ca.norm_2(e), self.onto_h(x, t, s, xs, ca.fabs(e)), e
 
     def located(self, x, t, s, xs, k1, h, r):
         """MX: (lo, hi, short): the bracket of the first crossing of a step of h from x after
@@ -191,9 +206,11 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
     te = step_end(prim, h, edge)
     _k1, h0, d0, u_raw, u = start(x, t, s, xs)
     k1, r, on = parts.nudged(x, t, s, xs, h)
+    d0 = parts.rate(x, t, s, xs, k1)  # h's rate along the branch the step runs on
     x_end, k4, gs = _trial(fg, x, t, s, xs, k1, h, te)
     cross = _crossed(r, gs)
-    trial = cse_sx(ca.Function("trial", [z], [h, te, k1, h0, d0, u_raw, u, x_end, k4, cross, r, on]))
+    en0, eh0, _e0 = parts.nudge_error(x, t, s, xs, h)
+    trial = cse_sx(ca.Function("trial", [z], [h, te, k1, h0, d0, u_raw, u, x_end, k4, cross, r, on, en0, eh0]))
     # part 3: the step's outputs from the piece taken
     tau, tep, xe, k4p, bad = (ca.SX.sym("tau"), ca.SX.sym("te"), ca.SX.sym("x_end", nx), ca.SX.sym("k4", nx),
                              ca.SX.sym("unresolved"))
@@ -210,10 +227,10 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
                                 [ca.vertcat(x_next, t + tau, s + tau, xs), out]))
     # the step: trial, the conditional location, the outputs
     Z = ca.MX.sym("z", 2 * nx + 2)
-    (hM, teM, k1M, h0M, d0M, urM, uM, xeM, k4M, crM, rM, onM) = trial(Z)
+    (hM, teM, k1M, h0M, d0M, urM, uM, xeM, k4M, crM, rM, onM, en0M, eh0M) = trial(Z)
     Xm, Tm, Sm, XSm = Z[:nx], Z[nx], Z[nx + 1], Z[nx + 2:2 * nx + 2]
-    pc = _locate(parts)(crM, Xm, Tm, Sm, XSm, k1M, hM, teM, xeM, k4M, rM, onM)
-    z_next, o = finish(Z, *pc, k1M, h0M, d0M, urM, uM)
+    tau, tep, xe, k4p, bad, en_x, eh_x = _locate(parts)(crM, Xm, Tm, Sm, XSm, k1M, hM, teM, xeM, k4M, rM, onM)
+    z_next, o = finish(Z, tau, tep, xe, k4p, bad, en_x + en0M, eh_x + eh0M, k1M, h0M, d0M, urM, uM)
     return ca.Function("body", [Z], [z_next, o])
 
 
@@ -237,6 +254,7 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     _k1, h0, d0, u_raw, u = start(x, t, s, xs)
     _kc, h0c, _ucr, uc = loop(xc, t, s, xs)
     k1, r, on = parts.nudged(x, t, s, xs, h)
+    d0 = parts.rate(x, t, s, xs, k1)  # h's rate along the branch the step runs on
     kc1, rc, _on = parts.nudged(xc, t, s, xs, h)
     hh = h / 2
     x_mid, _k4, ga = _trial(fg, x, t, s, xs, k1, hh, hh)
@@ -244,8 +262,10 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     x_end, _k4, gb = _trial(fg, x_mid, t + hh, s + hh, xs, km, hh, te - hh)
     cross = ca.logic_or(_crossed(r, ga), _crossed(rm, gb))
     xc_end, _k4, cross_c, _sp = parts.rk4(xc, t, s, xs, kc1, h, te, rc)
+    en0, eh0, e0 = parts.nudge_error(x, t, s, xs, h)
+    en0c, eh0c, _e0c = parts.nudge_error(xc, t, s, xs, h)
     trial = cse_sx(ca.Function("trial2", [z], [h, te, k1, h0, d0, u_raw, u, x_end, cross, h0c, uc, kc1, rc,
-                                               xc_end, cross_c, r, on]))
+                                               xc_end, cross_c, r, on, en0 + en0c, eh0 + eh0c, e0]))
     # the judged rollout: the piece before its first crossing, both halves again over it (or a sliver
     # across a crossing right after the start, or the whole step unresolved when it starts on a guard)
     M = [ca.MX.sym(n, *shape) for n, shape in (("x", (nx, 1)), ("t", (1, 1)), ("s", (1, 1)), ("x_sw", (nx, 1)),
@@ -270,7 +290,7 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     halves = ca.Function.if_else("halves_or_whole", located, whole)
     # the step: trial, the judged piece, the companion over it, the outputs
     Z = ca.MX.sym("z", 3 * nx + 2)
-    (hM, teM, k1M, h0M, d0M, urM, uM, xeM, crM, h0cM, ucM, kc1M, rcM, xceM, crcM, rM, onM) = trial(Z)
+    (hM, teM, k1M, h0M, d0M, urM, uM, xeM, crM, h0cM, ucM, kc1M, rcM, xceM, crcM, rM, onM, en0M, eh0M, e0M) = trial(Z)
     Xm, Tm, Sm, XSm, XCm = Z[:nx], Z[nx], Z[nx + 1], Z[nx + 2:2 * nx + 2], Z[2 * nx + 2:3 * nx + 2]
     tau, tep, xe, bad, en_j, eh_j = halves(crM, Xm, Tm, Sm, XSm, k1M, hM, teM, xeM, rM, onM)
     again = ca.logic_or(crcM, tau < hM)  # the companion crosses, or its step is the shorter piece
@@ -282,7 +302,12 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
         ca.SX.sym("uc", u.shape[0])
     h1, d1 = at_end(xe_, t + te_, s + te_, xs)
     h1c = loop(xce_, t + te_, s + te_, xs)[1]
-    x_next, xc_next = jump(xe_, us, t + T_, s + T_), jump(xce_, ucs, t + T_, s + T_)
+    # the companion also carries the judged rollout's possible error at a guard (nudge_error), pushed
+    # away from the judged state, so that the difference keeps it from step to step (errors at two
+    # guards cannot cancel)
+    off_ = parts.sx("offset")
+    away = ca.fabs(off_) * ca.if_else(xce_ >= xe_, 1, -1)
+    x_next, xc_next = jump(xe_, us, t + T_, s + T_), jump(xce_ + away, ucs, t + T_, s + T_)
     act = active(prim, wrap(prim, t + T_ / 2), x, s, x_next, T_)
     m_f, m_c = margin(x, t), margin(xc, t)
     worse = b_ * UNRESOLVED
@@ -290,8 +315,8 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     out = ca.vertcat(*h_rows(h0s, h1, d0s, d1, T_, act), ca.fabs(h1 - h1c) + eh_ + worse, m_f,
                      ca.fabs(m_f - m_c) + en_ + worse, s, T_, urs, us, *([x] if with_state else []),
                      ca.fabs(h0s - h0cs) + worse)
-    finish = cse_sx(ca.Function("finish2", [z, T_, te_, xe_, xce_, b_, en_, eh_, h0s, d0s, h0cs, urs, us, ucs],
+    finish = cse_sx(ca.Function("finish2", [z, T_, te_, xe_, xce_, b_, en_, eh_, off_, h0s, d0s, h0cs, urs, us, ucs],
                                 [ca.vertcat(x_next, t + T_, s + T_, xs, xc_next), out]))
-    z_next, o = finish(Z, tau, tep, xe, xce, ca.logic_or(bad, bad_c), en_j + en_c, eh_j + eh_c, h0M, d0M, h0cM,
+    z_next, o = finish(Z, tau, tep, xe, xce, ca.logic_or(bad, bad_c), en_j + en_c + en0M, eh_j + eh_c + eh0M, e0M, h0M, d0M, h0cM,
                        urM, uM, ucM)
     return ca.Function("body2", [Z], [z_next, o])
