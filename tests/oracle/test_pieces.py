@@ -1,0 +1,159 @@
+"""Non-smooth closed loops: guards collected by the compiler, steps ended where a guard crosses.
+
+Known answers in closed form on x' = u (test_oracle's scalar integrator) and, in bulk, the
+generated families of pieces_campaign.py (read its docstring): laws that switch on the state and
+on the clock, input saturation and pulses, at every preset and both error estimates. The full
+campaign (600 cases per family, 2,400 in all) runs stand-alone:
+
+    . .venv/bin/activate && python tests/oracle/pieces_campaign.py --cases-per-family 600
+"""
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mpgspec.compile.guards import collect
+from mpgspec.oracle import SafetyOracle
+from mpgspec.oracle.pieces import MIN_PIECE, guarded
+from mpgspec.settings import OracleSettings
+
+from test_oracle import GOAL, one
+
+sys.path.insert(0, str(Path(__file__).parent))
+import pieces_campaign as campaign  # noqa: E402
+
+PRESETS = ("low", "medium", "high", "very_high")
+ERRORS = ("local", "doubling")
+
+
+# ----------------------------------------------------------------------------- guards
+def _loop(expr):
+    x, t, s, xs = ca.SX.sym("x", 2), ca.SX.sym("t"), ca.SX.sym("s"), ca.SX.sym("x_sw", 2)
+    return ca.Function("f", [x, t, s, xs], [expr(x, t)])
+
+
+@pytest.mark.parametrize("expr,kinds", [
+    (lambda x, t: ca.vertcat(x[1], ca.if_else(x[0] < 0.3, 1, 3)), ["<"]),
+    (lambda x, t: ca.vertcat(x[1], ca.fmin(ca.fmax(-4 * x[0], -1), 1)), ["max", "min"]),
+    (lambda x, t: ca.vertcat(ca.sign(t - 0.5), ca.fabs(x[1])), ["abs", "sign"]),
+    (lambda x, t: ca.vertcat(ca.floor(t / 0.7), x[0]), ["floor"]),
+])
+def test_the_compiler_collects_every_switching_point_of_the_loop(expr, kinds):
+    g = collect(_loop(expr))
+    assert g.exposed and sorted(n.split(":")[0] for n in g.names) == kinds
+    assert g.fn.size1_out(0) == len(kinds)
+
+
+def test_a_guard_changes_sign_where_the_law_switches():
+    g = collect(_loop(lambda x, t: ca.vertcat(x[1], ca.if_else(x[0] < 0.3, 1, 3))))
+    below, above = (float(g.fn([x0, 0], 0, 0, [0, 0])) for x0 in (0.29, 0.31))
+    assert below > 0 > above
+
+
+def test_a_smooth_loop_has_no_guards_and_a_compiled_law_none_exposed():
+    assert len(collect(_loop(lambda x, t: ca.vertcat(x[1], -x[0] - x[1] ** 3)))) == 0
+    x = ca.MX.sym("x", 2)
+    mx = ca.Function("f", [x, ca.MX.sym("t"), ca.MX.sym("s"), ca.MX.sym("x_sw", 2)], [x])
+    g = collect(mx)
+    assert not g.exposed and "not exposed" in g.why and g.record()["why"] == g.why
+
+
+def test_the_primitive_carries_its_guards(tmp_path):
+    prim = one(tmp_path, GOAL.replace("-2*(x - 1)", "-5*(x - 1)"), bounds=(-1, 1))  # saturated at 1
+    assert len(prim.guards) == 2 and all(n.startswith("max") for n in prim.guards.names) and guarded(prim)
+    assert len(one(tmp_path, GOAL).guards) == 2  # the bounds of +-10 are guards too
+    assert len(one(tmp_path, GOAL, bounds=("-.inf", ".inf")).guards) == 0
+
+
+# ----------------------------------------------------------------------------- known answers
+def _switching(tmp_path, law: str, c: float, T: float = 0.6):
+    """x' = law from x0 = 0; c - x required on the clock window [0, T); E around 2 beyond x(T); the
+    input unbounded."""
+    prim = GOAL.replace('setpoint: {expr: [1]}', 'setpoint: {expr: [2]}').replace("-2*(x - 1)", law)
+    return one(tmp_path, prim + f'  safe_set:\n    - {{name: cap, h: "{c!r} - x", when: [0, {T}]}}\n',
+               bounds=("-.inf", ".inf"))
+
+
+@pytest.mark.parametrize("error", ERRORS)
+@pytest.mark.parametrize("preset", PRESETS)
+@pytest.mark.parametrize("on", ["state", "clock"])
+@pytest.mark.parametrize("theta", [0.05, 0.31, 0.77])  # where the switch falls inside its step of 10 ms
+def test_a_law_that_switches_inside_a_step_is_judged_on_each_branch(tmp_path, on, theta, preset, error):
+    """Rate 1 until the switch at t* = 0.5 + theta dt, then 3: x(T) = t* + 3 (T - t*) exactly. RK4
+    across the switch is off by up to 0.8 dt; on its two pieces it is exact. With c = x(T) - 3e-5
+    (violated at the window's end by 3e-5) the answer must not be safe and the bound must read the
+    true -3e-5; with c = x(T) + 3e-5 it is safe."""
+    ts = 0.5 + theta * 0.01
+    law = f"if_else(x < {ts!r}, 1, 3)" if on == "state" else f"if_else(t < {ts!r}, 1, 3)"
+    x_T = ts + 3 * (0.6 - ts)
+    s = OracleSettings.with_accuracy(preset, horizon=3.0, dt=0.01, error=error, jit=False)
+    e = SafetyOracle(_switching(tmp_path, law, x_T - 3e-5), s)(np.array([0.0]), 0.0)
+    assert e.status != "safe" and e.violated == "cap", e
+    assert e.lower_bounds["cap"] == pytest.approx(-3e-5, abs=1e-9)
+    e = SafetyOracle(_switching(tmp_path, law, x_T + 3e-5), s)(np.array([0.0]), 0.0)
+    assert e.status == "safe", e
+    assert e.lower_bounds["cap"] == pytest.approx(3e-5, abs=1e-9)
+
+
+@pytest.mark.parametrize("error", ERRORS)
+def test_a_saturation_kink_inside_a_step_is_judged_on_each_side(tmp_path, error):
+    """u = clip(-4 (x - 2), -1, 1) from x0 = 1.3537: rate 1 until x = 1.75 at t_k = 0.3963, then
+    x = 2 - e^(-4 (t - t_k)) / 4; c = x(T) -+ 1e-6 at T = 0.6."""
+    tk = 0.3963
+    x0 = 1.75 - tk
+    x_T = 2 - math.exp(-4 * (0.6 - tk)) / 4
+    s = OracleSettings.with_accuracy("very_high", horizon=3.0, dt=0.01, error=error, jit=False)
+    for c, truth in ((x_T - 1e-6, "unsafe"), (x_T + 1e-6, "safe")):
+        e = SafetyOracle(_switching(tmp_path, "clip(-4*(x - 2), -1, 1)", c), s)(np.array([x0]), 0.0)
+        assert (e.status == "safe") == (truth == "safe"), e
+        if truth == "safe":  # a bound over the window's last step: positive, at most the true margin
+            assert 0 < e.lower_bounds["cap"] <= c - x_T + 1e-9
+
+
+@pytest.mark.parametrize("error", ERRORS)
+@pytest.mark.parametrize("width", [1e-5, 0.3 * MIN_PIECE])
+def test_a_pulse_narrower_than_a_step_is_integrated_or_inconclusive(tmp_path, width, error):
+    """A kick of area 0.2 at t = 0.2537 lasting `width`: x(T) = T + 0.2. A kick wider than
+    MIN_PIECE is integrated on its own piece (the answer is right either way); a narrower one cannot
+    be resolved, and the rollout is never safe."""
+    P = 0.2 / width
+    law = f"1 + {P!r}*(if_else(t > 0.2537, 1, 0) - if_else(t > {0.2537 + width!r}, 1, 0))"
+    s = OracleSettings.with_accuracy("medium", horizon=3.0, dt=0.01, error=error, jit=False)
+    for c in (0.8 - 1e-3, 0.8 + 1e-3):  # x(T) = 0.8
+        e = SafetyOracle(_switching(tmp_path, law, c), s)(np.array([0.0]), 0.0)
+        if width < MIN_PIECE or c < 0.8:
+            assert e.status != "safe", (c, e)
+        else:
+            assert e.status == "safe", (c, e)
+
+
+def test_a_law_that_chatters_ends_inconclusive(tmp_path):
+    """x' = -sign(x - 0.3) from 0 slides on x = 0.3 forever and never reaches E around 1: every
+    step there starts on the guard and crosses it again at once, so it is not resolved; the call
+    returns, and never says safe."""
+    prim = one(tmp_path, GOAL.replace("-2*(x - 1)", "-sign(x - 0.3)"))
+    e = SafetyOracle(prim, OracleSettings(horizon=2.0, dt=0.01, refinements=0, jit=False))(np.array([0.0]), 0.0)
+    assert e.status != "safe" and e.steps <= 2.0 / 0.01 + 5, e
+
+
+# ----------------------------------------------------------------------------- generated families
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory):
+    return campaign.run(tmp_path_factory.mktemp("pieces"), per_family=60)
+
+
+def test_no_false_safe_on_any_generated_non_smooth_loop(generated):
+    bad = [(c.family, k, c.x_T - c.c) for c in generated for k, s in c.status.items() if c.unsafe and s == "safe"]
+    assert not bad, campaign.table(generated)
+
+
+def test_every_generated_family_has_safe_answers_at_the_finest_preset(generated):
+    for fam in campaign.FAMILIES:
+        safe = [c for c in generated if c.family == fam and not c.unsafe]
+        got = [c.status[("local", "very_high")] == "safe" for c in safe]
+        assert np.mean(got) >= 0.5, (fam, campaign.table(generated))
