@@ -51,7 +51,7 @@ def primitive_entry(p: CompiledPrimitive, spec, roa=None) -> dict:
         "controller": c.type, "safety_functions": p.h_names, "roa_radius": _f(p.radius),
         "roa_method": rec["method"], "roa_level": rec["level"], "roa_message": rec["message"],
         "roa_evidence": rnd(finite_json(rec["evidence"])), "horizon": _f(p.horizon), "setpoint_t0": [float(v) for v in p.x_star(p.t_range[0])],
-        "description": spec.description.strip(), "info": p.info,
+        "description": spec.description.strip(), "info": p.info, "guards": p.guards.record(),
     }
 
 

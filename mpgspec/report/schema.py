@@ -60,6 +60,14 @@ class System(_Strict):
     input_bounds: dict[str, tuple[float, float]]
 
 
+class Guards(_Strict):
+    """The closed loop's switching points (compile/guards.py): the oracle ends a step where one crosses."""
+
+    exposed: bool = Field(True, description="false when the loop's switching points could not be searched")
+    guards: list[str] = Field(default_factory=list, description="each guard: the operation and its expression")
+    why: str = Field("", description="why the loop's switching points are not exposed")
+
+
 class Primitive(_Strict):
     name: str
     cls: Literal["fixed", "periodic", "transient"] = Field(alias="class")
@@ -77,6 +85,8 @@ class Primitive(_Strict):
     setpoint_t0: list[float]
     description: str
     info: dict[str, Any] = Field(description="free-form data from the controller (e.g. LQR gains)")
+    guards: Guards = Field(default_factory=lambda: Guards(), description="where the closed loop switches or kinks; "
+                                                                         "the oracle steps piece by piece between them")
 
 
 Grid = list[list[Num]]

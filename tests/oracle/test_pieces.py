@@ -144,7 +144,7 @@ def test_a_law_that_chatters_ends_inconclusive(tmp_path):
 # ----------------------------------------------------------------------------- generated families
 @pytest.fixture(scope="module")
 def generated(tmp_path_factory):
-    return campaign.run(tmp_path_factory.mktemp("pieces"), per_family=60)
+    return campaign.run(tmp_path_factory.mktemp("pieces"), per_family=40)
 
 
 def test_no_false_safe_on_any_generated_non_smooth_loop(generated):

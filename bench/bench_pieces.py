@@ -1,0 +1,90 @@
+"""What stepping piece by piece costs: the oracle on loops with guards, against the same loops without.
+
+    python bench/bench_pieces.py [--repeats 7] [--no-write]
+
+In one process, on the pendulum example (every primitive's loop has guards: its input saturation,
+SwingUp's switch at t = 1.5, the swings' clock wrap), every oracle call of Algorithm 1 (each
+source's setpoint on its t_A grid, every target on its t_B grid) is made twice per round with
+jit: through the guarded step (oracle/pieces.py) and through the same primitives with their guards
+removed, i.e. the smooth step every loop took before guards. Both error estimates. Prints the
+median per-round ratio guarded / unguarded (target <= 1.3x) and the verdict counts of both, and
+writes the table to bench/RESULTS.md. Large loops (the A1's, called from their loop libraries)
+expose no guards and take the unguarded step unchanged: their ratio is 1 by construction.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("MPGSPEC_CACHE", tempfile.mkdtemp(prefix="mpgspec-bench-"))
+
+import casadi as ca  # noqa: E402
+import common  # noqa: E402  (bench/common.py)
+from bench_oracle import all_points  # noqa: E402
+
+from mpgspec.compile.guards import Guards  # noqa: E402
+from mpgspec.oracle import SafetyOracle  # noqa: E402
+from mpgspec.pipeline.stages import compile_project  # noqa: E402
+from mpgspec.settings import OracleSettings  # noqa: E402
+from mpgspec.spec.loader import load_project  # noqa: E402
+
+HEADING = "## Guards: stepping piece by piece"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--no-write", action="store_true")
+    args = ap.parse_args(argv)
+    t_all = time.perf_counter()
+    spec = load_project(ROOT / "specs" / "pendulum" / "project.yaml")
+    prims = compile_project(spec)
+    base = OracleSettings.with_accuracy(spec.oracle.accuracy, horizon=spec.oracle.horizon, dt=spec.oracle.dt)
+    gA = {n: p.clock_grid(max(p.grid_A, 1), "A") for n, p in prims.items()}
+    gB = {n: p.clock_grid(max(p.grid_B, 1), "B") for n, p in prims.items()}
+    pts, _src = all_points(prims, gA, gB)
+    plain = {n: dataclasses.replace(p, guards=Guards(), cache={}) for n, p in prims.items()}
+    n_calls = sum(len(v[1]) for v in pts.values())
+    rows = [("oracle calls per round (Algorithm 1's grids)", f"{n_calls}"),
+            ("primitives with guards", ", ".join(f"{n} ({len(p.guards)})" for n, p in prims.items()))]
+    for error in ("local", "doubling"):
+        s = base.replace(error=error)
+        oracles = {kind: {b: SafetyOracle(src[b], s) for b in pts} for kind, src in (("guarded", prims), ("plain", plain))}
+        verdicts = {}
+
+        def run(kind, oracles=oracles, verdicts=verdicts):
+            out = []
+            for b, (x0s, t0s) in pts.items():
+                out += [e.status for e in oracles[kind][b].evaluate(x0s, t0s)]
+            verdicts[kind] = out
+
+        for kind in oracles:  # compile and warm up outside the timed rounds
+            run(kind)
+        times = common.rounds({k: (lambda k=k: run(k)) for k in oracles}, args.repeats)
+        r = common.med_ratio(times["guarded"], times["plain"])
+        med = {k: float(np.median(v)) for k, v in times.items()}
+        count = {k: {st: v.count(st) for st in ("safe", "unsafe", "inconclusive")} for k, v in verdicts.items()}
+        differ = sum(a != b for a, b in zip(verdicts["guarded"], verdicts["plain"]))
+        rows += [(f"**{error}: guarded / unguarded oracle time** (target <= 1.3x)",
+                  f"**{r:.2f}x** ({med['guarded'] * 1e3:.0f} ms vs {med['plain'] * 1e3:.0f} ms per round)"),
+                 (f"{error}: verdicts safe / unsafe / inconclusive, guarded; unguarded",
+                  f"{count['guarded']['safe']} / {count['guarded']['unsafe']} / {count['guarded']['inconclusive']}; "
+                  f"{count['plain']['safe']} / {count['plain']['unsafe']} / {count['plain']['inconclusive']}; "
+                  f"{differ} differ")]
+    mach = common.machine(CasADi=ca.__version__, NumPy=np.__version__)
+    common.publish(HEADING, mach, "python bench/bench_pieces.py", args.repeats, time.perf_counter() - t_all,
+                   common.markdown_table(rows), not args.no_write)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
