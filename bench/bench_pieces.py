@@ -33,8 +33,8 @@ from bench_oracle import all_points  # noqa: E402
 
 from mpgspec.compile.guards import Guards  # noqa: E402
 from mpgspec.oracle import SafetyOracle  # noqa: E402
+from mpgspec.pipeline.settings import settings_for  # noqa: E402
 from mpgspec.pipeline.stages import compile_project  # noqa: E402
-from mpgspec.settings import OracleSettings  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402
 
 HEADING = "## Guards: stepping piece by piece"
@@ -48,7 +48,7 @@ def main(argv=None) -> int:
     t_all = time.perf_counter()
     spec = load_project(ROOT / "specs" / "pendulum" / "project.yaml")
     prims = compile_project(spec)
-    base = OracleSettings.with_accuracy(spec.oracle.accuracy, horizon=spec.oracle.horizon, dt=spec.oracle.dt)
+    base = settings_for(spec)
     gA = {n: p.clock_grid(max(p.grid_A, 1), "A") for n, p in prims.items()}
     gB = {n: p.clock_grid(max(p.grid_B, 1), "B") for n, p in prims.items()}
     pts, _src = all_points(prims, gA, gB)
@@ -80,7 +80,7 @@ def main(argv=None) -> int:
                   f"{count['guarded']['safe']} / {count['guarded']['unsafe']} / {count['guarded']['inconclusive']}; "
                   f"{count['plain']['safe']} / {count['plain']['unsafe']} / {count['plain']['inconclusive']}; "
                   f"{differ} differ")]
-    mach = common.machine(CasADi=ca.__version__, NumPy=np.__version__)
+    mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
     common.publish(HEADING, mach, "python bench/bench_pieces.py", args.repeats, time.perf_counter() - t_all,
                    common.markdown_table(rows), not args.no_write)
     return 0
