@@ -348,12 +348,20 @@ def step_body(prim: CompiledPrimitive, dt: float, with_state: bool = False, boun
     key = ("body", dt, with_state, boundaries, doubling, attached(prim) is not None)
     if key not in prim.cache:
         prim.cache[key] = (_doubling_body if doubling else _step_body)(prim, dt, with_state, boundaries)
-    return prim.cache[key]
+    body, nz, _smooth = prim.cache[key]
+    return body, nz
+
+
+def smooth_step(prim: CompiledPrimitive, dt: float, doubling: bool = False) -> ca.Function | None:
+    """For a loop with guards (pieces.py), its smooth step z -> (z after, outputs, 1 when a guard
+    crossed in it: the step must be taken by step_body instead); None without guards."""
+    step_body(prim, dt, doubling=doubling)
+    return prim.cache[("body", dt, False, True, doubling, attached(prim) is not None)][2]
 
 
 def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple[ca.Function, int]:
     if guarded(prim):
-        return _guarded_body(prim, dt, with_state, boundaries)
+        return (*_guarded_body(prim, dt, with_state, boundaries),)
     nx, nh = prim.system.nx, len(prim.h_names)
     start, end, f = _ends(prim, prim.sampled is not None)
     jump = _jump(prim)
@@ -373,16 +381,16 @@ def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries:
                      ca.norm_2(e), s, h, u_raw, u, *([x] if with_state else []))
     # small SX loops: cse saves 1-8 % of C; an MX graph around a large loop (itself with cse) gains
     # nothing measurable from it (bench/bench_jit.py)
-    return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out])), nz
+    return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out])), nz, None
 
 
 def _guarded_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple[ca.Function, int]:
     """_step_body for a loop with guards: the step ends where a guard first crosses (pieces.py)."""
     nx, nh = prim.system.nx, len(prim.h_names)
     start, end, f = _ends(prim)
-    return guarded_body(prim, dt, start, end, _jump(prim), _margin(prim), with_state, boundaries,
-                        lambda h0, h1, d0, d1, h, act: (*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)),)), \
-        2 * nx + 2
+    body, smooth = guarded_body(prim, dt, start, end, _jump(prim), _margin(prim), with_state, boundaries,
+                                lambda h0, h1, d0, d1, h, act: (*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)),))
+    return body, 2 * nx + 2, smooth
 
 
 def _sample_bound(h0, h1, d0, d1, h):
@@ -426,10 +434,10 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     nx, nh = prim.system.nx, len(prim.h_names)
     if guarded(prim):
         start = _ends(prim)[0]
-        body = guarded_doubling_body(prim, dt, start, _at_end(prim, start), _loop(prim), _jump(prim), _margin(prim),
-                                     with_state, boundaries,
-                                     lambda h0, h1, d0, d1, h, act: (*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)),))
-        return body, 3 * nx + 2
+        body, smooth = guarded_doubling_body(prim, dt, start, _at_end(prim, start), _loop(prim), _jump(prim),
+                                             _margin(prim), with_state, boundaries,
+                                             lambda h0, h1, d0, d1, h, act: (*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)),))
+        return body, 3 * nx + 2, smooth
     held = prim.sampled is not None
     start, _end, f = _ends(prim, held)
     loop = _loop(prim, held)
@@ -457,7 +465,7 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     m_f, m_c = _margin(prim)(x, t), _margin(prim)(xc, t)
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), ca.fabs(h1 - h1c), m_f,
                      ca.fabs(m_f - m_c), s, h, u_raw, u, *([x] if with_state else []), ca.fabs(h0 - h0c))
-    return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out])), nz
+    return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out])), nz, None
 
 
 def start_states(prim: CompiledPrimitive, x0s: np.ndarray, t0s: np.ndarray, doubling: bool = False) -> np.ndarray:

@@ -27,6 +27,9 @@ from .jit import cse_sx
 BISECTIONS = 36
 """Bisections of a step where a guard crosses: the piece ends within dt 2^-36 (1.5e-13 s at dt = 0.01)
 of the crossing."""
+BAND = 1e-9
+"""A step that starts with a guard within BAND times its change over the step of zero is not taken
+as smooth (the branch of its first stage is in doubt): the full step nudges it (NUDGE)."""
 NUDGE = 1e-9
 """A step's first stage is evaluated NUDGE dt after its start where a guard changes sign in between
 (the step starts on a guard): on the branch the step runs on, at a cost of order NUDGE dt |f'|."""
@@ -54,6 +57,17 @@ def _crossed(r, gs: list):
     flips = [ca.logic_and(r * g <= 0, r != 0) for g in gs]
     v = ca.vertcat(*flips)
     return ca.mmax(v) if v.shape[0] else ca.DM(0)
+
+
+def _suspect(g0, gs: list):
+    """1 when a step from guard values g0 may not be smooth: a guard changes sign at a stage or the
+    end (gs), or starts within BAND of its change over the step of zero (where the first stage's
+    branch is in doubt). Such a step is taken by the full, located step instead."""
+    change = ca.DM.zeros(g0.shape[0])
+    for g in gs:
+        change = ca.fmax(change, ca.fabs(g - g0))
+    near = ca.fabs(g0) <= BAND * change
+    return ca.logic_or(ca.mmax(near) if g0.shape[0] else ca.DM(0), _crossed(g0, gs))
 
 
 def _trial(fg: ca.Function, x, t, s, xs, k1, tau, te, spread: bool = False):
@@ -167,10 +181,11 @@ def _locate(parts: _Parts) -> ca.Function:
 
 
 def _split(parts: _Parts) -> ca.Function:
-    """(again, x, t, s, x_sw, k1, tau, te, x_end, r) -> (x after tau, unresolved, extra error norm,
-    extra error of h): when `again`, a step of tau from x in two RK4 pieces split at its first
-    crossing (unresolved when the second piece crosses again), or whole with the error bound
-    tau * (range of its rates) when the crossing is right after the start; else x_end as given."""
+    """(again, x, t, s, x_sw, k1, tau, te, x_end, r) -> (x after tau, unresolved (0: the companion's
+    error only widens the estimate), extra error norm, extra error of h): when `again`, a step of tau
+    from x in two RK4 pieces split at its first crossing, or whole when the crossing is right after
+    the start; a piece that straddles a crossing adds the bound (its length) * (range of its rates);
+    else x_end as given."""
     M = [ca.MX.sym(n, *shape) for n, shape in (("x", (parts.nx, 1)), ("t", (1, 1)), ("s", (1, 1)),
                                                 ("x_sw", (parts.nx, 1)), ("k1", (parts.nx, 1)), ("tau", (1, 1)),
                                                 ("te", (1, 1)), ("x_end", (parts.nx, 1)), ("r", (parts.ng, 1)))]
@@ -180,21 +195,23 @@ def _split(parts: _Parts) -> ca.Function:
     x1, _k4, _c, _sp = parts.rk4(mx, mt, ms, mxs, mk1, lo, lo, mr)
     rest = mtau - lo
     k1b, rb = parts.first(x1, mt + lo, ms + lo, mxs, rest)
-    x2, _k4, again, _sp = parts.rk4(x1, mt + lo, ms + lo, mxs, k1b, rest, mte - lo, rb)
+    x2, _k4, again, spread2 = parts.rk4(x1, mt + lo, ms + lo, mxs, k1b, rest, mte - lo, rb)
     two = ca.logic_and(cross, ca.logic_not(short))
-    extra = ca.if_else(ca.logic_and(cross, short), mtau * spread, ca.MX.zeros(parts.nx))
+    extra = ca.if_else(ca.logic_and(cross, short), mtau * spread,
+                       ca.if_else(ca.logic_and(two, again), rest * spread2, ca.MX.zeros(parts.nx)))
     x_end = ca.if_else(two, x2, whole)
-    split = ca.Function("split", M, [x_end, ca.logic_and(two, again), ca.norm_2(extra),
+    split = ca.Function("split", M, [x_end, ca.MX(0), ca.norm_2(extra),
                                      parts.onto_h(x_end, mt + mte, ms + mte, mxs, extra)])
     keep = ca.Function("as_tried", M, [mxe, ca.MX(0), ca.MX(0), ca.MX.zeros(parts.nh)])
     return ca.Function.if_else("split_or_keep", split, keep)
 
 
 def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca.Function, jump: ca.Function,
-                 margin: ca.Function, with_state: bool, boundaries: bool, h_rows) -> ca.Function:
-    """integrator.step_body's step for a loop with guards (see the module's docstring): z -> (z after
-    the step, its outputs in Rows order). h_rows(h0, h1, d0, d1, step, act) gives the h and lower
-    bound rows; the error rows of an unresolved step are UNRESOLVED."""
+                 margin: ca.Function, with_state: bool, boundaries: bool, h_rows) -> tuple[ca.Function, ca.Function]:
+    """integrator.step_body's step for a loop with guards (see the module's docstring) and its smooth
+    part (_smooth_or_located): z -> (z after the step, its outputs in Rows order). h_rows(h0, h1, d0,
+    d1, step, act) gives the h and lower bound rows; the error rows of an unresolved step are
+    UNRESOLVED."""
     nx = prim.system.nx
     parts = _Parts(prim)
     fg = parts.fg
@@ -225,19 +242,39 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
                      ca.norm_2(e) + en_x + worse, s, tau, urs, us, *([x] if with_state else []))
     finish = cse_sx(ca.Function("finish", [z, tau, tep, xe, k4p, bad, en_x, eh_x, k1s, h0s, d0s, urs, us],
                                 [ca.vertcat(x_next, t + tau, s + tau, xs), out]))
-    # the step: trial, the conditional location, the outputs
+    # the smooth step (no guard crosses: the step as tried), one SX function
+    k1s_, h0_, d0_, ur_, u_ = start(x, t, s, xs)
+    xe_, k4_, gs_ = _trial(fg, x, t, s, xs, k1s_, h, te)
+    suspect = _suspect(parts.G(x, t, s, xs), gs_)
+    smooth = cse_sx(ca.Function("smooth", [z], [*finish(z, h, te, xe_, k4_, 0, 0, ca.DM.zeros(parts.nh), k1s_, h0_,
+                                                        d0_, ur_, u_), suspect]))
+    # the located step: trial, the location, the outputs
     Z = ca.MX.sym("z", 2 * nx + 2)
     (hM, teM, k1M, h0M, d0M, urM, uM, xeM, k4M, crM, rM, onM, en0M, eh0M) = trial(Z)
     Xm, Tm, Sm, XSm = Z[:nx], Z[nx], Z[nx + 1], Z[nx + 2:2 * nx + 2]
     tau, tep, xe, k4p, bad, en_x, eh_x = _locate(parts)(crM, Xm, Tm, Sm, XSm, k1M, hM, teM, xeM, k4M, rM, onM)
-    z_next, o = finish(Z, tau, tep, xe, k4p, bad, en_x + en0M, eh_x + eh0M, k1M, h0M, d0M, urM, uM)
-    return ca.Function("body", [Z], [z_next, o])
+    located = ca.Function("located", [Z], list(finish(Z, tau, tep, xe, k4p, bad, en_x + en0M, eh_x + eh0M, k1M, h0M,
+                                                           d0M, urM, uM)))
+    return _smooth_or_located(smooth, located)
+
+
+def _smooth_or_located(smooth: ca.Function, located: ca.Function) -> tuple[ca.Function, ca.Function]:
+    """(body, smooth): body z -> (z after the step, its outputs) is the smooth step, and where a guard
+    crossed in it the located one instead (a conditional: its code runs only then; the values are
+    passed on as they are, signed zeros included); smooth z -> (z after, outputs, crossed) is the
+    smooth step alone, for chunks that run it and redo the columns where a guard crossed."""
+    Z = ca.MX.sym("z", smooth.size1_in(0))
+    zf, of, cross = smooth(Z)
+    zl, ol = located(Z)
+    v = ca.if_else(cross, ca.vertcat(zl, ol), ca.vertcat(zf, of), True)
+    n = zf.shape[0]
+    return ca.Function("body", [Z], [v[:n], v[n:]]), smooth
 
 
 def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function, at_end: ca.Function,
                           loop: ca.Function, jump: ca.Function, margin: ca.Function, with_state: bool,
-                          boundaries: bool, h_rows) -> ca.Function:
-    """integrator.step_body's step-doubling step for a loop with guards: the judged rollout's two
+                          boundaries: bool, h_rows) -> tuple[ca.Function, ca.Function]:
+    """integrator.step_body's step-doubling step for a loop with guards (and its smooth part): the judged rollout's two
     half steps are tried; where a guard crosses, the step ends just before the first crossing of its
     single-step trial and both halves are taken again over that piece. The companion advances by the
     same length, split in two RK4 pieces where one of its own guards crosses (its state differs from
@@ -266,7 +303,8 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     en0c, eh0c, _e0c = parts.nudge_error(xc, t, s, xs, h)
     trial = cse_sx(ca.Function("trial2", [z], [h, te, k1, h0, d0, u_raw, u, x_end, cross, h0c, uc, kc1, rc,
                                                xc_end, cross_c, r, on, en0 + en0c, eh0 + eh0c, e0]))
-    # the judged rollout: the piece before its first crossing, both halves again over it (or a sliver
+    # the judged rollout (where a guard crosses in its halves or the companion's step): the piece before its first
+    # crossing, both halves again over it (or a sliver
     # across a crossing right after the start, or the whole step unresolved when it starts on a guard)
     M = [ca.MX.sym(n, *shape) for n, shape in (("x", (nx, 1)), ("t", (1, 1)), ("s", (1, 1)), ("x_sw", (nx, 1)),
                                                 ("k1", (nx, 1)), ("h", (1, 1)), ("te", (1, 1)),
@@ -288,7 +326,7 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
                                         ca.if_else(sl, en_s, 0), ca.if_else(sl, eh_s, ca.MX.zeros(nh))])
     whole = ca.Function("whole2", M, [mh, mte, mxe, ca.MX(0), ca.MX(0), ca.MX.zeros(nh)])
     halves = ca.Function.if_else("halves_or_whole", located, whole)
-    # the step: trial, the judged piece, the companion over it, the outputs
+    # the located step: trial, the judged piece, the companion over it, the outputs
     Z = ca.MX.sym("z", 3 * nx + 2)
     (hM, teM, k1M, h0M, d0M, urM, uM, xeM, crM, h0cM, ucM, kc1M, rcM, xceM, crcM, rM, onM, en0M, eh0M, e0M) = trial(Z)
     Xm, Tm, Sm, XSm, XCm = Z[:nx], Z[nx], Z[nx + 1], Z[nx + 2:2 * nx + 2], Z[2 * nx + 2:3 * nx + 2]
@@ -317,6 +355,17 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
                      ca.fabs(h0s - h0cs) + worse)
     finish = cse_sx(ca.Function("finish2", [z, T_, te_, xe_, xce_, b_, en_, eh_, off_, h0s, d0s, h0cs, urs, us, ucs],
                                 [ca.vertcat(x_next, t + T_, s + T_, xs, xc_next), out]))
-    z_next, o = finish(Z, tau, tep, xe, xce, ca.logic_or(bad, bad_c), en_j + en_c + en0M, eh_j + eh_c + eh0M, e0M, h0M, d0M, h0cM,
-                       urM, uM, ucM)
-    return ca.Function("body2", [Z], [z_next, o])
+    located = ca.Function("located2", [Z], list(finish(Z, tau, tep, xe, xce, ca.logic_or(bad, bad_c), en_j + en_c + en0M,
+                                                            eh_j + eh_c + eh0M, e0M, h0M, d0M, h0cM, urM, uM, ucM)))
+    # the smooth step (no guard crosses in the judged halves or the companion's step), one SX function
+    k1_, h0_, d0_, ur_, u_ = start(x, t, s, xs)
+    kc_, h0c_, _ucr, uc_ = loop(xc, t, s, xs)
+    xm_, _k4, ga_ = _trial(fg, x, t, s, xs, k1_, hh, hh)
+    km_, gm_ = fg(xm_, t + hh, s + hh, xs)
+    xe_2, _k4, gb_ = _trial(fg, xm_, t + hh, s + hh, xs, km_, hh, te - hh)
+    xce_2, _k4, gc_ = _trial(fg, xc, t, s, xs, kc_, h, te)
+    suspect = ca.logic_or(ca.logic_or(_suspect(parts.G(x, t, s, xs), ga_), _suspect(gm_, gb_)),
+                          _suspect(parts.G(xc, t, s, xs), gc_))
+    smooth = cse_sx(ca.Function("smooth2", [z], [*finish(z, h, te, xe_2, xce_2, 0, 0, ca.DM.zeros(parts.nh),
+                                                         ca.DM.zeros(nx), h0_, d0_, h0c_, ur_, u_, uc_), suspect]))
+    return _smooth_or_located(smooth, located)
