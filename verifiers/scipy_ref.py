@@ -2,7 +2,9 @@
 
 What it guarantees, and what not:
 - it integrates each piece between the clock times where the safe set switches separately
-  (rtol 1e-10, atol 1e-12, maximum step dt/2), so no window is stepped over;
+  (rtol 1e-10, atol 1e-12, maximum step dt/2), so no window is stepped over, and stops at every
+  crossing of a guard of the closed loop (a law's switch or kink, located by the solver's event
+  search) to start a new piece just after it, so its error control never spans a kink;
 - the dense solution is sampled every dt/4 (and at every switching time); each safety function is
   bounded between samples from its values and its rate along the flow at both ends, and its
   tolerance-based error estimate (10 (atol + rtol |x|) mapped through |dh/dx|) is subtracted, with
@@ -31,6 +33,10 @@ from verifiers.rk4 import margin_gain
 
 RTOL, ATOL = 1e-10, 1e-12
 SAMPLES_PER_STEP = 4
+GUARD_STEP = 1e-12
+"""After a guard's crossing the next piece starts this long after it (s), moved along the flow."""
+MAX_CROSSINGS = 10000
+"""More guard crossings than this in one rollout: inconclusive (a law that chatters)."""
 
 
 class ScipyRunner:
@@ -97,31 +103,55 @@ class ScipyRunner:
             return float(margin(x, t0 + s)[0][0]) - 2 * err - 1e-9
 
         enter.terminal, enter.direction = True, 1
+        events = [enter, *self._guard_events(t0, x0)]
         edges = [0.0, *self._cuts(t0, T), T]
         ts, xs = [np.zeros(1)], [x0[:, None]]
-        x, status = x0.copy(), 0
+        x, status, crossings = x0.copy(), 0, 0
         if enter(0.0, x0) <= 0:
             for a, b in zip(edges, edges[1:]):
-                if b - a <= 1e-12:
-                    continue
-                try:
-                    sol = solve_ivp(rhs, (a, b), x, method="LSODA", rtol=RTOL, atol=ATOL, max_step=self.dt / 2,
-                                    dense_output=True, events=enter)
-                except Exception as err:
-                    return OracleEvidence(0, Reason.ERROR, a, message=str(err)[:500])
-                end = float(sol.t[-1])
-                n = max(1, int(np.ceil((end - a) / (self.dt / SAMPLES_PER_STEP) - 1e-9)))
-                grid = np.linspace(a, end, n + 1)[1:]
-                Y = sol.sol(grid) if sol.sol is not None and end > a else sol.y[:, -1:]
-                ts.append(grid)
-                xs.append(Y)
-                x = Y[:, -1]
-                status = sol.status
+                while b - a > 1e-12:
+                    try:
+                        sol = solve_ivp(rhs, (a, b), x, method="LSODA", rtol=RTOL, atol=ATOL, max_step=self.dt / 2,
+                                        dense_output=True, events=events)
+                    except Exception as err:
+                        return OracleEvidence(0, Reason.ERROR, a, message=str(err)[:500])
+                    end = float(sol.t[-1])
+                    n = max(1, int(np.ceil((end - a) / (self.dt / SAMPLES_PER_STEP) - 1e-9)))
+                    grid = np.linspace(a, end, n + 1)[1:]
+                    Y = sol.sol(grid) if sol.sol is not None and end > a else sol.y[:, -1:]
+                    ts.append(grid)
+                    xs.append(Y)
+                    x = Y[:, -1]
+                    status = sol.status
+                    if status != 1 or len(sol.t_events[0]) or not np.isfinite(x).all():
+                        break  # the piece's end, E entered, a failure
+                    crossings += 1  # a guard crossed: the next piece starts just after it, on its new branch
+                    if crossings > MAX_CROSSINGS:
+                        return OracleEvidence(0, Reason.INCONCLUSIVE, end, status="inconclusive",
+                                              message=f"more than {MAX_CROSSINGS} guard crossings (a law that chatters)")
+                    a, status = end + GUARD_STEP, 0
+                    x = x + GUARD_STEP * rhs(end, x)
                 if status != 0 or not np.isfinite(x).all():
                     break
         s = np.concatenate(ts)
         X = np.concatenate(xs, axis=1)
         return self._judge(X, s, t0, T, x0, status == -1)
+
+    def _guard_events(self, t0: float, x0: np.ndarray) -> list:
+        """One terminal event per guard of the closed loop (compile/guards.py): the solver stops where
+        a law switches or kinks and starts a new piece there, so that its error control never spans
+        a kink."""
+        g = self.prim.guards
+        if g.fn is None:
+            return []
+        fn = numeric(g.fn)
+        events = []
+        for j in range(len(g)):
+            def ev(s, x, j=j):
+                return float(fn(x, t0 + s, s, x0)[0][j])
+            ev.terminal, ev.direction = True, 0
+            events.append(ev)
+        return events
 
     def _judge(self, X: np.ndarray, s: np.ndarray, t0: float, T: float, x0: np.ndarray, failed: bool) -> OracleEvidence:
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):

@@ -4,7 +4,8 @@ RK4 and its error estimates assume a smooth right-hand side. A law that switches
 comparison, `sign`), a kink (`abs`, `min`/`max`, `clip`, input saturation) or a jump (`floor`,
 `ceil`, `fmod`) breaks that assumption between samples. Each such point of the closed loop's
 expression graph is a guard g(x, t, s, x_sw) whose sign changes exactly where the loop switches
-branch: the difference of a comparison's sides, the argument of `sign`/`abs`, the difference of
+branch: the difference of a comparison's sides (an `if_else` switches where its condition's
+comparison does; a comparison with an infinite constant, a finiteness test, never switches), the argument of `sign`/`abs`, the difference of
 `min`/`max`'s arguments (input saturation: u_raw minus its bound), sin(pi a) for `floor(a)`.
 The oracle (oracle/integrator.py) integrates piece by piece between the guards' crossings.
 
@@ -17,9 +18,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import casadi as ca
+import numpy as np
 
 _DIFF = {ca.OP_LT: "<", ca.OP_LE: "<=", ca.OP_EQ: "==", ca.OP_NE: "!=", ca.OP_FMIN: "min", ca.OP_FMAX: "max"}
-_ARG = {ca.OP_SIGN: "sign", ca.OP_FABS: "abs", ca.OP_IF_ELSE_ZERO: "if_else"}
+_ARG = {ca.OP_SIGN: "sign", ca.OP_FABS: "abs"}
 _PERIODIC = {ca.OP_FLOOR: "floor", ca.OP_CEIL: "ceil"}
 _RATIO = {ca.OP_FMOD: "fmod", ca.OP_REMAINDER: "remainder"}
 _LOGIC = (ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_AND, ca.OP_OR, ca.OP_NOT)
@@ -92,6 +94,8 @@ def collect(f: ca.Function, inputs: int = 4) -> Guards:
 def _guard(op: int, deps: list) -> tuple[ca.SX, str] | None:
     """(g, name) for a non-smooth operation, else None."""
     if op in _DIFF:
+        if any(d.is_constant() and not np.isfinite(float(d)) for d in deps):  # a finiteness test: never switches
+            return None
         g = deps[1] - deps[0] if op in (ca.OP_LT, ca.OP_LE) else deps[0] - deps[1]
         return g, f"{_DIFF[op]}: {_short(deps[0])} vs {_short(deps[1])}"
     if op in _ARG:

@@ -157,3 +157,17 @@ def test_every_generated_family_has_safe_answers_at_the_finest_preset(generated)
         safe = [c for c in generated if c.family == fam and not c.unsafe]
         got = [c.status[("local", "very_high")] == "safe" for c in safe]
         assert np.mean(got) >= 0.5, (fam, campaign.table(generated))
+
+
+@pytest.mark.parametrize("on", ["state", "clock"])
+def test_the_scipy_reference_stops_at_every_guard(tmp_path, on):
+    """The reference backend ends a solver piece at each guard crossing (a terminal event) and starts
+    the next just after it: the same switching law gives the true margins, -3e-5 and 3e-5."""
+    ts = 0.5 + 0.31 * 0.01
+    law = f"if_else(x < {ts!r}, 1, 3)" if on == "state" else f"if_else(t < {ts!r}, 1, 3)"
+    x_T = ts + 3 * (0.6 - ts)
+    s = OracleSettings.with_accuracy("medium", horizon=3.0, dt=0.01, method="scipy", jit=False)
+    for off in (-3e-5, 3e-5):
+        e = SafetyOracle(_switching(tmp_path, law, x_T + off), s)(np.array([0.0]), 0.0)
+        assert (e.status == "safe") == (off > 0), e
+        assert e.lower_bounds["cap"] == pytest.approx(off, abs=1e-8)
