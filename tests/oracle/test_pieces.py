@@ -152,6 +152,12 @@ def test_no_false_safe_on_any_generated_non_smooth_loop(generated):
     assert not bad, campaign.table(generated)
 
 
+def test_the_scipy_reference_ran_every_family(generated):
+    for fam in campaign.FAMILIES:
+        ran = [c for c in generated if c.family == fam and ("scipy", "low") in c.status]
+        assert len(ran) == campaign.SCIPY_PER_FAMILY
+
+
 def test_every_generated_family_has_safe_answers_at_the_finest_preset(generated):
     for fam in campaign.FAMILIES:
         safe = [c for c in generated if c.family == fam and not c.unsafe]
