@@ -55,8 +55,10 @@ class Guards:
         return {"exposed": self.exposed, "guards": list(self.names), **({"why": self.why} if self.why else {})}
 
 
-def collect(f: ca.Function, inputs: int = 4) -> Guards:
-    """The guards of f's outputs as functions of its first `inputs` inputs (x, t, s, x_sw)."""
+def collect(f: ca.Function, inputs: int = 4, labels: tuple[ca.Function, list[str]] | None = None) -> Guards:
+    """The guards of f's outputs as functions of its first `inputs` inputs (x, t, s, x_sw). labels:
+    a Function of the same inputs giving known guard expressions (input saturation's) and their
+    names, which replace the printed expression of a guard equal to one of them."""
     if not f.is_a("SXFunction"):
         return Guards(exposed=False, why="the loop calls a compiled function (an optimisation-based law or a "
                                          "large robot loop): its switching points are not exposed")
@@ -86,6 +88,10 @@ def collect(f: ca.Function, inputs: int = 4) -> Guards:
         return Guards(exposed=False, why=f"{len(gs)} switching points (more than {MAX_GUARDS})")
     if not gs:
         return Guards()
+    if labels is not None and labels[0].is_a("SXFunction"):
+        known = ca.vertcat(*labels[0].call(a[:inputs]))
+        gs = [(g, next((labels[1][i] for i in range(known.numel()) if ca.is_equal(g, known[i], 64)), name))
+              for g, name in gs]
     gs.sort(key=lambda p: p[1])
     fn = ca.Function("guards", a[:inputs], [ca.vertcat(*[g for g, _ in gs])], ["x", "t", "s", "x_sw"][:inputs], ["g"])
     return Guards(fn, [name for _, name in gs])

@@ -178,7 +178,8 @@ def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, cl
         radius=radius, f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, W=W, info=info,
         contacts=cm.plan, jump=jump, loop=loop_fn, loop_raw=loop_raw, windows=windows,
         boundaries=_boundaries(windows, cm.plan, clock.period, clock.domain),
-        hybrid=sys.events or cm.schedule is not None, sampled=ctx.sampled, loop_u=loop_u, guards=collect(f_cl),
+        hybrid=sys.events or cm.schedule is not None, sampled=ctx.sampled, loop_u=loop_u,
+        guards=collect(f_cl, labels=_saturation_guards(control, sys)),
     )
 
 
@@ -289,6 +290,25 @@ def _schedule(inst: PrimitiveInstance, sys: CompiledSystem, planned: Schedule | 
                             key=f"primitive '{inst.name}': contact_schedule.{k}.feet",
                             expected="one of " + ", ".join(feet), found=repr(bad[0]), code="MPG106")
     return Schedule(tuple((float(ph.until), tuple(ph.feet)) for ph in sched), period, frames)
+
+
+def _saturation_guards(control: ca.Function, sys: CompiledSystem) -> tuple[ca.Function, list[str]] | None:
+    """The guards input saturation gives the closed loop (as saturate writes it) and their names."""
+    if not control.is_a("SXFunction"):
+        return None
+    a = control.sx_in()
+    ur = control(*a)[0]
+    exprs, names = [], []
+    for i, name in enumerate(sys.input_names):
+        ui, lo, hi = ur[i], sys.u_lo[i], sys.u_hi[i]
+        if np.isfinite(lo):
+            exprs.append(lo - ui)
+            names.append(f"saturation: {name} at its lower bound {lo:g}")
+            ui = ui + ca.fmax(lo - ui, 0)
+        if np.isfinite(hi):
+            exprs.append(ui - hi)
+            names.append(f"saturation: {name} at its upper bound {hi:g}")
+    return ca.Function("saturation_guards", a, [ca.vertcat(*exprs) if exprs else ca.SX(0, 1)]), names
 
 
 def saturate(u, lo: np.ndarray, hi: np.ndarray):

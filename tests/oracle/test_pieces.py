@@ -66,7 +66,8 @@ def test_a_smooth_loop_has_no_guards_and_a_compiled_law_none_exposed():
 
 def test_the_primitive_carries_its_guards(tmp_path):
     prim = one(tmp_path, GOAL.replace("-2*(x - 1)", "-5*(x - 1)"), bounds=(-1, 1))  # saturated at 1
-    assert len(prim.guards) == 2 and all(n.startswith("max") for n in prim.guards.names) and guarded(prim)
+    assert prim.guards.names == ["saturation: u at its lower bound -1", "saturation: u at its upper bound 1"]
+    assert guarded(prim)
     assert len(one(tmp_path, GOAL).guards) == 2  # the bounds of +-10 are guards too
     assert len(one(tmp_path, GOAL, bounds=("-.inf", ".inf")).guards) == 0
 
