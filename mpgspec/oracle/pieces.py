@@ -152,6 +152,15 @@ class _Parts:
         return tau, xe, k4, ca.norm_2(extra), self.onto_h(xe, t + tau, s + tau, xs, extra)
 
 
+def _choice(short, on_guard):
+    """(unresolved, sliver, pick) for a located crossing: a piece shorter than MIN_PIECE is stepped
+    over by a sliver unless the step starts on a guard (then it is unresolved); pick(a, b, c) takes
+    the unresolved, the sliver's or the piece's value."""
+    bad = ca.logic_and(short, on_guard)
+    sl = ca.logic_and(short, ca.logic_not(on_guard))
+    return bad, sl, lambda a, b, c: ca.if_else(bad, a, ca.if_else(sl, b, c))
+
+
 def _locate(parts: _Parts) -> ca.Function:
     """(cross, x, t, s, x_sw, k1, h, te, x_end, k4, r, on_guard) -> (piece, end stage, x_end, k4,
     unresolved, extra error norm, extra error of h): where a guard crosses, the bisected piece
@@ -166,12 +175,7 @@ def _locate(parts: _Parts) -> ca.Function:
     lo, hi, short = parts.located(mx, mt, ms, mxs, mk1, mh, mr)
     xe_p, k4_p, _c, _sp = parts.rk4(mx, mt, ms, mxs, mk1, lo, lo, mr)
     ts, xs_s, k4_s, en_s, eh_s = parts.sliver(mx, mt, ms, mxs, mk1, hi, mh, mr)
-    bad = ca.logic_and(short, mon)
-    sl = ca.logic_and(short, ca.logic_not(mon))
-
-    def pick(a, b, c):  # unresolved, sliver, piece
-        return ca.if_else(bad, a, ca.if_else(sl, b, c))
-
+    bad, sl, pick = _choice(short, mon)
     nh = parts.nh
     out = [pick(mh, ts, lo), pick(mte, ts, lo), pick(mxe, xs_s, xe_p), pick(mk4, k4_s, k4_p), bad,
            ca.if_else(sl, en_s, 0), ca.if_else(sl, eh_s, ca.MX.zeros(nh))]
@@ -315,12 +319,7 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     km2, rm2 = parts.first(x2, mt + lo / 2, ms + lo / 2, mxs, lo / 2)
     x4, _k4, _c, _sp = parts.rk4(x2, mt + lo / 2, ms + lo / 2, mxs, km2, lo / 2, lo / 2, rm2)
     ts, xs_s, _k4s, en_s, eh_s = parts.sliver(mx, mt, ms, mxs, mk1, hi, mh, mr)
-    bad = ca.logic_and(short, mon)
-    sl = ca.logic_and(short, ca.logic_not(mon))
-
-    def pick(a, b, c):  # unresolved, sliver, piece
-        return ca.if_else(bad, a, ca.if_else(sl, b, c))
-
+    bad, sl, pick = _choice(short, mon)
     nh = parts.nh
     located = ca.Function("halves", M, [pick(mh, ts, lo), pick(mte, ts, lo), pick(mxe, xs_s, x4), bad,
                                         ca.if_else(sl, en_s, 0), ca.if_else(sl, eh_s, ca.MX.zeros(nh))])
