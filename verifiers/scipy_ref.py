@@ -57,6 +57,7 @@ class ScipyRunner:
         self._fine: ScipyRunner | None = None
         # the solver calls these thousands of times per rollout: on numpy buffers, no DM conversions
         self.f_cl, self.margin = numeric(prim.f_cl), numeric(prim.roa_margin)
+        self.guards = numeric(prim.guards.fn) if prim.guards.fn is not None else None
 
     def evaluate(self, x0s, t0s, horizons, level: int = 0) -> list[OracleEvidence]:
         x0s, t0s = np.atleast_2d(np.asarray(x0s, float)), np.atleast_1d(np.asarray(t0s, float))
@@ -141,12 +142,11 @@ class ScipyRunner:
         """One terminal event per guard of the closed loop (compile/guards.py): the solver stops where
         a law switches or kinks and starts a new piece there, so that its error control never spans
         a kink."""
-        g = self.prim.guards
-        if g.fn is None:
+        fn = self.guards
+        if fn is None:
             return []
-        fn = numeric(g.fn)
         events = []
-        for j in range(len(g)):
+        for j in range(len(self.prim.guards)):
             def ev(s, x, j=j):
                 return float(fn(x, t0 + s, s, x0)[0][j])
             ev.terminal, ev.direction = True, 0

@@ -345,23 +345,27 @@ def step_body(prim: CompiledPrimitive, dt: float, with_state: bool = False, boun
     """(z -> (z after one step, that step's outputs in Rows order), nz): one step of the chunk with
     error 'local' (or 'doubling'), remembered on the primitive so that every chunk built from it
     shares it (one body inlining the loop, one calling its library)."""
-    key = ("body", dt, with_state, boundaries, doubling, attached(prim) is not None)
-    if key not in prim.cache:
-        prim.cache[key] = (_doubling_body if doubling else _step_body)(prim, dt, with_state, boundaries)
-    body, nz, _smooth = prim.cache[key]
+    body, nz, _smooth = _bodies(prim, dt, with_state, boundaries, doubling)
     return body, nz
 
 
 def smooth_step(prim: CompiledPrimitive, dt: float, doubling: bool = False) -> ca.Function | None:
     """For a loop with guards (pieces.py), its smooth step z -> (z after, outputs, 1 when a guard
     crossed in it: the step must be taken by step_body instead); None without guards."""
-    step_body(prim, dt, doubling=doubling)
-    return prim.cache[("body", dt, False, True, doubling, attached(prim) is not None)][2]
+    return _bodies(prim, dt, False, True, doubling)[2]
+
+
+def _bodies(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool, doubling: bool) -> tuple:
+    """(step, nz, smooth step or None), built once per primitive and settings."""
+    key = ("body", dt, with_state, boundaries, doubling, attached(prim) is not None)
+    if key not in prim.cache:
+        prim.cache[key] = (_doubling_body if doubling else _step_body)(prim, dt, with_state, boundaries)
+    return prim.cache[key]
 
 
 def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple[ca.Function, int]:
     if guarded(prim):
-        return (*_guarded_body(prim, dt, with_state, boundaries),)
+        return _guarded_body(prim, dt, with_state, boundaries)
     nx, nh = prim.system.nx, len(prim.h_names)
     start, end, f = _ends(prim, prim.sampled is not None)
     jump = _jump(prim)
@@ -384,13 +388,17 @@ def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries:
     return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out])), nz, None
 
 
-def _guarded_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple[ca.Function, int]:
+def _guarded_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple:
     """_step_body for a loop with guards: the step ends where a guard first crosses (pieces.py)."""
-    nx, nh = prim.system.nx, len(prim.h_names)
-    start, end, f = _ends(prim)
+    start, end, _f = _ends(prim)
     body, smooth = guarded_body(prim, dt, start, end, _jump(prim), _margin(prim), with_state, boundaries,
-                                lambda h0, h1, d0, d1, h, act: (*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)),))
-    return body, 2 * nx + 2, smooth
+                                _h_rows(len(prim.h_names)))
+    return body, 2 * prim.system.nx + 2, smooth
+
+
+def _h_rows(nh: int):
+    """(h0, h1, d0, d1, h, act) -> the rows h and lb of a step (masked outside their windows)."""
+    return lambda h0, h1, d0, d1, h, act: _masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h))
 
 
 def _sample_bound(h0, h1, d0, d1, h):
@@ -435,8 +443,7 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     if guarded(prim):
         start = _ends(prim)[0]
         body, smooth = guarded_doubling_body(prim, dt, start, _at_end(prim, start), _loop(prim), _jump(prim),
-                                             _margin(prim), with_state, boundaries,
-                                             lambda h0, h1, d0, d1, h, act: (*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)),))
+                                             _margin(prim), with_state, boundaries, _h_rows(nh))
         return body, 3 * nx + 2, smooth
     held = prim.sampled is not None
     start, _end, f = _ends(prim, held)

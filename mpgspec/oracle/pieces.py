@@ -13,8 +13,10 @@ its start, on the new branch, as every later stage is. A crossing that cannot be
 shorter than MIN_PIECE: a guard that chatters, a pulse shorter than that) gives the step the error
 estimate UNRESOLVED, so the rollout can never be judged safe.
 
-The trial step, the location (a conditional: its code runs only on a step where a guard crosses)
-and the step's outputs are three compiled parts called from one MX step.
+Each step comes in two forms: the smooth step alone (one SX function, which also says whether a
+guard may have crossed in it) and the full step, an MX graph of the trial, the location (a
+conditional: its code runs only where a guard crosses) and the outputs. The judged chunks run the
+smooth steps and redo the columns in which a guard crossed through the full ones (judged.py).
 """
 from __future__ import annotations
 
@@ -102,39 +104,31 @@ class _Parts:
         tau, te = ca.SX.sym("tau"), ca.SX.sym("te")
         xe, k4, gs, spread = _trial(self.fg, x, t, s, xs, k1, tau, te, spread=True)
         self.rk4 = ca.Function("rk4_checked", [x, t, s, xs, k1, tau, te, r], [xe, k4, _crossed(r, gs), spread])
-        a = prim.loop.sx_in()
-        e = self.sx("e")
-        hv = prim.loop(*a)[1]
-        self.onto_h = ca.Function("onto_h", [*a, e], [ca.mtimes(ca.fabs(ca.jacobian(hv, a[0])), e)])
-        k1n, rn, _on = self.nudged(x, t, s, xs, tau)
+        k1n, rn, _on, _e = self.nudged(x, t, s, xs, tau)
         self.first = ca.Function("first_stage", [x, t, s, xs, tau], [k1n, rn])
         a = prim.loop.sx_in()
-        k = self.sx("k")
-        arg = ca.vertcat(a[0], a[1], a[2])
-        self.rate = ca.Function("h_rate", [*a, k], [ca.jtimes(prim.loop(*a)[1], arg, ca.vertcat(k, 1, 1))])
+        hv, e, k = prim.loop(*a)[1], self.sx("e"), self.sx("k")
+        self.onto_h = ca.Function("onto_h", [*a, e], [ca.mtimes(ca.fabs(ca.jacobian(hv, a[0])), e)])
+        self.rate = ca.Function("h_rate", [*a, k], [ca.jtimes(hv, ca.vertcat(*a[:3]), ca.vertcat(k, 1, 1))])
 
     def sx(self, name: str):
         return ca.SX.sym(name, self.nx)
 
     def nudged(self, x, t, s, xs, h):
-        """(k1, r, on_guard) for a step of h from x: each guard's side r just after the start, the
+        """(k1, r, on_guard, e) for a step of h from x: each guard's side r just after the start, the
         first stage f(x), or f just after the start where a guard changes sign in between (the step
-        starts on a guard: on_guard = 1; its error: nudge_error)."""
+        starts on a guard: on_guard = 1), and the error e of taking that new branch from the start:
+        the guard lies within NUDGE dt of it (the last piece ended within the bracket before it), so
+        the state may be off by up to NUDGE dt (f(x) - f(x + NUDGE dt f)); 0 off a guard."""
         k1 = self.fg(x, t, s, xs)[0]
         d = NUDGE * h
         k1n, r = self.fg(x + d * k1, t + d, s + d, xs)
         on = _crossed(r, [self.G(x, t, s, xs)])
-        return ca.if_else(on, k1n, k1), r, on
+        return ca.if_else(on, k1n, k1), r, on, ca.if_else(on, d * (k1 - k1n), ca.DM.zeros(self.nx))
 
-    def nudge_error(self, x, t, s, xs, h):
-        """(its norm, its bound on h, the error itself) of taking the new branch from a step's start on
-        a guard: the guard lies within NUDGE dt of the start (the last piece ended within the bracket
-        before it), so the state may be off by up to NUDGE dt (f(x) - f(x + NUDGE dt f))."""
-        k1 = self.fg(x, t, s, xs)[0]
-        d = NUDGE * h
-        k1n, r = self.fg(x + d * k1, t + d, s + d, xs)
-        e = ca.if_else(_crossed(r, [self.G(x, t, s, xs)]), d * (k1 - k1n), ca.DM.zeros(self.nx))
-        return ca.norm_2(e), self.onto_h(x, t, s, xs, ca.fabs(e)), e
+    def nudge_error(self, x, t, s, xs, e):
+        """(norm, bound on h) of a nudged start's error e (nudged)."""
+        return ca.norm_2(e), self.onto_h(x, t, s, xs, ca.fabs(e))
 
     def located(self, x, t, s, xs, k1, h, r):
         """MX: (lo, hi, short): the bracket of the first crossing of a step of h from x after
@@ -185,11 +179,11 @@ def _locate(parts: _Parts) -> ca.Function:
 
 
 def _split(parts: _Parts) -> ca.Function:
-    """(again, x, t, s, x_sw, k1, tau, te, x_end, r) -> (x after tau, unresolved (0: the companion's
-    error only widens the estimate), extra error norm, extra error of h): when `again`, a step of tau
-    from x in two RK4 pieces split at its first crossing, or whole when the crossing is right after
-    the start; a piece that straddles a crossing adds the bound (its length) * (range of its rates);
-    else x_end as given."""
+    """(again, x, t, s, x_sw, k1, tau, te, x_end, r) -> (x after tau, extra error norm, extra error
+    of h): when `again`, a step of tau from x in two RK4 pieces split at its first crossing, or whole
+    when the crossing is right after the start; a piece that straddles a crossing adds the bound
+    (its length) * (range of its rates) (never unresolved: the companion's error only widens the
+    estimate); else x_end as given."""
     M = [ca.MX.sym(n, *shape) for n, shape in (("x", (parts.nx, 1)), ("t", (1, 1)), ("s", (1, 1)),
                                                 ("x_sw", (parts.nx, 1)), ("k1", (parts.nx, 1)), ("tau", (1, 1)),
                                                 ("te", (1, 1)), ("x_end", (parts.nx, 1)), ("r", (parts.ng, 1)))]
@@ -204,9 +198,8 @@ def _split(parts: _Parts) -> ca.Function:
     extra = ca.if_else(ca.logic_and(cross, short), mtau * spread,
                        ca.if_else(ca.logic_and(two, again), rest * spread2, ca.MX.zeros(parts.nx)))
     x_end = ca.if_else(two, x2, whole)
-    split = ca.Function("split", M, [x_end, ca.MX(0), ca.norm_2(extra),
-                                     parts.onto_h(x_end, mt + mte, ms + mte, mxs, extra)])
-    keep = ca.Function("as_tried", M, [mxe, ca.MX(0), ca.MX(0), ca.MX.zeros(parts.nh)])
+    split = ca.Function("split", M, [x_end, ca.norm_2(extra), parts.onto_h(x_end, mt + mte, ms + mte, mxs, extra)])
+    keep = ca.Function("as_tried", M, [mxe, ca.MX(0), ca.MX.zeros(parts.nh)])
     return ca.Function.if_else("split_or_keep", split, keep)
 
 
@@ -225,18 +218,18 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
     tc = wrap(prim, t)
     h, edge = step_length(prim, dt, tc, x, s, edge=True) if boundaries else (ca.DM(dt), None)
     te = step_end(prim, h, edge)
-    _k1, h0, d0, u_raw, u = start(x, t, s, xs)
-    k1, r, on = parts.nudged(x, t, s, xs, h)
+    _k1, h0, _d0, u_raw, u = start(x, t, s, xs)
+    k1, r, on, e0 = parts.nudged(x, t, s, xs, h)
     d0 = parts.rate(x, t, s, xs, k1)  # h's rate along the branch the step runs on
     x_end, k4, gs = _trial(fg, x, t, s, xs, k1, h, te)
     cross = _crossed(r, gs)
-    en0, eh0, _e0 = parts.nudge_error(x, t, s, xs, h)
+    en0, eh0 = parts.nudge_error(x, t, s, xs, e0)
     trial = cse_sx(ca.Function("trial", [z], [h, te, k1, h0, d0, u_raw, u, x_end, k4, cross, r, on, en0, eh0]))
     # part 3: the step's outputs from the piece taken
     tau, tep, xe, k4p, bad = (ca.SX.sym("tau"), ca.SX.sym("te"), ca.SX.sym("x_end", nx), ca.SX.sym("k4", nx),
                              ca.SX.sym("unresolved"))
     en_x, eh_x = ca.SX.sym("extra"), ca.SX.sym("extra_h", parts.nh)
-    k1s, h0s, d0s = ca.SX.sym("k1", nx), ca.SX.sym("h0", h0.shape[0]), ca.SX.sym("d0", d0.shape[0])
+    h0s, d0s = ca.SX.sym("h0", h0.shape[0]), ca.SX.sym("d0", d0.shape[0])
     urs, us = ca.SX.sym("u_raw", u_raw.shape[0]), ca.SX.sym("u", u.shape[0])
     _k5, h1, d1, dh, e = end(xe, t + tep, s + tep, xs, k4p, tau)
     x_next = jump(xe, us, t + tau, s + tau)
@@ -244,21 +237,21 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
     worse = bad * UNRESOLVED
     out = ca.vertcat(*h_rows(h0s, h1, d0s, d1, tau, act), dh + eh_x + worse, margin(x, t),
                      ca.norm_2(e) + en_x + worse, s, tau, urs, us, *([x] if with_state else []))
-    finish = cse_sx(ca.Function("finish", [z, tau, tep, xe, k4p, bad, en_x, eh_x, k1s, h0s, d0s, urs, us],
+    finish = cse_sx(ca.Function("finish", [z, tau, tep, xe, k4p, bad, en_x, eh_x, h0s, d0s, urs, us],
                                 [ca.vertcat(x_next, t + tau, s + tau, xs), out]))
     # the smooth step (no guard crosses: the step as tried), one SX function
     k1s_, h0_, d0_, ur_, u_ = start(x, t, s, xs)
     xe_, k4_, gs_ = _trial(fg, x, t, s, xs, k1s_, h, te)
     suspect = _suspect(parts.G(x, t, s, xs), gs_)
-    smooth = cse_sx(ca.Function("smooth", [z], [*finish(z, h, te, xe_, k4_, 0, 0, ca.DM.zeros(parts.nh), k1s_, h0_,
-                                                        d0_, ur_, u_), suspect]))
+    smooth = cse_sx(ca.Function("smooth", [z], [*finish(z, h, te, xe_, k4_, 0, 0, ca.DM.zeros(parts.nh), h0_, d0_,
+                                                        ur_, u_), suspect]))
     # the located step: trial, the location, the outputs
     Z = ca.MX.sym("z", 2 * nx + 2)
     (hM, teM, k1M, h0M, d0M, urM, uM, xeM, k4M, crM, rM, onM, en0M, eh0M) = trial(Z)
     Xm, Tm, Sm, XSm = Z[:nx], Z[nx], Z[nx + 1], Z[nx + 2:2 * nx + 2]
     tau, tep, xe, k4p, bad, en_x, eh_x = _locate(parts)(crM, Xm, Tm, Sm, XSm, k1M, hM, teM, xeM, k4M, rM, onM)
-    located = ca.Function("located", [Z], list(finish(Z, tau, tep, xe, k4p, bad, en_x + en0M, eh_x + eh0M, k1M, h0M,
-                                                           d0M, urM, uM)))
+    located = ca.Function("located", [Z], list(finish(Z, tau, tep, xe, k4p, bad, en_x + en0M, eh_x + eh0M, h0M, d0M,
+                                                           urM, uM)))
     return _smooth_or_located(smooth, located)
 
 
@@ -292,24 +285,24 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     tc = wrap(prim, t)
     h, edge = step_length(prim, dt, tc, x, s, edge=True) if boundaries else (ca.DM(dt), None)
     te = step_end(prim, h, edge)
-    _k1, h0, d0, u_raw, u = start(x, t, s, xs)
+    _k1, h0, _d0, u_raw, u = start(x, t, s, xs)
     _kc, h0c, _ucr, uc = loop(xc, t, s, xs)
-    k1, r, on = parts.nudged(x, t, s, xs, h)
+    k1, r, on, e0 = parts.nudged(x, t, s, xs, h)
     d0 = parts.rate(x, t, s, xs, k1)  # h's rate along the branch the step runs on
-    kc1, rc, _on = parts.nudged(xc, t, s, xs, h)
+    kc1, rc, _on, e0c = parts.nudged(xc, t, s, xs, h)
     hh = h / 2
     x_mid, _k4, ga = _trial(fg, x, t, s, xs, k1, hh, hh)
-    km, rm, _on = parts.nudged(x_mid, t + hh, s + hh, xs, hh)
+    km, rm, _on, _e = parts.nudged(x_mid, t + hh, s + hh, xs, hh)
     x_end, _k4, gb = _trial(fg, x_mid, t + hh, s + hh, xs, km, hh, te - hh)
     cross = ca.logic_or(_crossed(r, ga), _crossed(rm, gb))
     xc_end, _k4, cross_c, _sp = parts.rk4(xc, t, s, xs, kc1, h, te, rc)
-    en0, eh0, e0 = parts.nudge_error(x, t, s, xs, h)
-    en0c, eh0c, _e0c = parts.nudge_error(xc, t, s, xs, h)
+    en0, eh0 = parts.nudge_error(x, t, s, xs, e0)
+    en0c, eh0c = parts.nudge_error(xc, t, s, xs, e0c)
     trial = cse_sx(ca.Function("trial2", [z], [h, te, k1, h0, d0, u_raw, u, x_end, cross, h0c, uc, kc1, rc,
                                                xc_end, cross_c, r, on, en0 + en0c, eh0 + eh0c, e0]))
-    # the judged rollout (where a guard crosses in its halves or the companion's step): the piece before its first
-    # crossing, both halves again over it (or a sliver
-    # across a crossing right after the start, or the whole step unresolved when it starts on a guard)
+    # the judged rollout (where a guard crosses in its halves or the companion's step): the piece before its
+    # first crossing, both halves again over it (or a sliver across a crossing right after the start, or
+    # the whole step unresolved when it starts on a guard)
     M = [ca.MX.sym(n, *shape) for n, shape in (("x", (nx, 1)), ("t", (1, 1)), ("s", (1, 1)), ("x_sw", (nx, 1)),
                                                 ("k1", (nx, 1)), ("h", (1, 1)), ("te", (1, 1)),
                                                 ("x_end", (nx, 1)), ("r", (parts.ng, 1)), ("on_guard", (1, 1)))]
@@ -331,7 +324,7 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     Xm, Tm, Sm, XSm, XCm = Z[:nx], Z[nx], Z[nx + 1], Z[nx + 2:2 * nx + 2], Z[2 * nx + 2:3 * nx + 2]
     tau, tep, xe, bad, en_j, eh_j = halves(crM, Xm, Tm, Sm, XSm, k1M, hM, teM, xeM, rM, onM)
     again = ca.logic_or(crcM, tau < hM)  # the companion crosses, or its step is the shorter piece
-    xce, bad_c, en_c, eh_c = _split(parts)(again, XCm, Tm, Sm, XSm, kc1M, tau, tep, xceM, rcM)
+    xce, en_c, eh_c = _split(parts)(again, XCm, Tm, Sm, XSm, kc1M, tau, tep, xceM, rcM)
     # the outputs, as the unguarded doubling step forms them
     T_, te_, xe_, xce_, b_ = ca.SX.sym("tau"), ca.SX.sym("te"), parts.sx("x_end"), parts.sx("xc_end"), ca.SX.sym("bad")
     h0s, d0s = ca.SX.sym("h0", h0.shape[0]), ca.SX.sym("d0", d0.shape[0])
@@ -354,7 +347,7 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
                      ca.fabs(h0s - h0cs) + worse)
     finish = cse_sx(ca.Function("finish2", [z, T_, te_, xe_, xce_, b_, en_, eh_, off_, h0s, d0s, h0cs, urs, us, ucs],
                                 [ca.vertcat(x_next, t + T_, s + T_, xs, xc_next), out]))
-    located = ca.Function("located2", [Z], list(finish(Z, tau, tep, xe, xce, ca.logic_or(bad, bad_c), en_j + en_c + en0M,
+    located = ca.Function("located2", [Z], list(finish(Z, tau, tep, xe, xce, bad, en_j + en_c + en0M,
                                                             eh_j + eh_c + eh0M, e0M, h0M, d0M, h0cM, urM, uM, ucM)))
     # the smooth step (no guard crosses in the judged halves or the companion's step), one SX function
     k1_, h0_, d0_, ur_, u_ = start(x, t, s, xs)
