@@ -1,0 +1,92 @@
+"""Message authentication of what mpgspec stores and reads back (cached results, compiled chunks,
+reports), so that a file edited or replaced outside mpgspec is never taken for its own work.
+
+The key never lives in the cache folder (CI systems restore caches across branches, so a pull
+request could otherwise write entries the main branch trusts): it is MPGSPEC_CACHE_KEY when set,
+else a random per-machine key created once in the user's configuration folder
+($XDG_CONFIG_HOME/mpgspec/cache.key, else ~/.config/mpgspec/cache.key, readable by its owner only).
+Where that file can be neither read nor created, the key is random per process: nothing stored by
+another process verifies, so everything is recomputed (correct, only slower), with one warning.
+"""
+from __future__ import annotations
+
+import hashlib
+import hmac
+import json
+import os
+import tempfile
+import warnings
+from functools import lru_cache
+from pathlib import Path
+
+KEY_ENV = "MPGSPEC_CACHE_KEY"
+KEY_BYTES = 32
+
+
+def key_file() -> Path:
+    """Where the per-machine key is kept (outside every cache folder)."""
+    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
+    return Path(base) / "mpgspec" / "cache.key"
+
+
+@lru_cache(maxsize=None)
+def _key(env: str | None, path: str) -> bytes:
+    if env:
+        return hashlib.sha256(env.encode("utf-8")).digest()
+    p = Path(path)
+    try:
+        if not p.is_file():
+            p.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=".cache.key.")
+            try:
+                os.write(fd, os.urandom(KEY_BYTES).hex().encode())
+                os.close(fd)
+                os.chmod(tmp, 0o600)
+                os.link(tmp, p)  # fails when another process created it first: then its key is read
+            except FileExistsError:
+                pass
+            finally:
+                os.unlink(tmp)
+        text = p.read_text(encoding="ascii").strip()
+        key = bytes.fromhex(text)
+        if len(key) < 16:
+            raise ValueError("too short")
+        return key
+    except (OSError, ValueError) as e:
+        warnings.warn(f"no usable cache key at {p} ({e}); set {KEY_ENV}: this run trusts nothing stored before it")
+        return os.urandom(KEY_BYTES)
+
+
+def key() -> bytes:
+    """The key of this machine or user (MPGSPEC_CACHE_KEY, else the key file)."""
+    return _key(os.environ.get(KEY_ENV) or None, str(key_file()))
+
+
+def mac(*parts: str | bytes) -> str:
+    """HMAC-SHA256 (hex) of the parts, each length-prefixed so that no two part lists collide."""
+    h = hmac.new(key(), digestmod=hashlib.sha256)
+    for p in parts:
+        b = p if isinstance(p, bytes) else str(p).encode("utf-8")
+        h.update(len(b).to_bytes(8, "big"))
+        h.update(b)
+    return h.hexdigest()
+
+
+def authentic(tag, *parts: str | bytes) -> bool:
+    """Whether tag is mac(*parts) (compared in constant time; any non-string tag is not)."""
+    return isinstance(tag, str) and hmac.compare_digest(tag, mac(*parts))
+
+
+def file_mac(path: Path) -> str:
+    """mac of a file's name and content."""
+    return mac(Path(path).name, hashlib.sha256(Path(path).read_bytes()).digest())
+
+
+def canonical(obj) -> bytes:
+    """The JSON text a content hash is taken over: sorted keys, no whitespace, NaN as in Python."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True).encode("ascii")
+
+
+def content_hash(obj) -> str:
+    """sha256 (hex) of canonical(obj)."""
+    return hashlib.sha256(canonical(obj)).hexdigest()
