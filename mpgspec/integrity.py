@@ -82,6 +82,11 @@ def file_mac(path: Path) -> str:
     return mac(Path(path).name, hashlib.sha256(Path(path).read_bytes()).digest())
 
 
+def file_authentic(tag, path: Path) -> bool:
+    """Whether tag is file_mac(path) (constant time)."""
+    return isinstance(tag, str) and hmac.compare_digest(tag, file_mac(path))
+
+
 def canonical(obj) -> bytes:
     """The JSON text a content hash is taken over: sorted keys, no whitespace, NaN as in Python."""
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=True).encode("ascii")

@@ -60,7 +60,10 @@ def _inconclusive(r: dict) -> str:
 
 
 def _cached(t: dict) -> str:
-    return f", {int(t['cache_hits'])} from the cache" if t.get("cache_hits") else ""
+    out = f", {int(t['cache_hits'])} from the cache" if t.get("cache_hits") else ""
+    if t.get("cache_rejected"):
+        out += f", {int(t['cache_rejected'])} stored results failed their integrity check and were recomputed"
+    return out
 
 
 def _human(res: VerifyResult, fmt: str):

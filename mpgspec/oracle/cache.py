@@ -5,6 +5,12 @@ its serialised CasADi Functions and numbers), the start state and clock, the ora
 the backend and mpgspec's version. Editing one primitive changes its digest and its setpoint
 samples, so only the edges into and out of it run again. Results are kept as JSON rows in one
 SQLite file next to the compiled chunks (MPGSPEC_CACHE, else ~/.cache/mpgspec).
+
+Every row carries an HMAC of its key and value (mpgspec.integrity: the key never lives in the cache
+folder). A row whose HMAC does not verify (edited, copied from another machine, written by a
+pull request into a restored CI cache) is ignored, recomputed and counted (stats["cache_rejected"]).
+A cache that cannot be used (a read-only or corrupt database, MPGSPEC_CACHE naming a file, the
+file removed during a run) degrades to an in-memory store for the rest of the run, with one warning.
 """
 from __future__ import annotations
 
@@ -13,6 +19,7 @@ import json
 import os
 import shutil
 import sqlite3
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +27,7 @@ import numpy as np
 from functools import lru_cache
 
 from .. import __version__
+from ..integrity import authentic, mac
 from .evidence import OracleEvidence, Reason
 from .tasks import Executor, Task
 
@@ -42,36 +50,105 @@ def cache_root() -> Path:
 
 
 class ResultStore:
-    """Oracle evidence by key, in SQLite (one writer: the process that runs the build)."""
+    """Oracle evidence and memoised values by key, in SQLite (one writer: the process that runs the
+    build), each row authenticated (the module's docstring)."""
 
     def __init__(self, path: Path | None = None):
         self.path = Path(path) if path else cache_root() / "results.sqlite"
         self._db: sqlite3.Connection | None = None
+        self.rejected = 0
+        self.unusable: str | None = None
 
     @property
     def db(self) -> sqlite3.Connection:
         if self._db is None:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._db = sqlite3.connect(self.path)
-            self._db.execute("CREATE TABLE IF NOT EXISTS results (key TEXT PRIMARY KEY, evidence TEXT)")
-            self._db.execute("CREATE TABLE IF NOT EXISTS memo (key TEXT PRIMARY KEY, value TEXT)")
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self._db = self._open(sqlite3.connect(self.path))
+            except (OSError, sqlite3.Error) as e:
+                self._degrade(e)
         return self._db
+
+    @staticmethod
+    def _open(db: sqlite3.Connection) -> sqlite3.Connection:
+        db.execute("CREATE TABLE IF NOT EXISTS results2 (key TEXT PRIMARY KEY, evidence TEXT, mac TEXT)")
+        db.execute("CREATE TABLE IF NOT EXISTS memo2 (key TEXT PRIMARY KEY, value TEXT, mac TEXT)")
+        return db
+
+    def _degrade(self, err: Exception) -> None:
+        """Go on with an in-memory store (nothing from the file is trusted or kept), warning once."""
+        if self.unusable is None:
+            self.unusable = f"{type(err).__name__}: {err}"
+            warnings.warn(f"the result cache {self.path} cannot be used ({self.unusable}); this run keeps "
+                          "its results in memory only")
+        if self._db is not None:
+            try:
+                self._db.close()
+            except sqlite3.Error:
+                pass
+        self._db = self._open(sqlite3.connect(":memory:"))
+
+    def _rows(self, sql: str, args) -> list:
+        try:
+            return self.db.execute(sql, args).fetchall()
+        except sqlite3.Error as e:
+            self._degrade(e)
+            return []
+
+    def _write(self, sql: str, rows: list) -> None:
+        try:
+            with self.db:
+                self.db.executemany(sql, rows)
+        except sqlite3.Error as e:
+            self._degrade(e)
+            with self.db:
+                self.db.executemany(sql, rows)
+
+    def _verified(self, table: str, key: str, value, tag) -> bool:
+        ok = isinstance(value, str) and authentic(tag, table, key, value)
+        self.rejected += not ok
+        return ok
 
     def get(self, keys: list[str]) -> dict[str, OracleEvidence]:
         out = {}
         for a in range(0, len(keys), 500):
             part = keys[a:a + 500]
-            rows = self.db.execute(f"SELECT key, evidence FROM results WHERE key IN ({','.join('?' * len(part))})", part)
-            out.update((k, _load(v)) for k, v in rows)
+            rows = self._rows(f"SELECT key, evidence, mac FROM results2 WHERE key IN ({','.join('?' * len(part))})",
+                              part)
+            for k, v, tag in rows:
+                if self._verified("results", k, v, tag):
+                    try:
+                        out[k] = _load(v)
+                    except (ValueError, TypeError, KeyError):  # authentic but unreadable (an older layout)
+                        self.rejected += 1
         return out
 
     def put(self, items: dict[str, OracleEvidence]) -> None:
-        with self.db:
-            self.db.executemany("INSERT OR REPLACE INTO results VALUES (?, ?)",
-                                [(k, json.dumps(e.to_dict())) for k, e in items.items()])
+        rows = []
+        for k, e in items.items():
+            text = json.dumps(e.to_dict())
+            rows.append((k, text, mac("results", k, text)))
+        self._write("INSERT OR REPLACE INTO results2 VALUES (?, ?, ?)", rows)
+
+    def memo_get(self, key: str):
+        rows = self._rows("SELECT value, mac FROM memo2 WHERE key = ?", (key,))
+        if not rows or not self._verified("memo", key, rows[0][0], rows[0][1]):
+            return None
+        return json.loads(rows[0][0])
+
+    def memo_has(self, key: str) -> bool:
+        rows = self._rows("SELECT value, mac FROM memo2 WHERE key = ?", (key,))
+        return bool(rows) and isinstance(rows[0][0], str) and authentic(rows[0][1], "memo", key, rows[0][0])
+
+    def memo_put(self, key: str, value) -> None:
+        text = json.dumps(value, default=_plain)
+        self._write("INSERT OR REPLACE INTO memo2 VALUES (?, ?, ?)", [(key, text, mac("memo", key, text))])
 
     def count(self) -> int:
-        return self.db.execute("SELECT COUNT(*) FROM results").fetchone()[0] if self.path.exists() else 0
+        if not self.path.is_file():
+            return 0
+        rows = self._rows("SELECT COUNT(*) FROM results2", ())
+        return rows[0][0] if rows else 0
 
     def close(self) -> None:
         if self._db is not None:
@@ -103,16 +180,14 @@ class Memo:
         return hashlib.sha256("|".join(map(str, (*parts, code_version()))).encode()).hexdigest()
 
     def get(self, key: str):
-        row = self.store.db.execute("SELECT value FROM memo WHERE key = ?", (key,)).fetchone()
-        return json.loads(row[0]) if row else None
+        return self.store.memo_get(key)
 
     def has(self, key: str) -> bool:
-        """Whether a value is stored under key (without reading it)."""
-        return self.store.db.execute("SELECT 1 FROM memo WHERE key = ?", (key,)).fetchone() is not None
+        """Whether an authentic value is stored under key."""
+        return self.store.memo_has(key)
 
     def put(self, key: str, value) -> None:
-        with self.store.db:
-            self.store.db.execute("INSERT OR REPLACE INTO memo VALUES (?, ?)", (key, json.dumps(value, default=_plain)))
+        self.store.memo_put(key, value)
 
 
 class CachedExecutor:
@@ -121,8 +196,13 @@ class CachedExecutor:
     def __init__(self, inner: Executor, store: ResultStore | None = None):
         self.inner = inner
         self.store = store or ResultStore()
-        self.stats = {"cache_hits": 0, "cache_misses": 0}
+        self._stats = {"cache_hits": 0, "cache_misses": 0}
         self.memo = Memo(self.store)
+
+    @property
+    def stats(self) -> dict:
+        """Oracle calls taken from the cache and run, and stored rows that failed their check."""
+        return {**self._stats, "cache_rejected": self.store.rejected}
 
     @property
     def workers(self) -> int:
@@ -152,8 +232,8 @@ class CachedExecutor:
                 if e.reason is not Reason.ERROR:  # a crash may be transient: never remembered
                     new[keys[i][j]] = e
         self.store.put(new)
-        self.stats["cache_hits"] += sum(len(ks) for ks in keys) - sum(len(m) for _, m in where)
-        self.stats["cache_misses"] += sum(len(m) for _, m in where)
+        self._stats["cache_hits"] += sum(len(ks) for ks in keys) - sum(len(m) for _, m in where)
+        self._stats["cache_misses"] += sum(len(m) for _, m in where)
         return out
 
 
@@ -179,6 +259,9 @@ def clear() -> dict:
     """Remove stored oracle results and compiled chunks; returns what was there."""
     before = info()
     root = cache_root()
-    (root / "results.sqlite").unlink(missing_ok=True)
+    try:
+        (root / "results.sqlite").unlink(missing_ok=True)
+    except OSError:  # MPGSPEC_CACHE names a file, or the folder is read-only: nothing of ours to remove
+        pass
     shutil.rmtree(root / "jit", ignore_errors=True)
     return before

@@ -7,7 +7,9 @@ hash of its C code, the flags and CasADi's version: unchanged code is never comp
 two different Functions of the same name load their own libraries. A library is written to a
 private temporary folder and moved into the cache with os.replace, so concurrent processes never
 load a half-written one. When the compiler is missing or fails, the Function is returned
-uncompiled (CasADi's virtual machine) with a warning.
+uncompiled (CasADi's virtual machine) with a warning. Every library is sealed when compiled (a
+.mac file beside it: an HMAC of its name and content, mpgspec.integrity) and loaded only when its
+seal verifies; a library replaced or edited in the cache is compiled again, never loaded.
 
 compile_library(name, fns, flags) compiles several Functions and their reverse derivatives into one
 library (a robot's dynamics, built once); compile_many(fns, flags, libs=[...]) links Functions that
@@ -30,9 +32,11 @@ A failed compile is logged with "hit": false and "failed": true.
 """
 from __future__ import annotations
 
+import atexit
 import hashlib
 import json
 import os
+import shutil
 import subprocess
 import tempfile
 import threading
@@ -40,11 +44,13 @@ import time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import casadi as ca
 
 from ..cores import usable_cores
+from ..integrity import file_authentic, file_mac
 
 try:
     import fcntl
@@ -64,8 +70,25 @@ _LOG_LOCK = threading.Lock()
 
 
 def cache_dir() -> Path:
-    """Where compiled libraries are kept between runs (MPGSPEC_CACHE, else ~/.cache/mpgspec)."""
-    return Path(os.environ.get("MPGSPEC_CACHE", Path.home() / ".cache" / "mpgspec")) / "jit"
+    """Where compiled libraries are kept between runs (MPGSPEC_CACHE, else ~/.cache/mpgspec); a
+    folder that cannot be created or written (MPGSPEC_CACHE naming a file, a read-only place) is
+    replaced for this process by a temporary one, with one warning."""
+    return _usable(str(Path(os.environ.get("MPGSPEC_CACHE", Path.home() / ".cache" / "mpgspec")) / "jit"))
+
+
+@lru_cache(maxsize=None)
+def _usable(folder: str) -> Path:
+    p = Path(folder)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise PermissionError(f"{p} is not writable")
+        return p
+    except OSError as e:
+        tmp = Path(tempfile.mkdtemp(prefix="mpgspec-jit-"))
+        atexit.register(shutil.rmtree, tmp, True)
+        warnings.warn(f"the compiled-code cache {p} cannot be used ({e}); compiling into {tmp} for this run")
+        return tmp
 
 
 def with_cse(fn: ca.Function) -> ca.Function:
@@ -113,7 +136,27 @@ def _library_job(name: str, fn, code: str, flags: tuple[str, ...], libs: tuple[P
     links = tuple(a for lib in libs for a in (str(lib), f"-Wl,-rpath,{lib.parent}"))
     key = hashlib.sha256((code + " ".join(flags + links) + ca.__version__).encode()).hexdigest()[:24]
     lib = cache_dir() / f"{name}_{key}.so"
-    return _Job(name, fn, code, tuple(flags), lib, lib.exists(), links)
+    return _Job(name, fn, code, tuple(flags), lib, sealed(lib), links)
+
+
+def _seal_path(lib: Path) -> Path:
+    return lib.with_name(lib.name + ".mac")
+
+
+def sealed(lib: Path) -> bool:
+    """Whether the library lies in the cache folder and its seal verifies (compiled here, unchanged)."""
+    lib = Path(lib)
+    try:
+        return lib.parent.resolve() == cache_dir().resolve() and lib.is_file() and \
+            file_authentic(_seal_path(lib).read_text(encoding="ascii").strip(), lib)
+    except (OSError, ValueError):
+        return False
+
+
+def _seal(lib: Path) -> None:
+    tmp = _seal_path(lib).with_suffix(f".tmp{os.getpid()}")
+    tmp.write_text(file_mac(lib), encoding="ascii")
+    os.replace(tmp, _seal_path(lib))
 
 
 def _gcc(job: _Job) -> None:
@@ -126,7 +169,7 @@ def _gcc(job: _Job) -> None:
     with open(folder / f"{job.lib.stem}.lock", "a") as lock:
         if fcntl is not None:
             fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
-        if job.lib.exists():  # compiled by another process while this one waited
+        if sealed(job.lib):  # compiled by another process while this one waited
             job.hit = True
         else:
             _compile(job, folder)
@@ -143,6 +186,7 @@ def _compile(job: _Job, folder: Path) -> None:
             subprocess.run([cc, *job.flags, "-fPIC", "-shared", str(src), "-o", str(out), *job.links, "-lm"], check=True,
                            capture_output=True, text=True)
             os.replace(out, job.lib)  # atomic: concurrent processes never load a half-written library
+            _seal(job.lib)
         except (OSError, subprocess.CalledProcessError) as err:
             job.error = getattr(err, "stderr", "") or str(err)
 

@@ -34,7 +34,7 @@ from ..compile.contacts import wrap_clock
 from ..compile.events import EventWindow
 from ..compile.numeric import NumericFunction, numeric
 from .flow import jump_of
-from .jit import cache_dir, compile_libraries, compile_many, library_job, with_cse
+from .jit import cache_dir, compile_libraries, compile_many, library_job, sealed, with_cse
 
 INLINE_NODES = 4000
 """Closed loops up to this many SX nodes are inlined (fastest code); larger ones become calls
@@ -136,12 +136,12 @@ def _index(tag: str) -> Path:
 
 
 def _known(tag: str) -> Path | None:
-    """The library of this tag compiled before (its index names an existing file), else None."""
+    """The library of this tag compiled before (its index names a sealed library), else None."""
     try:
         path = Path(_index(tag).read_text().strip())
-    except OSError:
+    except (OSError, ValueError):
         return None
-    return path if path.exists() else None
+    return path if sealed(path) else None
 
 
 def _load(units: list, paths: list) -> LoopLibrary | None:
