@@ -1,7 +1,10 @@
-"""Typed `roa.options` of the built-in level-set verifiers (verifiers/lyapunov.py, sos.py, polyv.py).
+"""Typed `roa.options` of the built-in verifiers (verifiers/lyapunov.py, sos.py, polyv.py,
+sampling.py, floquet.py).
 
 The spec's options are validated against these models before any verifier runs, so a wrong value
-is a located spec error instead of a failed or silently different region of attraction.
+is a located spec error instead of a failed or silently different region of attraction. Sizes are
+bounded too (MAX_DEGREE, MAX_SAMPLES, MAX_STEPS): past them a solver allocates tens of gigabytes
+or a run never ends, so they are refused before any work starts.
 """
 from __future__ import annotations
 
@@ -14,13 +17,21 @@ from ..spec.system import Number
 Positive = Annotated[Number, Field(gt=0)]
 Matrix = list[list[Number]]
 
+MAX_DEGREE = 12
+"""Highest degree of V: the SOS Gram matrices grow as C(n + d/2, d/2) squared (degree 12 in 6
+states: 924 monomials, a 924 x 924 Gram matrix)."""
+MAX_SAMPLES = 1_000_000
+"""Most sampled states of any check (a million rollouts or level-set points)."""
+MAX_STEPS = 1_000_000
+"""Most integration steps per period or horizon."""
+
 
 class LevelSetOptions(BaseModel):
     """Options of the `sos` verifier (the certified route of `lyapunov`)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    degree: StrictInt = Field(default=2, ge=2, description="degree of V (even); above 2 the V-rho alternation")
+    degree: StrictInt = Field(default=2, ge=2, le=MAX_DEGREE, description="degree of V (even); above 2 the V-rho alternation")
     iterations: StrictInt = Field(default=10, ge=0, le=1000, description="V-rho alternation rounds")
     improve_tol: Annotated[Number, Field(ge=0)] = Field(default=1e-3, description="stop below this relative gain")
     P: Matrix | None = Field(default=None, description="V = y'Py given")
@@ -31,13 +42,13 @@ class LevelSetOptions(BaseModel):
     eps: Positive = 1e-4
     equilibrium_tol: Positive = 1e-8
     polynomial: StrictBool | None = None
-    samples: StrictInt = Field(default=20000, ge=1)
-    radial: StrictInt = Field(default=40, ge=1)
-    local_starts: StrictInt = Field(default=8, ge=0)
+    samples: StrictInt = Field(default=20000, ge=1, le=MAX_SAMPLES)
+    radial: StrictInt = Field(default=40, ge=1, le=10_000)
+    local_starts: StrictInt = Field(default=8, ge=0, le=10_000)
     boundary_tol: Annotated[Number, Field(ge=0)] = 1e-9
     empirical_margin: Annotated[Number, Field(gt=0, le=1)] = 0.99
     seed: StrictInt = 0
-    mult_half_degree: Annotated[StrictInt, Field(ge=0)] | None = None
+    mult_half_degree: Annotated[StrictInt, Field(ge=0, le=MAX_DEGREE // 2)] | None = None
     solver: StrictStr = "CLARABEL"
     solver_opts: dict = Field(default_factory=dict)
     tol_eig: Positive = 1e-8
@@ -59,5 +70,34 @@ class LyapunovOptions(LevelSetOptions):
     require_certified: StrictBool = False
 
 
-OPTION_MODELS: dict[str, type[BaseModel]] = {"sos": LevelSetOptions, "lyapunov": LyapunovOptions}
+class SearchOptions(BaseModel):
+    """Options of the `sampling` verifier: a bisection on r, each level checked by sampled rollouts."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    r0: Positive | None = Field(default=None, description="first radius tried")
+    r_max: Positive | None = Field(default=None, description="largest radius tried")
+    rtol: Annotated[Number, Field(gt=0, lt=1)] | None = Field(default=None, description="relative width where the bisection stops")
+    confirm_rounds: StrictInt = Field(default=5, ge=0, le=100, description="rounds of fresh samples at the final radius")
+    samples: StrictInt = Field(default=256, ge=1, le=MAX_SAMPLES, description="rollouts per level")
+    seed: StrictInt = Field(default=0, ge=0)
+    conv: Positive | None = Field(default=None, description="contraction that counts as converged")
+    dt: Positive | None = Field(default=None, description="integration step (s)")
+    horizon: Annotated[Number, Field(gt=0, le=1e5)] | None = Field(default=None, description="rollout length (s)")
+
+
+class FloquetOptions(SearchOptions):
+    """Options of the `floquet` verifier: the monodromy of one period, then sampled rollouts."""
+
+    t0: Number = Field(default=0.0, description="clock where the period starts")
+    steps: StrictInt = Field(default=2000, ge=1, le=MAX_STEPS, description="integration steps of the monodromy")
+    tol: Positive = 1e-6
+    orbit_tol: Positive = 1e-3
+    periods: StrictInt | None = Field(default=None, ge=1, le=1000, description="periods each sampled rollout runs")
+    steps_per_period: StrictInt = Field(default=200, ge=1, le=MAX_STEPS)
+    neutral: list[StrictStr] = Field(default_factory=list, description="neutral directions of a floating base")
+
+
+OPTION_MODELS: dict[str, type[BaseModel]] = {"sos": LevelSetOptions, "lyapunov": LyapunovOptions,
+                                             "sampling": SearchOptions, "floquet": FloquetOptions}
 """Typed options of the built-in verifiers that declare them."""

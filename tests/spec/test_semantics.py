@@ -224,6 +224,20 @@ def test_given_radius_takes_no_options(tmp_path):
     spec_error(tmp_path, text, "MPG102", "roa.options.samples", "takes no options")
 
 
+@pytest.mark.parametrize("method, options, key, found", [
+    ("lyapunov", "{degree: 50}", "degree", "50"),            # a 41 GB Gram matrix before any message
+    ("sos", "{samples: 100000000}", "samples", "100000000"),
+    ("floquet", "{steps: 0}", "steps", "0"),
+    ("floquet", "{steps: abc}", "steps", "'abc'"),
+    ("sampling", "{samples: 1e8}", "samples", "100000000.0"),
+    ("sampling", "{rtol: 2}", "rtol", "2"),
+])
+def test_verifier_sizes_and_types_are_bounded_before_work_starts(tmp_path, method, options, key, found):
+    text = edit("roa: {radius: 0.1}\n  - name: B", f"roa: {{method: {method}, options: {options}}}\n  - name: B")
+    err = spec_error(tmp_path, text, "MPG104", f"roa.options.{key}", f"invalid option of the {method} verifier")
+    assert err["found"] == found
+
+
 # ----------------------------------------------------------------------------- transient hand-overs
 TRANSIENT_B = "  - name: B\n    class: transient\n    domain: [0, 1]\n    next: {next}\n"
 
