@@ -59,7 +59,7 @@ def scenarios(unc, sys, rng: np.random.Generator, nominal: dict) -> tuple[np.nda
         kinds += ["corner"] * len(corners)
         pts += list(lo + rng.random((unc.samples, dim)) * (hi - lo))
         kinds += ["sample"] * unc.samples
-    pts = np.array(pts, float).reshape(-1, dim)
+    pts = np.array(pts, float).reshape(len(pts), dim)  # dim 0: the nominal scenario alone
     signs = [0.0, 1.0, -1.0] if unc.disturbance is not None else [0.0]
     th, err, sg, kd = [], [], [], []
     for sgn in signs:
@@ -70,7 +70,7 @@ def scenarios(unc, sys, rng: np.random.Generator, nominal: dict) -> tuple[np.nda
             err.append(e)
             sg.append(sgn)
             kd.append(k if sgn == 0 else f"{k}, constant disturbance {'+' if sgn > 0 else '-'}bound")
-    return np.array(th).reshape(-1, len(names)), np.array(err), np.array(sg), kd
+    return np.array(th).reshape(len(th), len(names)), np.array(err), np.array(sg), kd
 
 
 def searched(unc) -> bool:

@@ -83,6 +83,14 @@ class StartInRoA(Strict):
 class Uncertainty(Strict):
     """What the robust graph must withstand and how hard it searches (a falsification, not a proof)."""
 
+    def rollouts(self, n_nodes: int) -> int:
+        """An upper bound on the robust stage's rollouts over n_nodes primitives (the budget's measure)."""
+        dim = len(self.parameters) + len(self.initial_state)
+        corners = min(2 ** dim, self.corners) if dim else 0
+        per_cell = (1 + corners + (self.samples if dim else 0)) * (3 if self.disturbance is not None else 1)
+        starts = 1 + (self.start_in_roa.samples if self.start_in_roa is not None else 0)
+        return n_nodes * (n_nodes - 1) * self.cells * per_cell * starts * (1 + self.search)
+
     parameters: dict[str, ParameterRange] = Field(default_factory=dict)
     disturbance: Disturbance | None = None
     initial_state: dict[str, NonNegative] = Field(
@@ -96,6 +104,9 @@ class Uncertainty(Strict):
     runs: int = Field(default=8, ge=0, le=1000,
                       description="seeded runs of the goal sequence under sampled uncertainty, per mode")
     seed: int = 0
+    budget: int = Field(default=1_000_000, ge=1, le=100_000_000,
+                        description="most robust rollouts the stage may run, checked before it starts: edges among the "
+                                    "nodes x cells x scenarios per cell x start states x (1 + search)")
     start_in_roa: StartInRoA | None = Field(
         default=None, description="also start each cell from seeded samples of the boundary of the source's region "
                                   "of attraction E_A (projected onto its contact manifold for rigid bodies)")

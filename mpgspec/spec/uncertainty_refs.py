@@ -95,6 +95,14 @@ def check_uncertainty(spec: ProjectSpec) -> None:
         if refs is None:
             _err(errors, "this assertion does not apply to the robust graph", loc(*base), f"assertions.{i}",
                  "MPG104", "edge, no_edge, plan or reachable_from", type(a).__name__)
+    n = len(chosen & nodes)
+    if unc.rollouts(n) > unc.budget:
+        where = ("budget",) if "budget" in unc.model_fields_set else ()
+        _err(errors, "the robust stage could run more rollouts than its budget", loc(*where), "budget" if where else "",
+             "MPG104", f"at most {unc.budget:,} rollouts (uncertainty.budget)",
+             f"up to {unc.rollouts(n):,}: {n * (n - 1)} edges x {unc.cells} cells x scenarios x start states x "
+             f"(1 + {unc.search} search rounds)",
+             "lower cells, corners, samples, search or start_in_roa.samples, or raise uncertainty.budget")
     if errors:
         raise SpecErrors(errors)
 

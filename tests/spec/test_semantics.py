@@ -238,6 +238,22 @@ def test_verifier_sizes_and_types_are_bounded_before_work_starts(tmp_path, metho
     assert err["found"] == found
 
 
+# ----------------------------------------------------------------------------- the robust stage's budget
+def test_a_robust_stage_beyond_its_budget_is_refused_before_it_starts(tmp_path):
+    unc = ("uncertainty:\n  parameters: {k: {range: [1, 3]}}\n  disturbance: {inputs: [u], bound: 1}\n"
+           "  corners: 1024\n  samples: 1000\n  cells: 1000\n  search: 50\n")
+    err = spec_error(tmp_path, BASE + unc, "MPG104", "more rollouts than its budget", "uncertainty",
+                     at="uncertainty:")
+    assert "at most 1,000,000" in err["expected"] and "2 edges x 1000 cells" in err["found"]
+    err = spec_error(tmp_path, BASE + unc + "  budget: 1000\n", "MPG104", "uncertainty.budget", at="budget: 1000")
+
+
+def test_an_empty_parameter_box_runs_the_nominal_scenario(tmp_path):
+    unc = "uncertainty:\n  parameters: {}\n  disturbance: {inputs: [u], bound: 0.5}\n  samples: 0\n  runs: 0\n"
+    rc, p = run(tmp_path, BASE + unc)
+    assert rc == 0 and p.report["robust"]["scenarios"]["per_cell"] == 3, p.errors
+
+
 # ----------------------------------------------------------------------------- transient hand-overs
 TRANSIENT_B = "  - name: B\n    class: transient\n    domain: [0, 1]\n    next: {next}\n"
 
