@@ -202,6 +202,8 @@ def _safety_functions(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprComp
             when = own[0] if own else sf.when
             if isinstance(when, tuple):
                 a, b = float(when[0]), float(when[1])
+                if not own:
+                    _check_in_period(inst, path, a, b, clock.period)
                 windows.append((a, b))
                 hv = ca.if_else(ca.logic_and(clock.tc >= a, clock.tc < b), hv, INACTIVE)
             elif sf.when is not None:  # anchored on a contact event: the loader checked the system has them
@@ -213,6 +215,16 @@ def _safety_functions(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprComp
             hs.append(hv)
             names.append(name or f"h{j}")
     return hs, hs_raw, names, windows
+
+
+def _check_in_period(inst: PrimitiveInstance, path: tuple, a: float, b: float, period: float | None) -> None:
+    """A clock window of a periodic primitive lies in one period [0, T]: its clock wraps into it, so
+    a window beyond T would never (or only partly) be active."""
+    if period is not None and (a < 0 or b > period * (1 + 1e-12)):
+        raise SpecError("the window lies outside the primitive's period", location=inst.locate(path + ("when",)),
+                        key=f"primitive '{inst.name}': {'.'.join(map(str, path))}.when",
+                        expected=f"[start, end) within [0, {period:g}] (the clock wraps into one period)",
+                        found=f"[{a:g}, {b:g})", code="MPG104")
 
 
 def _builtin_block(inst: PrimitiveInstance, sys: CompiledSystem, use: str, path: tuple, cm: _Mode,

@@ -181,6 +181,19 @@ def test_constants_must_evaluate_to_numbers(tmp_path):
     spec_error(tmp_path, periodic, "MPG205", "period", "finite", at="period:")
 
 
+@pytest.mark.parametrize("when, ok", [("[0.5, 1.5]", True), ("[0, 2]", True), ("[2.5, 3]", False), ("[1, 2.5]", False),
+                                      ("[-1, 1]", False)])
+def test_a_periodic_primitives_windows_lie_in_its_period(tmp_path, when, ok):
+    text = edit("  - name: B\n    class: fixed\n", "  - name: B\n    class: periodic\n    period: 2\n",
+                "{name: wall, h: \"2 - x\"}", f"{{name: wall, h: \"2 - x\", when: {when}}}",
+                "  - name: A\n    class: fixed\n", "  - name: A\n    class: periodic\n    period: 2\n")
+    if ok:
+        assert run(tmp_path, text)[0] in (0, 1)
+    else:
+        err = spec_error(tmp_path, text, "MPG104", "outside the primitive's period", "safe_set.0.when", at="when:")
+        assert "within [0, 2]" in err["expected"]
+
+
 # ----------------------------------------------------------------------------- no shadowing
 @pytest.mark.parametrize("insert, key, what", [
     ("    let: {x: 3}\n", "let.x", "a state of the system"),
