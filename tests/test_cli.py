@@ -274,3 +274,10 @@ def test_second_verify_takes_every_call_from_the_cache(capsys, tmp_path, monkeyp
 def test_jobs_below_one_is_a_usage_error(capsys):
     rc, _, err = run(capsys, "verify", TINY, "--no-write", "-q", "-j", "0")
     assert rc == 2 and "--jobs" in err
+
+
+@pytest.mark.parametrize("flags", [["--scheduler", "http://x; rm -rf /"], ["--dask", ""], ["--dask", "tcp://h:1 --x"],
+                                   ["--dask", "local", "--scheduler", "tcp://h:8786"], ["--scheduler", "local"]])
+def test_dask_addresses_are_checked_before_any_work(capsys, flags):
+    rc, out, err = run(capsys, "verify", TINY, "--no-write", "-q", *flags)
+    assert rc == 2 and ("--dask" in err or "--scheduler" in err) and "Traceback" not in out + err

@@ -3,6 +3,7 @@ result as text, JSON or GitHub annotations with a step summary."""
 from __future__ import annotations
 
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -111,6 +112,23 @@ def _check_jobs(jobs: int) -> None:
                              f"({JOBS_PER_CORE} per core, {cores} cores), not {jobs}")
 
 
+SCHEDULER = re.compile(r"(tcp|tls|ws|wss|ucx|inproc)://([A-Za-z0-9._\-]+|\[[0-9A-Fa-f:.]+\])(:[0-9]{1,5})?")
+"""A Dask scheduler address: protocol://host[:port] (an IPv6 host in brackets)."""
+
+
+def _check_dask(args) -> None:
+    """--dask is 'local' or a scheduler address, --scheduler an address; anything else (a shell
+    fragment, an empty value, both options at once) is a usage error before any work starts."""
+    if args.dask is not None and args.scheduler is not None:
+        raise UsageError("give --dask or --scheduler, not both")
+    for opt, value in (("--dask", args.dask), ("--scheduler", args.scheduler)):
+        if value is None or (opt == "--dask" and value == "local"):
+            continue
+        if not SCHEDULER.fullmatch(value):
+            raise UsageError(f"{opt} must be {'local or ' if opt == '--dask' else ''}a scheduler address such as "
+                             f"tcp://host:8786, not {value[:80]!r}")
+
+
 def _verify(args, overrides: dict, show) -> VerifyResult:
     """Every project of args.paths verified and (unless --no-write) written: side by side, one
     process per project, when there are several, more than one job and no Dask; else here."""
@@ -140,6 +158,7 @@ def cmd_verify(args) -> int:
     if args.jobs is None:
         args.jobs = usable_cores()
     _check_jobs(args.jobs)
+    _check_dask(args)
     t0 = time.perf_counter()
     show = None if args.quiet else _progress(sys.stderr, args.format)
     try:
