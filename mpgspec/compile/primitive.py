@@ -193,7 +193,7 @@ def _safety_functions(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprComp
         if sf.use is not None:
             items = _builtin_block(inst, sys, sf.use, path, cm, clock.t)
         elif sf.h is not None:
-            items = [(sf.name, ec.sx(sf.h, path + ("h",), henv))]
+            items = [(sf.name, _finite_if_constant(inst, path + ("h",), ec.sx(sf.h, path + ("h",), henv)))]
         else:
             items = [(sf.name, sf.tol - ca.fabs(ec.sx(sf.eq, path + ("eq",), henv)))]
         for name, hv, *own in items:  # a block may give its rows their own clock windows
@@ -215,6 +215,17 @@ def _safety_functions(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprComp
             hs.append(hv)
             names.append(name or f"h{j}")
     return hs, hs_raw, names, windows
+
+
+def _finite_if_constant(inst: PrimitiveInstance, path: tuple, hv):
+    """h as given, unless it is a constant that is not a finite number (`1/0`, `inf - inf`): a safe
+    set that is everything or nothing, refused here rather than found by every oracle call."""
+    if hv.is_constant() and not np.all(np.isfinite(np.asarray(ca.DM(hv), float))):
+        raise SpecError("the safety function is a constant that is not a finite number",
+                        location=inst.locate(path), key=f"primitive '{inst.name}': {'.'.join(map(str, path))}",
+                        expected="an expression of the state and clock with finite values",
+                        found=f"{float(ca.DM(hv)[0]):g}", code="MPG205")
+    return hv
 
 
 def _check_in_period(inst: PrimitiveInstance, path: tuple, a: float, b: float, period: float | None) -> None:

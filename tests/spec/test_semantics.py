@@ -194,6 +194,12 @@ def test_a_periodic_primitives_windows_lie_in_its_period(tmp_path, when, ok):
         assert "within [0, 2]" in err["expected"]
 
 
+@pytest.mark.parametrize("h", ["1/0", "0/0", "-1/0"])
+def test_a_safety_function_that_is_no_finite_constant_is_refused(tmp_path, h):
+    text = edit("{name: wall, h: \"2 - x\"}", f"{{name: wall, h: \"{h}\"}}")
+    spec_error(tmp_path, text, "MPG205", "safe_set.0.h", "not a finite number", at="wall")
+
+
 # ----------------------------------------------------------------------------- no shadowing
 @pytest.mark.parametrize("insert, key, what", [
     ("    let: {x: 3}\n", "let.x", "a state of the system"),
