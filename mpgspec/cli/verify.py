@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 from .. import api
 from ..cores import usable_cores
 from ..errors import UsageError
+from ..oracle.cache import VERIFY_ENV
 from ..streams import stdout_to_stderr
 from .output import MARK, _annotation, _json_doc, _line, _num, _print_errors, _progress
 
@@ -62,6 +63,8 @@ def _inconclusive(r: dict) -> str:
 
 def _cached(t: dict) -> str:
     out = f", {int(t['cache_hits'])} from the cache" if t.get("cache_hits") else ""
+    if t.get("cache_verified"):
+        out += f", {int(t['cache_verified'])} of them run again ({int(t.get('cache_mismatch', 0))} disagreed)"
     if t.get("cache_rejected"):
         out += f", {int(t['cache_rejected'])} stored results failed their integrity check and were recomputed"
     return out
@@ -129,6 +132,16 @@ def _check_dask(args) -> None:
                              f"tcp://host:8786, not {value[:80]!r}")
 
 
+def _set_verify_cache(fraction) -> None:
+    """--verify-cache F: the share of stored results every executor of this run (and of the
+    processes it starts) runs again (oracle/cache.py, through MPGSPEC_VERIFY_CACHE)."""
+    if fraction is None:
+        return
+    if not 0.0 <= fraction <= 1.0:
+        raise UsageError(f"--verify-cache must be a fraction between 0 and 1, not {fraction:g}")
+    os.environ[VERIFY_ENV] = repr(float(fraction))
+
+
 def _verify(args, overrides: dict, show) -> VerifyResult:
     """Every project of args.paths verified and (unless --no-write) written: side by side, one
     process per project, when there are several, more than one job and no Dask; else here."""
@@ -159,6 +172,7 @@ def cmd_verify(args) -> int:
         args.jobs = usable_cores()
     _check_jobs(args.jobs)
     _check_dask(args)
+    _set_verify_cache(getattr(args, "verify_cache", None))
     t0 = time.perf_counter()
     show = None if args.quiet else _progress(sys.stderr, args.format)
     try:
@@ -176,4 +190,9 @@ def cmd_verify(args) -> int:
             print(_line(summary(res.projects, time.perf_counter() - t0), args.format))
     if args.format == "github":
         _step_summary(res)
+    mismatch = sum(int(((p.report or {}).get("timing") or {}).get("cache_mismatch", 0)) for p in res.projects)
+    if mismatch:
+        print(f"mpgspec: {mismatch} stored oracle results disagreed with a fresh run (--verify-cache): the result "
+              "cache cannot be trusted; clear it with `mpgspec cache clear`", file=sys.stderr)
+        return max(res.exit_code, 1)
     return res.exit_code

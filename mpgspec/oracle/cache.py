@@ -191,17 +191,24 @@ class Memo:
 
 
 class CachedExecutor:
-    """Runs only the start points whose results are not stored yet, through the inner executor."""
+    """Runs only the start points whose results are not stored yet, through the inner executor.
 
-    def __init__(self, inner: Executor, store: ResultStore | None = None):
+    verify (a fraction in [0, 1]; default MPGSPEC_VERIFY_CACHE, which `verify --verify-cache` sets):
+    that share of the stored results, picked by their keys (the same ones every run), is run again
+    and compared with what was stored; a different verdict is a mismatch (stats["cache_mismatch"]),
+    the fresh result is used and stored, and the CLI fails."""
+
+    def __init__(self, inner: Executor, store: ResultStore | None = None, verify: float | None = None):
         self.inner = inner
         self.store = store or ResultStore()
-        self._stats = {"cache_hits": 0, "cache_misses": 0}
+        self.verify = verify_fraction() if verify is None else float(verify)
+        self._stats = {"cache_hits": 0, "cache_misses": 0, "cache_verified": 0, "cache_mismatch": 0}
         self.memo = Memo(self.store)
 
     @property
     def stats(self) -> dict:
-        """Oracle calls taken from the cache and run, and stored rows that failed their check."""
+        """Oracle calls taken from the cache and run, stored rows that failed their check, stored
+        results run again (verify) and those that disagreed."""
         return {**self._stats, "cache_rejected": self.store.rejected}
 
     @property
@@ -212,6 +219,9 @@ class CachedExecutor:
         """The inner executor's map (its results are not stored here: the stages memoise their own)."""
         return self.inner.map(fn, items, progress, label, shared)
 
+    def _rechecked(self, key: str) -> bool:
+        return self.verify > 0 and int(key[:12], 16) < self.verify * 16 ** 12
+
     def run(self, prims, settings, tasks: list[Task], progress=None):
         base = {t: hashlib.sha256(f"{prims[t].digest()}|{settings!r}|{code_version()}".encode()).hexdigest()
                 for t in {task.target for task in tasks}}
@@ -219,22 +229,43 @@ class CachedExecutor:
         found = self.store.get([k for ks in keys for k in ks])
         todo, where = [], []
         for i, (task, ks) in enumerate(zip(tasks, keys)):
-            miss = [j for j, k in enumerate(ks) if k not in found]
+            miss = [j for j, k in enumerate(ks) if k not in found or self._rechecked(k)]
             if miss:
                 todo.append(Task(task.target, task.x0s[miss], task.t0s[miss]))
                 where.append((i, miss))
         fresh = self.inner.run(prims, settings, todo, progress) if todo else []
         new = {}
         out = [[found.get(k) for k in ks] for ks in keys]
+        ran = 0
         for (i, miss), evs in zip(where, fresh):
             for j, e in zip(miss, evs):
+                k, ran = keys[i][j], ran + 1
+                if k in found:
+                    self._stats["cache_verified"] += 1
+                    old = found[k]
+                    if (old.verdict, old.status, old.reason) != (e.verdict, e.status, e.reason):
+                        self._stats["cache_mismatch"] += 1
                 out[i][j] = e
                 if e.reason is not Reason.ERROR:  # a crash may be transient: never remembered
-                    new[keys[i][j]] = e
+                    new[k] = e
         self.store.put(new)
-        self._stats["cache_hits"] += sum(len(ks) for ks in keys) - sum(len(m) for _, m in where)
-        self._stats["cache_misses"] += sum(len(m) for _, m in where)
+        rechecked = sum(1 for (i, miss) in where for j in miss if keys[i][j] in found)
+        self._stats["cache_hits"] += sum(len(ks) for ks in keys) - ran + rechecked
+        self._stats["cache_misses"] += ran - rechecked
         return out
+
+
+VERIFY_ENV = "MPGSPEC_VERIFY_CACHE"
+
+
+def verify_fraction() -> float:
+    """The share of stored results to run again (MPGSPEC_VERIFY_CACHE; 0 when unset or not a number
+    in [0, 1], which `verify --verify-cache` refuses before setting it)."""
+    try:
+        f = float(os.environ.get(VERIFY_ENV, "0"))
+    except ValueError:
+        return 0.0
+    return f if 0.0 <= f <= 1.0 else 0.0
 
 
 def _key(base: str, x0: np.ndarray, t0: float) -> str:

@@ -155,3 +155,22 @@ def test_clearing_the_cache_during_a_run(capsys, tmp_path, failing, clean, monke
     monkeypatch.setattr(cache_mod.ResultStore, "put", put_after_clear)
     rc, rep, out = verify(capsys, failing, tmp_path / "cleared")
     assert (rc, verdicts(rep)) == clean and "Traceback" not in out
+
+
+def test_verify_cache_catches_a_row_forged_with_the_key(capsys, tmp_path, failing, clean, monkeypatch):
+    """A row rewritten with a valid HMAC (the key leaked): run again under MPGSPEC_VERIFY_CACHE=1,
+    every stored result is recomputed and compared; the mismatch fails the run (exit 1, loudly)."""
+    with _db(tmp_path) as db:
+        rows = db.execute("SELECT key, evidence FROM results2").fetchall()
+        safe = next(v for _k, v in rows if json.loads(v)["verdict"] == 1)
+        forged = [(safe, integrity.mac("results", k, safe), k) for k, v in rows if json.loads(v)["verdict"] != 1]
+        db.executemany("UPDATE results2 SET evidence = ?, mac = ? WHERE key = ?", forged)
+    assert forged
+    monkeypatch.setenv(cache_mod.VERIFY_ENV, "1")
+    rc, rep, out = verify(capsys, failing, tmp_path / "verified")
+    t = rep["timing"]
+    assert t["cache_verified"] == len(rows) and t["cache_mismatch"] == len(forged)
+    assert verdicts(rep) == clean[1] and rc == 1 and "disagreed with a fresh run" in out
+    monkeypatch.setenv(cache_mod.VERIFY_ENV, "0")
+    rc, rep, _ = verify(capsys, failing, tmp_path / "after")  # the fresh results replaced the forged ones
+    assert (rc, verdicts(rep)) == clean and rep["timing"]["cache_hits"] == len(rows)
