@@ -7,6 +7,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+HIDDEN = "content not shown: the file lies outside the project folder"
+"""What an error says instead of a value read from a file outside the project folder."""
+
 EXIT_OK = 0
 EXIT_CHECK_FAILED = 1
 EXIT_USAGE = 2
@@ -14,11 +17,16 @@ EXIT_USAGE = 2
 
 @dataclass
 class Location:
-    """A place in a spec file; line and column are 1-based (0 when unknown)."""
+    """A place in a spec file; line and column are 1-based (0 when unknown).
+
+    quote is False for a file outside the project folder: an error located there shows neither
+    its lines nor the value found, so that a spec cannot make CI logs echo another file.
+    """
 
     file: str = "<string>"
     line: int = 0
     column: int = 0
+    quote: bool = field(default=True, compare=False, repr=False)
 
     def __str__(self) -> str:
         if self.line:
@@ -62,9 +70,9 @@ class SpecError(MpgError, ValueError):
         self.location = location or Location()
         self.key = _cap(key)
         self.expected = _cap(expected, 300)
-        self.found = _cap(found)
+        self.found = _cap(found) if self.location.quote or not found else HIDDEN
         self.hint = hint
-        self.context = context
+        self.context = context if self.location.quote else ""
         if code:
             self.code = code
         super().__init__(self.format())
@@ -94,6 +102,7 @@ class SpecError(MpgError, ValueError):
             "expected": self.expected,
             "found": self.found,
             "hint": self.hint,
+            "quote": self.location.quote,
         }
 
 

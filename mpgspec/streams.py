@@ -55,3 +55,28 @@ def stdout_to_stderr():
                     os.dup2(_quiet_saved, 1)
                     os.close(_quiet_saved)
                     _quiet_saved = None
+
+
+@contextmanager
+def native_stderr_discarded():
+    """Point file descriptor 2 at /dev/null while a native parser reads a file outside the project
+    folder: its own messages (urdfdom names the joints and links of the file it rejects) must not
+    reach CI logs. sys.stderr is flushed first and writes to the real stderr again afterwards."""
+    try:
+        sys.stderr.flush()
+    except (OSError, ValueError, AttributeError):
+        pass
+    try:
+        saved = os.dup(2)
+    except OSError:  # no stderr at all: nothing can leak
+        saved = None
+    null = os.open(os.devnull, os.O_WRONLY) if saved is not None else None
+    try:
+        if null is not None:
+            os.dup2(null, 2)
+        yield
+    finally:
+        if saved is not None:
+            os.dup2(saved, 2)
+            os.close(saved)
+            os.close(null)

@@ -118,6 +118,9 @@ def _gait_args(sub) -> None:
              "  mpgspec gait specs/a1/gaits.yaml --check    exit 1 when the tables on disk are stale")
     g.add_argument("file", metavar="GAITS", help="a gait file (project, primitive, dt)")
     g.add_argument("--check", action="store_true", help="regenerate in memory and compare with the tables on disk")
+    g.add_argument("--allow-path", action="append", metavar="DIR", default=[],
+                   help="a folder outside the gait file's folder that its project and the files the project "
+                        "names may lie in (repeatable)")
     g.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     g.set_defaults(fn=cmd_gait)
 

@@ -29,12 +29,14 @@ def _progress(stream, fmt: str = "human"):
 
 
 def _print_errors(errors: list[dict], fmt: str):
+    """Each error's line, with the spec lines around it unless its file lies outside the project
+    folder (quote false: nothing of such a file is shown)."""
     for e in errors:
         if fmt == "github":
             print(_annotation("error", e.get("text", e.get("message")), e, e.get("code", "") or None))
             continue
         print(e.get("text", e.get("message")), file=sys.stderr)
-        if e.get("line"):
+        if e.get("line") and e.get("quote", True):
             try:
                 print(format_context(e["file"], e["line"], column=e.get("column", 0)), file=sys.stderr)
             except OSError:

@@ -23,7 +23,7 @@ def cmd_schema(args) -> int:
 def cmd_gait(args) -> int:
     """Generate (or with --check, compare) the gait tables of a gait file."""
     say = None if args.quiet else (lambda m: print(m, file=sys.stderr, flush=True))
-    run = api.gait(args.file, check=args.check, progress=say)
+    run = api.gait(args.file, check=args.check, progress=say, allow_paths=args.allow_path)
     if args.check:
         for p_ in run.stale:
             print(f"stale: {p_}")

@@ -8,7 +8,7 @@ from scipy.interpolate import CubicSpline
 
 from ..errors import SpecError
 from ..spec.loader import PrimitiveInstance
-from ..spec.paths import MAX_FILE_BYTES, ReadProblem, clip, clip_repr, confine, read_text_bounded
+from ..spec.paths import MAX_FILE_BYTES, ReadProblem, clip, clip_repr, confine, in_project, read_text_bounded
 from .contacts import wrap_clock
 from .expr_casadi import interp_cubic, interp_linear
 from .exprs import ExprCompiler
@@ -89,15 +89,16 @@ def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) ->
     """Times and full-state samples of a setpoint table; states without a column take their default.
 
     The table must lie inside the project folder (or an allowed folder), be a regular UTF-8 file
-    of at most MAX_FILE_BYTES and hold finite numbers; errors never echo more than a short piece
-    of a line.
+    of at most MAX_FILE_BYTES, name each column once and hold finite numbers; errors never echo
+    more than a short piece of a line, and nothing of a table outside the project folder.
     """
     where = inst.locate(("setpoint", "file"))
     key = f"primitive '{clip(inst.name, 60)}': setpoint.file"
     raw, path = spec_file(inst, inst.spec.setpoint.file, where, key)
+    quote = in_project(path, inst.roots)
 
     def fail(msg, expected, found, line=0):
-        loc = where if not line else type(where)(str(path), line, 1)
+        loc = where if not line else type(where)(str(path), line, 1, quote)
         raise SpecError(msg, location=loc, key=key, expected=expected, found=found, code="MPG110")
 
     try:
@@ -113,6 +114,10 @@ def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) ->
     unknown = [h for h in header[1:] if h not in sys.state_names]
     if unknown:
         fail("unknown state in the header", "state names of the system", clip_repr(unknown[0]), first + 1)
+    twice = _named_twice(header)
+    if twice:
+        fail("a column is named twice in the header", "each state in one column at most",
+             f"{clip_repr(twice[0])} in columns {twice[1]} and {twice[2]}", first + 1)
     rows = []
     for n, text in enumerate(lines[first + 1:], start=first + 2):
         if not text.strip():
@@ -133,6 +138,17 @@ def _samples_from_csv(inst: PrimitiveInstance, sys: CompiledSystem, contacts) ->
     for j, name in enumerate(header[1:], start=1):
         ys[:, sys.state_names.index(name)] = data[:, j]
     return data[:, 0], ys
+
+
+def _named_twice(header: list[str]) -> tuple[str, int, int] | None:
+    """The first column name that appears again and both its column numbers (1-based): a second
+    column of a state would silently replace the first."""
+    seen: dict[str, int] = {}
+    for k, name in enumerate(header, start=1):
+        if name in seen:
+            return name, seen[name], k
+        seen[name] = k
+    return None
 
 
 TABLE_KNOTS = 64

@@ -42,15 +42,17 @@ class GaitRun:
     written: list[Path] = field(default_factory=list)
 
 
-def gait(path, check: bool = False, progress=None) -> GaitRun:
-    """Find every node's orbit; with check compare the tables with the files on disk, else write them."""
+def gait(path, check: bool = False, progress=None, allow_paths=None) -> GaitRun:
+    """Find every node's orbit; with check compare the tables with the files on disk, else write them.
+
+    allow_paths: folders outside the gait file's folder that its project and the files the project
+    names may lie in (as for verify)."""
     from ..compile.system import compile_system
-    from ..robots.quadruped.gait.library import GaitTable, compare, generate, load_gait_file, write
-    from ..spec.loader import load_project
+    from ..robots.quadruped.gait.library import GaitTable, compare, gait_project, generate, write
 
     path = Path(path)
-    tables = generate(path, progress=progress or (lambda m: None))
-    names = compile_system(load_project(path.parent / load_gait_file(path).project)).state_names
+    tables = generate(path, progress=progress or (lambda m: None), allow_paths=allow_paths)
+    names = compile_system(gait_project(path, allow_paths)[2]).state_names
     bad = [f"{t.node}: {t.failure}" if t.failure else t.node for t in tables
            if isinstance(t, GaitTable) and (t.orbit.status != "converged" or not t.orbit.spectral_radius < 1)]
     if check:

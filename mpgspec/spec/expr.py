@@ -109,7 +109,7 @@ def relocate(err: ExprError, location: Location, key: str, *, shift: bool = True
     """
     offset = getattr(err, "offset", 0)
     column = location.column + offset if shift and location.column > 0 else location.column
-    new = ExprError(err.message, location=Location(location.file, location.line, column),
+    new = ExprError(err.message, location=Location(location.file, location.line, column, location.quote),
                     key=key, expected=err.expected, found=err.found, hint=err.hint,
                     code=err.code, context=err.context)
     new.offset = offset
@@ -154,7 +154,7 @@ def tokenize(text: str) -> Iterator[Token]:
         if ch.isspace():
             i += 1
             continue
-        if ch.isdigit() or (ch == "." and i + 1 < n and text[i + 1].isdigit()):
+        if "0" <= ch <= "9" or (ch == "." and i + 1 < n and "0" <= text[i + 1] <= "9"):  # ASCII digits only
             m = _NUMBER.match(text, i)
             assert m
             end = m.end()

@@ -5,7 +5,8 @@ so that later stages (expression compilation) can still report file:line:column.
 
 Every path a spec names (included system and primitive files, setpoint tables, URDFs) must lie
 inside the project folder, the data folder of a `share:` package or a folder passed in
-`allow_paths` (mpgspec.spec.paths); files are read with a size bound.
+`allow_paths` (mpgspec.spec.paths); files are read with a size bound. Errors in a file outside
+the project folder show none of its lines or values.
 """
 from __future__ import annotations
 
@@ -25,6 +26,7 @@ from .paths import (
     clip_repr,
     confine,
     confine_share,
+    in_project,
     name_problem,
     project_root,
     read_text_bounded,
@@ -201,20 +203,23 @@ def _at(pos: PositionMap, loc: tuple, offset: int | None) -> Location:
     return pos.locate(loc) if offset is None else pos.locate_in_value(loc, offset)
 
 
-def _read(path: Path) -> tuple[Any, PositionMap]:
-    """The project file itself: a missing file is a usage error, other problems spec errors."""
+def _read(path: Path, quote: bool = True, what: str = "project file") -> tuple[Any, PositionMap]:
+    """The project file itself (or a gait file: `what`): a missing file is a usage error, other
+    problems spec errors, a byte that is not UTF-8 placed at its line and column."""
     try:
         text = read_text_bounded(path, allow_empty=True)
     except ReadProblem as p:
         if p.missing:
             raise UsageError(f"{path}: no such file") from None
-        raise SpecErrors([SpecError(f"project file: {p.message}", location=Location(str(path)), key="project file",
-                                    expected=p.expected, found=p.found, code="MPG100")]) from None
-    return parse_yaml(text, str(path))
+        raise SpecErrors([SpecError(p.message, location=Location(str(path), p.line, p.column, quote),
+                                    key=what, expected=p.expected, found=p.found, code="MPG100")]) from None
+    return parse_yaml(text, str(path), quote)
 
 
-def _read_included(path: Path, written: str, where: Location, key: str) -> tuple[Any, PositionMap]:
-    """An included spec file, read bounded; a problem is a SpecError at the key that names it."""
+def _read_included(path: Path, written: str, where: Location, key: str, roots=()) -> tuple[Any, PositionMap]:
+    """An included spec file, read bounded; a problem is a SpecError at the key that names it.
+
+    A file outside the project folder (roots[0]) is parsed with quote=False."""
     try:
         text = read_text_bounded(path)
     except ReadProblem as p:
@@ -225,7 +230,7 @@ def _read_included(path: Path, written: str, where: Location, key: str) -> tuple
         raise SpecError(f"included file: {p.message}", location=where, key=key, expected=p.expected,
                         found=f"{clip_repr(written)} ({p.found})" if p.found else clip_repr(written),
                         code="MPG301") from None
-    data, positions = parse_yaml(text, str(path))
+    data, positions = parse_yaml(text, str(path), in_project(path, roots))
     if data is None:
         raise SpecError("included file has no content", location=where, key=key,
                         expected="a YAML mapping", found="only comments", code="MPG301")
@@ -290,14 +295,17 @@ def _expand(p: Primitive) -> list[tuple[str, dict[str, float]]]:
     return [(f"{p.name}({label})", {arg: float(v)}) for label, v in items]
 
 
-def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = None) -> ProjectSpec:
+def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = None,
+                 root: str | Path | None = None) -> ProjectSpec:
     """Read, validate and cross-check one project file; raise SpecErrors listing every problem.
 
     Files the spec names must lie inside the project folder (the folder of `path`, symlinks
     resolved), inside the data folder of a `share:` package, or inside one of `allow_paths`.
+    root replaces the project folder for a project named by another spec (a gait file) that lies
+    outside that spec's folder: nothing of the project's files is then quoted in errors.
     """
     path = Path(path)
-    roots = resolve_roots(project_root(path), allow_paths)
+    roots = resolve_roots(Path(root) if root is not None else project_root(path), allow_paths)
     data, pos = _read_project(path, roots)
     name_errors = _name_errors(data, pos)  # reported with the errors of whichever later pass fails
     errors: list[SpecError] = []
@@ -326,9 +334,9 @@ def _read_project(path: Path, roots) -> tuple[dict, PositionMap]:
         confine(path.name, path.absolute().parent, roots, where=Location(str(path)), key="project file")
     except SpecError as err:
         raise SpecErrors([err]) from None
-    data, pos = _read(path)
+    data, pos = _read(path, in_project(path, roots))
     if not isinstance(data, dict):
-        raise SpecErrors([SpecError("a project file must be a mapping", location=Location(str(path), 1, 1),
+        raise SpecErrors([SpecError("a project file must be a mapping", location=Location(str(path), 1, 1, pos.quote),
                                     expected="keys project, system, primitives", found=type(data).__name__,
                                     code="MPG104")])
     return data, pos
@@ -351,10 +359,15 @@ def _include_system(data: dict, pos: PositionMap, path: Path, roots, errors: lis
     if isinstance(sys_data, str):
         try:
             sys_path = confine(sys_data, path.parent, roots, where=pos.locate(("system",)), key="system")
-            sd, spos = _read_included(sys_path, sys_data, pos.locate_value(("system",)), "system")
+            sd, spos = _read_included(sys_path, sys_data, pos.locate_value(("system",)), "system", roots)
         except SpecError as err:
             errors.append(err)
         else:
+            if not isinstance(sd, dict):  # a string would be read as the name of another file
+                errors.append(SpecError("an included system file must hold a mapping",
+                                        location=pos.locate_value(("system",)), key="system",
+                                        expected="a system (mapping)", found=type(sd).__name__, code="MPG104"))
+                return data, system_locate
             data = {**data, "system": sd}
             system_locate = lambda loc, offset=None, spos=spos: _at(spos, tuple(loc), offset)
     return data, system_locate
@@ -366,10 +379,14 @@ def _include_primitives(data: dict, pos: PositionMap, path: Path, roots, errors:
     prim_sources: list[Path] = []
     prims_in: list = []
     prims_raw = data.get("primitives")
-    if prims_raw is not None and not isinstance(prims_raw, list):
+    if "primitives" not in data:
+        errors.append(SpecError("required key is missing", location=pos.locate(("primitives",)), key="primitives",
+                                expected="a list of primitive files or inline primitives",
+                                found="no key primitives in the project file", code="MPG103"))
+    elif not isinstance(prims_raw, list):
         errors.append(SpecError("primitives must be a list", location=pos.locate(("primitives",)), key="primitives",
                                 expected="a list of primitive files or inline primitives",
-                                found=type(prims_raw).__name__, code="MPG104"))
+                                found="null" if prims_raw is None else type(prims_raw).__name__, code="MPG104"))
         prims_raw = None
     for i, item in enumerate(prims_raw or []):
         if not isinstance(item, str):
@@ -380,7 +397,7 @@ def _include_primitives(data: dict, pos: PositionMap, path: Path, roots, errors:
         key = f"primitives.{i}"
         try:
             ppath = confine(item, path.parent, roots, where=pos.locate(("primitives", i)), key=key)
-            pd_, ppos = _read_included(ppath, item, pos.locate_value(("primitives", i)), key)
+            pd_, ppos = _read_included(ppath, item, pos.locate_value(("primitives", i)), key, roots)
         except SpecError as err:
             errors.append(err)
             continue

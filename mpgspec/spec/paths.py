@@ -6,7 +6,9 @@ read (and echo in an error) a file outside its project: every path a spec names 
 project folder (the folder of project.yaml), inside the data folder of a `share:` package, or
 inside a folder the caller allowed explicitly (`allow_paths`). Every file is read with a size
 bound, only if it is a regular file, and must be UTF-8 text; a problem is a located SpecError
-that never contains the file's content.
+that never contains the file's content. Errors about the content of a file outside the project
+folder (admitted by `allow_paths` or `share:`) show neither its lines nor its values
+(`Location.quote`, `shown`).
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ import sysconfig
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from ..errors import Location, SpecError
+from ..errors import HIDDEN, Location, SpecError
 
 MAX_FILE_BYTES = 10_000_000
 """Largest spec, CSV or URDF file read (bytes)."""
@@ -113,6 +115,23 @@ def confine(raw, base: Path, roots: Sequence[Path], *, where: Location, key: str
     return target
 
 
+def in_project(path: str | Path, roots: Sequence[Path]) -> bool:
+    """Whether `path` (symlinks resolved) lies in the project folder roots[0]; True when no
+    project folder is known (an instance built without the loader)."""
+    if not roots:
+        return True
+    try:
+        return _inside(Path(path).resolve(), roots[:1])
+    except (OSError, RuntimeError, ValueError):
+        return False
+
+
+def shown(text: str, path: str | Path, roots: Sequence[Path]) -> str:
+    """`text` read from the file at `path` as it may appear in an error: itself for a file in the
+    project folder, a note saying it is not shown for any other."""
+    return text if in_project(path, roots) else HIDDEN
+
+
 def share_dirs() -> list[Path]:
     """The cmeel `share` folders of the site directories (where example-robot-data lives)."""
     roots = {sysconfig.get_paths()[k] for k in ("purelib", "platlib")}
@@ -160,11 +179,16 @@ def confine_share(raw: str, roots: Sequence[Path], *, where: Location, key: str)
 
 
 class ReadProblem(Exception):
-    """A file that cannot be read as spec input; never carries the file's content."""
+    """A file that cannot be read as spec input; never carries the file's content.
 
-    def __init__(self, message: str, expected: str = "", found: str = "", missing: bool = False):
+    line and column (1-based, 0 when unknown) place the problem in the file (a byte that is not
+    UTF-8)."""
+
+    def __init__(self, message: str, expected: str = "", found: str = "", missing: bool = False,
+                 line: int = 0, column: int = 0):
         super().__init__(message)
         self.message, self.expected, self.found, self.missing = message, expected, found, missing
+        self.line, self.column = line, column
 
 
 def read_bytes_bounded(path: str | Path, limit: int = MAX_FILE_BYTES) -> bytes:
@@ -217,11 +241,21 @@ def read_text_bounded(path: str | Path, limit: int = MAX_FILE_BYTES, allow_empty
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise ReadProblem("file is not UTF-8 text", "UTF-8 text",
-                          f"byte {exc.object[exc.start]:#04x} at offset {exc.start}") from None
+        raise _not_utf8(data, exc.start) from None
     if not allow_empty and not text.strip():
         raise ReadProblem("file is empty", "a non-empty file", "no content")
     return text
+
+
+def _not_utf8(data: bytes, offset: int) -> ReadProblem:
+    """The problem of a byte that starts no UTF-8 character, placed by line and column (characters
+    before it on its line, 1-based) as well as by byte offset."""
+    start = data.rfind(b"\n", 0, offset) + 1
+    line = data.count(b"\n", 0, offset) + 1
+    column = len(data[start:offset].decode("utf-8", errors="replace")) + 1
+    return ReadProblem("file is not UTF-8 text", "UTF-8 text",
+                       f"byte {data[offset]:#04x} at line {line}, column {column}, byte offset {offset}",
+                       line=line, column=column)
 
 
 def read_text(path: str | Path, *, where: Location, key: str = "", code: str, what: str = "file",

@@ -8,10 +8,12 @@ YAML 1.1 surprises of `on: ...` becoming True or `dt: 1e-3` staying a string.
 Specs come from pull requests, so the loader is bounded: files larger than MAX_FILE_BYTES and
 values longer than MAX_SCALAR characters are refused, nesting is limited to MAX_DEPTH levels,
 and aliases and merge keys (`<<`) may expand to at most MAX_EXPANSION nodes (a billion-laughs
-document fails fast). Error messages echo at most MAX_ECHO characters of a line or value.
+document fails fast). Error messages echo at most MAX_ECHO characters of a line or value, and
+nothing of a file outside the project folder (`quote=False`: no lines, values or quoted names).
 """
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import re
@@ -144,6 +146,8 @@ class PositionMap:
     file: str = "<string>"
     text: str = field(default="", repr=False)
     entries: dict[PathKey, _Entry] = field(default_factory=dict, repr=False)
+    quote: bool = True
+    """False for a file outside the project folder: its locations say so (Location.quote)."""
 
     def __contains__(self, path: PathKey) -> bool:
         return tuple(path) in self.entries
@@ -156,19 +160,19 @@ class PositionMap:
                 return path[:n], entry
         return (), None
 
-    def _loc(self, pos: tuple[int, int]) -> Location:
-        return Location(self.file, *pos)
+    def _loc(self, pos: tuple[int, int] = (0, 0)) -> Location:
+        return Location(self.file, *pos, quote=self.quote)
 
     def locate(self, path: PathKey) -> Location:
         """Where the key at path starts; for a missing path, its deepest existing ancestor."""
         _, entry = self._deepest(path)
-        return self._loc(entry.key) if entry else Location(self.file)
+        return self._loc(entry.key) if entry else self._loc()
 
     def locate_value(self, path: PathKey) -> Location:
         """Where the value at path starts; for a missing path, as locate()."""
         found, entry = self._deepest(path)
         if entry is None:
-            return Location(self.file)
+            return self._loc()
         return self._loc(entry.value if found == tuple(path) else entry.key)
 
     def locate_in_value(self, path: PathKey, offset: int) -> Location:
@@ -186,15 +190,14 @@ class PositionMap:
             inner = 0 if node.style is None else 1
             raw = self.text[start.index + inner:end.index - inner] if self.text else ""
             if raw == node.value and 0 <= offset <= len(node.value):
-                return Location(self.file, line, column + inner + offset)
+                return self._loc((line, column + inner + offset))
         if node.style == "|" and self.text:
             before = node.value[:offset]
             row = before.count("\n")
             first = start.line + 1  # 0-based; content starts on the line after the indicator
             content = [ln for ln in self.text.splitlines()[first:] if ln.strip()]
             indent = len(content[0]) - len(content[0].lstrip(" ")) if content else 0
-            return Location(self.file, first + row + 1, indent + len(before) - (
-                before.rfind("\n") + 1) + 1)
+            return self._loc((first + row + 1, indent + len(before) - (before.rfind("\n") + 1) + 1))
         return self._loc(entry.value)
 
 
@@ -210,12 +213,34 @@ def load_yaml(path_or_text: str | Path, filename: str | None = None) -> tuple[An
     return parse_yaml(text, name)
 
 
-def parse_yaml(text: str, name: str = "<string>") -> tuple[Any, PositionMap]:
-    """load_yaml for text already read; `name` labels locations."""
+def parse_yaml(text: str, name: str = "<string>", quote: bool = True) -> tuple[Any, PositionMap]:
+    """load_yaml for text already read; `name` labels locations. quote=False for a file outside
+    the project folder: errors and locations then carry nothing of its text (`hidden`)."""
+    try:
+        return _parse(text, name, quote)
+    except SpecError as err:
+        if quote:
+            raise
+        raise hidden(err) from None
+
+
+def hidden(err: SpecError) -> SpecError:
+    """err as it may be shown for a file outside the project folder: its message up to the first
+    quoted piece of the file, no key (a path of the file's keys), found and context hidden."""
+    message = _QUOTE.split(err.message, maxsplit=1)[0].rstrip(" :(,")
+    return SpecError(message or "invalid YAML", location=dataclasses.replace(err.location, quote=False),
+                     expected=err.expected, found=err.found, hint="" if _QUOTE.search(err.hint) else err.hint,
+                     code=err.code)
+
+
+_QUOTE = re.compile(r"""['"]""")
+
+
+def _parse(text: str, name: str, quote: bool) -> tuple[Any, PositionMap]:
     if len(text) > MAX_FILE_BYTES:
         raise SpecError("YAML text is too large", location=Location(name), code="MPG100",
                         expected=f"at most {MAX_FILE_BYTES} characters", found=f"{len(text)} characters")
-    positions = PositionMap(file=name, text=text)
+    positions = PositionMap(file=name, text=text, quote=quote)
     stream = io.StringIO(text)
     stream.name = name  # PyYAML labels marks with the stream's name
     try:
@@ -264,8 +289,8 @@ def _read(path_or_text: str | Path, filename: str | None) -> tuple[str, str]:
     except ReadProblem as p:
         if p.missing:
             raise UsageError(f"{path}: no such file") from None
-        raise SpecError(p.message, location=Location(name), code="MPG100", expected=p.expected,
-                        found=p.found) from None
+        raise SpecError(p.message, location=Location(name, p.line, p.column), code="MPG100",
+                        expected=p.expected, found=p.found) from None
 
 
 def _is_file(text: str) -> bool:

@@ -403,3 +403,158 @@ def test_overlong_value_is_a_located_error(proj, capsys):
     out, errtext = capsys.readouterr()
     assert_no_leak(out, errtext)
     assert max(len(ln) for ln in errtext.splitlines()) < 400
+
+
+# ----------------------------------------------------------------------------- allowed folders quote nothing
+
+
+def cli(capfd, *argv) -> tuple[int, str]:
+    """Exit code and everything written to stdout and stderr, also by native code (fd level)."""
+    rc = main([str(a) for a in argv])
+    out, err = capfd.readouterr()
+    return rc, out + err
+
+
+def _csv_header(outside: Path) -> str:
+    (outside / "header.csv").write_text(f"t,{SECRET}\n0,0\n1,0\n")
+    return project_text(setpoint=f"{{file: {outside / 'header.csv'}}}")
+
+
+def _csv_row(outside: Path) -> str:
+    (outside / "row.csv").write_text(f"t,x\n0,0\n1,{SECRET}\n")
+    return project_text(setpoint=f"{{file: {outside / 'row.csv'}}}")
+
+
+def _system_value(outside: Path) -> str:
+    (outside / "kind.yaml").write_text(SYSTEM.replace("kind: analytic", f"kind: {SECRET}"))
+    return project_text(system=str(outside / "kind.yaml"))
+
+
+def _system_alias(outside: Path) -> str:
+    (outside / "alias.yaml").write_text(f"name: *{SECRET}\n")
+    return project_text(system=str(outside / "alias.yaml"))
+
+
+def _system_nul(outside: Path) -> str:
+    (outside / "environ").write_bytes(f"TOKEN={SECRET}\0HOME=/root\0".encode())
+    return project_text(system=str(outside / "environ"))
+
+
+def _primitive_duplicate_key(outside: Path) -> str:
+    (outside / "dup.yaml").write_text(f"{PRIMITIVE}{SECRET}: 1\n{SECRET}: 2\n")
+    return project_text(primitives=f"[{outside / 'dup.yaml'}]")
+
+
+def _urdf(outside: Path) -> str:
+    (outside / "joint.urdf").write_text(
+        f"<robot name='r'><link name='base'/><joint name='{SECRET}' type='revolute'><parent link='x'/>"
+        "<child link='base'/><axis xyz='0 0 1'/></joint></robot>\n")
+    return (f"project: rb\nsystem:\n  kind: rigid_body\n  name: r\n  urdf: {outside / 'joint.urdf'}\n"
+            f"  floating_base: false\nprimitives: [{{name: A, class: fixed, setpoint: {{expr: [0]}}, "
+            f"controller: {{type: expression, u: []}}, roa: {{radius: 0.1}}}}]\n")
+
+
+ALLOWED_FILES = {"csv header": (_csv_header, "MPG110"), "csv row": (_csv_row, "MPG110"),
+                 "system value": (_system_value, "MPG104"), "undefined alias": (_system_alias, "MPG100"),
+                 "NUL bytes (an environ file)": (_system_nul, "MPG100"),
+                 "duplicate key": (_primitive_duplicate_key, "MPG101"), "urdf parser message": (_urdf, "MPG109")}
+
+
+@pytest.mark.parametrize("case", sorted(ALLOWED_FILES))
+def test_errors_about_an_allowed_file_quote_none_of_it(proj, outside, capfd, case):
+    """--allow-path admits a file, never its content into a message, its lines as context, nor
+    the messages of a native parser reading it."""
+    make, code = ALLOWED_FILES[case]
+    path = write(proj, make(outside))
+    rc, text = cli(capfd, "verify", path, "--no-write", "-q", "--no-cache", "--allow-path", outside)
+    assert rc == 2 and code in text, text
+    assert_no_leak(text)
+    assert "MPG900" not in text
+    lines = text.splitlines()
+    for line, after in zip(lines, lines[1:]):  # an error located in the outside file shows no lines of it
+        assert not (line.startswith(str(outside.resolve())) and " | " in after), text
+
+
+def test_an_allowed_csv_is_located_in_it_without_its_content(proj, outside):
+    spec = load_project(write(proj, _csv_row(outside)), allow_paths=[outside])
+    with pytest.raises(SpecError) as info:
+        compile_project(spec)
+    err = info.value
+    assert (err.location.file, err.location.line) == (str((outside / "row.csv").resolve()), 3)
+    assert not err.location.quote and not err.to_dict()["quote"]
+    assert err.key == "primitive 'Hold': setpoint.file" and "not shown" in err.found
+    assert_no_leak(err.format(), str(err.to_dict()))
+
+
+def test_a_csv_inside_the_project_is_still_quoted(proj):
+    err = _csv_error(proj, b"t,x\n0,0\n1,abc\n")
+    assert err.location.quote and "abc" in err.found
+
+
+@pytest.mark.parametrize("where", ["setpoint", "system"])
+def test_proc_self_environ_with_allow_path_proc_does_not_leak(proj, where):
+    """The reviewer's case: a secret in the environment of `mpgspec verify --allow-path /proc`."""
+    import subprocess
+    import sys
+
+    text = project_text(setpoint="{file: /proc/self/environ}") if where == "setpoint" else \
+        project_text(system="/proc/self/environ")
+    path = write(proj, text)
+    env = {**os.environ, "MPG_CONF_SECRET": SECRET}
+    run = subprocess.run([sys.executable, "-m", "mpgspec", "verify", str(path), "--no-write", "-q", "--no-cache",
+                          "--allow-path", "/proc"], env=env, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2, run.stderr
+    assert_no_leak(run.stdout, run.stderr)
+    assert "MPG110" in run.stderr if where == "setpoint" else "MPG100" in run.stderr
+
+
+# ----------------------------------------------------------------------------- gait files
+
+
+PENDULUM = Path(__file__).parents[2] / "specs" / "pendulum"
+
+
+@pytest.fixture
+def pendulum(tmp_path: Path) -> Path:
+    import shutil
+
+    shutil.copytree(PENDULUM, tmp_path / "pendulum")
+    return tmp_path / "pendulum"
+
+
+def gait_file(folder: Path, project: str) -> Path:
+    path = folder / "gaits.yaml"
+    path.write_text(f"project: {project}\nprimitive: Walk\ndt: 0.001\n")
+    return path
+
+
+def test_gait_project_etc_passwd_is_refused(pendulum, capfd):
+    from mpgspec.robots.quadruped.gait.library import generate
+
+    gaits = gait_file(pendulum, "../../../../../../../../etc/passwd")
+    with pytest.raises(SpecError) as info:
+        generate(gaits, progress=lambda m: None)
+    err = info.value
+    assert err.code == "MPG305" and err.key == "project" and err.found == repr("../../../../../../../../etc/passwd")
+    assert (err.location.file, err.location.line, err.location.column) == (str(gaits), 1, 10)
+    assert str(pendulum.resolve()) in err.expected
+    rc, text = cli(capfd, "gait", gaits, "-q")
+    assert rc == 2 and f"{gaits}:1:10 MPG305 project: path outside the project folder" in text
+    assert_no_leak(text, secret="root:")
+
+
+def test_gait_project_symlink_outside_is_refused(pendulum, outside, capfd):
+    (pendulum / "elsewhere.yaml").symlink_to(outside / "secret.yaml")
+    gaits = gait_file(pendulum, "elsewhere.yaml")
+    rc, text = cli(capfd, "gait", gaits, "-q")
+    assert rc == 2 and f"{gaits}:1:10 MPG305" in text
+    assert_no_leak(text)
+
+
+def test_gait_project_in_an_allowed_folder_is_read_but_not_quoted(pendulum, outside, capfd):
+    gaits = gait_file(pendulum, str(outside / "secret.yaml"))
+    rc, text = cli(capfd, "gait", gaits, "-q")
+    assert rc == 2 and "MPG305" in text
+    rc, text = cli(capfd, "gait", gaits, "-q", "--allow-path", outside)
+    assert rc == 2 and "MPG305" not in text and "secret.yaml" in text
+    assert_no_leak(text)

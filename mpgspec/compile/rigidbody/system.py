@@ -7,6 +7,7 @@ up); com_x, com_y, com_z; and `mass`.
 """
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -351,16 +352,40 @@ def _urdf_path(spec, urdf: str) -> Path:
     return confine(urdf, Path(spec.path).parent, roots, where=where, key="system.urdf")
 
 
+def _read_model(path: Path, spec) -> RigidBodyModel:
+    """The URDF's model; for a URDF outside the project folder the parser's own messages (they name
+    the file's joints and links) are discarded."""
+    from ...spec.paths import in_project
+    from ...streams import native_stderr_discarded
+
+    s = spec.system
+    quiet = not in_project(path, getattr(spec, "roots", ()))
+    with native_stderr_discarded() if quiet else nullcontext():
+        return RigidBodyModel(path, s.contacts, floating_base=s.floating_base)
+
+
+def _model_problem(err: Exception, path: Path | None, spec) -> str:
+    """What went wrong loading the URDF: the parser's message (which may quote the file) only for
+    a URDF in the project folder; contact frames missing (names from the spec) always."""
+    from ...spec.paths import shown
+
+    text = str(err)[:300]
+    if isinstance(err, KeyError) or path is None:
+        return text
+    return shown(text, path, getattr(spec, "roots", ()))
+
+
 def compile_rigid_body(spec) -> RigidBodyCompiledSystem:
     """Load the URDF with pinocchio and build symbols, env and limits."""
     from ...spec.paths import ReadProblem, clip_repr, read_text_bounded
 
     s = spec.system
     where = spec.system_locate(("urdf",))
+    path = None
     try:
         path = _urdf_path(spec, s.urdf)
         read_text_bounded(path)  # a regular UTF-8 file of bounded size before pinocchio parses it
-        model = RigidBodyModel(path, s.contacts, floating_base=s.floating_base)
+        model = _read_model(path, spec)
     except SpecError:
         raise
     except ReadProblem as p:
@@ -370,7 +395,7 @@ def compile_rigid_body(spec) -> RigidBodyCompiledSystem:
     except (FileNotFoundError, OSError, ValueError, KeyError) as err:
         raise SpecError("cannot load the robot model", location=where, key="system.urdf",
                         expected="a readable URDF with the named contact frames",
-                        found=f"{clip_repr(s.urdf)} ({str(err)[:300]})", code="MPG109") from None
+                        found=f"{clip_repr(s.urdf)} ({_model_problem(err, path, spec)})", code="MPG109") from None
     legs = resolve_legs(s, model, spec.system_locate)
     dyn = RigidBodyDynamics(model)
     qn = (BASE_Q if model.n_base else []) + list(model.joint_names)

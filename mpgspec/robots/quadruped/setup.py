@@ -8,7 +8,7 @@ import json
 from ...compile.laws.kind import Setup
 from ...compile.setpoint import spec_file
 from ...errors import SpecError
-from ...spec.paths import MAX_FILE_BYTES, ReadProblem, read_text_bounded
+from ...spec.paths import MAX_FILE_BYTES, ReadProblem, clip, read_text_bounded, shown
 from .pairs import trot_pairs
 from .trot import check_pose, gains_of, min_normal_force, stance_height
 
@@ -38,14 +38,16 @@ def trot_setup(inst, sys, ec, consts: dict) -> Setup:
         if head.get("inputs") != out["inputs"]:
             raise SpecError("the gait table is stale: it was generated for other settings", location=where,
                             key=f"{owner}: controller.gait", expected=f"inputs {out['inputs']}",
-                            found=f"inputs {head.get('inputs')}", code="MPG110",
+                            found=shown(f"inputs {clip(str(head.get('inputs')), 60)}", path, inst.roots),
+                            code="MPG110",
                             hint="regenerate it with `mpgspec gait <project>/gaits.yaml`")
         try:
             out["command"] = float(head["command"])
         except (KeyError, ValueError):
             raise SpecError("the gait table has no calibrated command", location=where,
                             key=f"{owner}: controller.gait", expected="a header line '# command: <m/s>'",
-                            found=str(head.get("command")), code="MPG110") from None
+                            found=shown(clip(str(head.get("command")), 60), path, inst.roots),
+                            code="MPG110") from None
         out["gait"] = {k: head[k] for k in head}
         out["gait_file"] = str(raw)
     gains = gains_of(c, out["command"], sys, ec)

@@ -6,6 +6,9 @@ A gait file (e.g. specs/a1/gaits.yaml) names the project, the trot primitive and
     primitive: Walk
     dt: 0.001
 
+The project must lie in the gait file's folder (or a folder passed in `allow_paths`), like every
+path a spec names (mpgspec.spec.paths); errors are located in the gait file.
+
 `mpgspec gait specs/a1/gaits.yaml` compiles every node of the primitive, finds its orbit
 (gait/orbit.py) and writes the table its `controller.gait` and `setpoint.file` name: a header
 of `# key: value` lines (solver status, residual, calibrated command, Floquet multipliers, the hash
@@ -27,12 +30,14 @@ from ....compile.exprs import ExprCompiler
 from ....compile.primitive import compile_primitive
 from ....compile.setpoint import spec_file
 from ....compile.system import compile_system
-from ....errors import SpecError
+from ....errors import Location, SpecError
 from ....oracle.flow import switched_flow
 from ....report.write import write_atomic
 from ....spec.base import Strict
-from ....spec.loader import _read, load_project
+from ....spec.loader import ProjectSpec, _read, load_project
+from ....spec.paths import ReadProblem, confine, in_project, project_root, read_text_bounded, resolve_roots
 from ....spec.primitive import Setpoint
+from ....spec.yamlpos import PositionMap
 from ..models import TrotController
 from ..setup import check_ready, trot_inputs
 from ..stance import nominal_state
@@ -127,7 +132,14 @@ class FlowTable:
         return "\n".join(lines) + "\n"
 
 
-def _start_state(spec, sys, entry: TransientEntry, done: dict) -> np.ndarray:
+def _entry_at(pos: PositionMap | None, index: int, name: str) -> tuple[Location | None, str]:
+    """Where a field of the index-th transient entry is written in the gait file, and its key."""
+    where = pos.locate_value(("transients", index, name)) if pos is not None else None
+    return where, f"transients.{index}.{name}"
+
+
+def _start_state(spec, sys, entry: TransientEntry, done: dict, pos: PositionMap | None = None,
+                 index: int = 0) -> np.ndarray:
     """x0 of a flow: the stance of the controller's pose, or another transient's x* at the end of its
     domain (from the table generated before it, else from the compiled primitive)."""
     if entry.start is None:
@@ -135,7 +147,8 @@ def _start_state(spec, sys, entry: TransientEntry, done: dict) -> np.ndarray:
         return nominal_state(sys, dict(inst.spec.controller.pose))
     src = next((i for i in spec.primitives if i.name == entry.start), None)
     if src is None or src.spec.domain is None:
-        raise SpecError("no transient primitive of that name", location=None, key="transients.start",
+        where, key = _entry_at(pos, index, "start")
+        raise SpecError("no transient primitive of that name", location=where, key=key,
                         expected="the name of a transient primitive", found=entry.start, code="MPG104")
     if entry.start in done:
         table = done[entry.start]
@@ -145,21 +158,23 @@ def _start_state(spec, sys, entry: TransientEntry, done: dict) -> np.ndarray:
     return prim.x_star(prim.domain[1])
 
 
-def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print, done: dict | None = None) -> FlowTable:
+def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print, done: dict | None = None,
+               pos: PositionMap | None = None, index: int = 0) -> FlowTable:
     """Roll out a transient primitive's closed loop from its start for entry.duration, with the
     oracle's step (RK4, the step-end rule, the jump with contact events); with `rest`, x* is the
-    end state held."""
+    end state held. pos and index locate errors at the entry (transients[index]) of the gait file."""
     inst = next((i for i in spec.primitives if i.name == entry.primitive), None)
     ctrl = inst.spec.controller if inst is not None else None
     free = ctrl is not None and not getattr(ctrl, "reads_setpoint", True)
     if inst is None or not free or inst.spec.setpoint.file is None:
+        where, key = _entry_at(pos, index, "primitive")
         raise SpecError("no transient primitive of that name whose law does not read x*, with a setpoint table",
-                        location=None, key="transients.primitive",
+                        location=where, key=key,
                         expected="a primitive with controller type jump (or pd with a target) and setpoint.file",
                         found=entry.primitive, code="MPG104")
     path = spec_file(inst, inst.spec.setpoint.file, inst.locate(("setpoint", "file")),
                      f"primitive '{inst.name}': setpoint.file")[1]
-    x0 = _start_state(spec, sys, entry, done or {})
+    x0 = _start_state(spec, sys, entry, done or {}, pos, index)
     named = {n: float(v) for n, v in zip(sys.state_names, x0) if v != 0.0 and not n.startswith(("contact_", "since_"))}
     start = dataclasses.replace(inst, spec=inst.spec.model_copy(update={"setpoint": Setpoint(named=named)}))
     progress(f"compiling {inst.name} (its law does not read x*)")
@@ -183,9 +198,15 @@ def flow_table(spec, sys, entry: TransientEntry, dt: float, progress=print, done
 
 
 def load_gait_file(path: Path) -> GaitFile:
-    data, pos = _read(path)
+    """The validated gait file (a located SpecError otherwise)."""
+    return read_gait_file(path)[0]
+
+
+def read_gait_file(path: Path) -> tuple[GaitFile, PositionMap]:
+    """The validated gait file and the positions of its keys, to locate later errors in it."""
+    data, pos = _read(Path(path), what="gait file")
     try:
-        return GaitFile.model_validate(data)
+        return GaitFile.model_validate(data), pos
     except Exception as err:  # pydantic's ValidationError, located by the first failing key
         errs = getattr(err, "errors", lambda: [])()
         loc = tuple(errs[0]["loc"]) if errs else ()
@@ -194,16 +215,31 @@ def load_gait_file(path: Path) -> GaitFile:
                         code="MPG104") from None
 
 
-def generate(path: str | Path, progress=print) -> list:
-    """Find the orbit of every node of the gait file's primitive and the flow of every transient
-    entry; return the tables (not yet written)."""
+def gait_project(path: str | Path, allow_paths=None) -> tuple[GaitFile, PositionMap, ProjectSpec]:
+    """The gait file, its positions and the project it names, loaded with `allow_paths`.
+
+    The project is a path a spec names: it must lie in the gait file's folder (symlinks resolved)
+    or in an allowed folder, else a located SpecError (MPG305) before it is read. A project in an
+    allowed folder is loaded with the gait file's folder as its root: its files are not quoted.
+    """
     path = Path(path)
-    gf = load_gait_file(path)
-    spec = load_project(path.parent / gf.project)
+    gf, pos = read_gait_file(path)
+    roots = resolve_roots(project_root(path), allow_paths)
+    target = confine(gf.project, path.absolute().parent, roots, where=pos.locate_value(("project",)),
+                     key="project")
+    root = None if in_project(target, roots) else roots[0]
+    return gf, pos, load_project(path.parent / gf.project, allow_paths=allow_paths, root=root)
+
+
+def generate(path: str | Path, progress=print, allow_paths=None) -> list:
+    """Find the orbit of every node of the gait file's primitive and the flow of every transient
+    entry; return the tables (not yet written). allow_paths: folders outside the gait file's
+    folder that its project (and the files the project names) may lie in."""
+    gf, pos, spec = gait_project(path, allow_paths)
     sys = compile_system(spec)
     nodes = [i for i in spec.primitives if i.base == gf.primitive]
     if not nodes or not isinstance(nodes[0].spec.controller, TrotController):
-        raise SpecError("no trot primitive of that name", location=None, key="primitive",
+        raise SpecError("no trot primitive of that name", location=pos.locate_value(("primitive",)), key="primitive",
                         expected="the name of a primitive with controller type trot", found=gf.primitive,
                         code="MPG104")
     ctrl = nodes[0].spec.controller
@@ -218,7 +254,7 @@ def generate(path: str | Path, progress=print) -> list:
     try:
         sm = StrideMap(sys, ctrl, gf.dt)
     except ValueError as err:  # the trot's switching times are not on the step grid
-        raise SpecError("the gait's step does not divide the trot's timing", location=_read(path)[1].locate(("dt",)),
+        raise SpecError("the gait's step does not divide the trot's timing", location=pos.locate(("dt",)),
                         key="dt", expected="a step that divides swing and double_support",
                         found=f"{gf.dt:g} s ({err})", code="MPG104") from None
     stand = nominal_state(sys, dict(ctrl.pose))
@@ -235,8 +271,8 @@ def generate(path: str | Path, progress=print) -> list:
                  f"command {orbit.command:.4f} m/s for a mean speed of {orbit.stats['mean_speed']:.4f} m/s, "
                  f"largest multiplier {orbit.spectral_radius:.4f} ({orbit.seconds:.1f} s)")
     done: dict[str, FlowTable] = {}
-    for entry in gf.transients:
-        done[entry.primitive] = flow_table(spec, sys, entry, gf.dt, progress, done)
+    for index, entry in enumerate(gf.transients):
+        done[entry.primitive] = flow_table(spec, sys, entry, gf.dt, progress, done, pos, index)
         out.append(done[entry.primitive])
     return out
 
@@ -263,8 +299,10 @@ def compare(tables: list[GaitTable], state_names: list[str]) -> list[str]:
         if not t.path.is_file():
             problems.append(f"{t.node}: {t.path} is missing")
             continue
-        rows = [ln for ln in t.path.read_text().splitlines() if ln and not ln.startswith("#")][1:]
-        old = np.array([[float(v) for v in r.split(",")] for r in rows]).T
+        old = _table_on_disk(t.path)
+        if old is None:
+            problems.append(f"{t.node}: {t.path} is not a table of numbers with a header line")
+            continue
         new = np.vstack([t.orbit.t, t.orbit.X]) if isinstance(t, GaitTable) else np.vstack([t.t, t.X])
         if old.shape != new.shape:
             problems.append(f"{t.node}: {old.shape[1]} rows on disk, {new.shape[1]} regenerated")
@@ -273,3 +311,15 @@ def compare(tables: list[GaitTable], state_names: list[str]) -> list[str]:
         if not diff <= TOLERANCE:
             problems.append(f"{t.node}: states differ by up to {diff:.2e} (tolerance {TOLERANCE:g})")
     return problems
+
+
+def _table_on_disk(path: Path) -> np.ndarray | None:
+    """The columns of a gait table on disk (time first), read with the bound of every spec file;
+    None when it is not a table of numbers (nothing of the file goes into a message)."""
+    try:
+        lines = read_text_bounded(path).splitlines()
+        rows = [ln for ln in lines if ln and not ln.startswith("#")][1:]
+        old = np.array([[float(v) for v in r.split(",")] for r in rows], float).T
+    except (ReadProblem, ValueError):
+        return None
+    return old if old.ndim == 2 else None
