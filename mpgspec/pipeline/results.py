@@ -128,7 +128,8 @@ class VerifyResult:
 
 def load_report(path) -> ProjectResult:
     """A verified project read back from its report.json (or the folder holding it): report, status,
-    the planner's graph, plan(); simulate() compiles the project from the spec path in the report."""
+    the planner's graph, plan(); simulate() compiles the project from the spec path in the report.
+    A report that was edited, written with another key or is malformed raises ReportError (exit 2)."""
     p = Path(path)
     report = read(p)
     name = report.get("project", {}).get("name", "")

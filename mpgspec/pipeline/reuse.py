@@ -28,7 +28,8 @@ def load_one(path):
 
 def quick_report(project, out, rebuild: bool) -> dict | None:
     """The report `verify` wrote for the project at `project` when it matches the spec files, found
-    without loading the spec (its name is read from project.yaml); None otherwise."""
+    without loading the spec (its name is read from project.yaml); None otherwise. A current report
+    that its checks refuse (edited, written with another key, malformed) raises ReportError."""
     if rebuild:
         return None
     f = Path(project)
@@ -40,15 +41,16 @@ def quick_report(project, out, rebuild: bool) -> dict | None:
     name = data.get("project") if isinstance(data, dict) else None
     if not isinstance(name, str) or not name.strip() or Path(name).name != name or name.startswith("."):
         return None
-    return report_status(Path(out) / name / "report.json", f)[0]
+    return report_status(Path(out) / name / "report.json", f, strict=True)[0]
 
 
-def verified(spec, out, rebuild: bool, notify: Notify | None = None) -> dict | None:
+def verified(spec, out, rebuild: bool, notify: Notify | None = None, strict: bool = True) -> dict | None:
     """The project's report from `verify` when it matches the spec files, else None (telling
-    notify why)."""
+    notify why). strict: a current report that its checks refuse raises ReportError (plan and
+    simulate stop on it); otherwise it is only not used."""
     if rebuild:
         return None
-    report, why = report_status(Path(out) / spec.name / "report.json", spec.path)
+    report, why = report_status(Path(out) / spec.name / "report.json", spec.path, strict)
     if report is None and notify is not None:
         notify(f"mpgspec: {why}; rebuilding the graph (run `mpgspec verify` to store it)")
     return report

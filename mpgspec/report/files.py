@@ -11,6 +11,7 @@ project's folder must lie inside the report folder once both are resolved; a pro
 """
 from __future__ import annotations
 
+import json
 import os
 import secrets
 import shutil
@@ -26,6 +27,7 @@ from ..graph.transition import MotionPrimitiveGraph
 from .build import finite_json
 from .export import to_dot, to_graphml
 from .html import render_html
+from .trust import integrity_record
 from .write import json_text, write_new
 
 FORMATS = ("json", "html", "dot", "graphml")
@@ -68,7 +70,7 @@ def render_reports(report: dict, formats=FORMATS) -> dict[str, str]:
     data = finite_json(report)
     texts = {}
     if "json" in formats:
-        texts["json"] = json_text(data, compact=True)
+        texts["json"] = json_text(sealed(data), compact=True)
         texts["lookup_table"] = json_text(data.get("lookup_table", {}))
     if "html" in formats:
         texts["html"] = render_html(data)
@@ -77,6 +79,13 @@ def render_reports(report: dict, formats=FORMATS) -> dict[str, str]:
     if "graphml" in formats:
         texts["graphml"] = to_graphml(data)
     return texts
+
+
+def sealed(data: dict) -> dict:
+    """The report as report.json holds it, with its integrity record (trust.integrity_record) taken
+    over exactly that content: the report is read back from its JSON text first."""
+    plain = json.loads(json_text(data, compact=True))
+    return {**plain, "integrity": integrity_record(plain)}
 
 
 def write_project_reports(report: dict, out_dir, name: str | None = None, formats=FORMATS) -> dict[str, str]:

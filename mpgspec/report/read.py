@@ -1,6 +1,10 @@
 """Read verified results back: a report.json, whether it still belongs to the specs, and the
 planner's graph rebuilt from it (only the edges the planner may take, with their weights).
 
+A report is used only when trust.check_report accepts it (its integrity record under this machine's
+key, then its structure); otherwise reading it raises trust.ReportError, which names the file and
+the key path.
+
 Kept light (json and networkx) so that `mpgspec plan` answers from a report in well under a second.
 """
 from __future__ import annotations
@@ -13,34 +17,51 @@ from pathlib import Path
 import networkx as nx
 
 from ..plan.planner import WEIGHTS
+from .trust import ReportError, check_graph, check_report
 
 
-def load_report(path) -> dict:
-    """A report.json (or the folder holding one) as a dict."""
-    p = Path(path)
-    if p.is_dir():
-        p = p / "report.json"
-    with open(p, encoding="utf-8") as f:
+def _read_json(path: Path):
+    with open(path, encoding="utf-8") as f:
         return json.load(f)
 
 
-def report_status(report_path, project_file) -> tuple[dict | None, str]:
+def load_report(path) -> dict:
+    """A report.json (or the folder holding one) as a dict; ReportError when it is refused."""
+    p = Path(path)
+    if p.is_dir():
+        p = p / "report.json"
+    report = _read_json(p)
+    check_report(report, p)
+    return report
+
+
+def report_status(report_path, project_file, strict: bool = False) -> tuple[dict | None, str]:
     """(report, '') when the report at report_path was verified from the project's current spec
-    files, else (None, why not)."""
+    files and is accepted by its checks, else (None, why not). strict: a current report that the
+    checks refuse raises ReportError instead (plan and simulate stop on it rather than rebuild)."""
     from ..spec.digest import spec_digest
 
     p = Path(report_path)
     if not p.is_file():
         return None, f"no verified results at {p}"
     try:
-        report = load_report(p)
-    except (OSError, ValueError) as e:
+        report = _read_json(p)
+    except (OSError, ValueError, RecursionError) as e:
         return None, f"{p} cannot be read ({e})"
-    if not str(report.get("schema_version", "")).startswith("2."):
-        return None, f"{p} has report schema {report.get('schema_version')!r}, not 2.x"
-    stored = (report.get("project") or {}).get("digest")
-    if not stored or stored != spec_digest(project_file):
-        return None, f"{p} is stale: the spec files changed since it was verified"
+    try:
+        if not isinstance(report, dict):
+            check_report(report, p)
+        if not str(report.get("schema_version", "")).startswith("2."):
+            return None, f"{p} has report schema {report.get('schema_version')!r}, not 2.x"
+        project = report.get("project")
+        stored = project.get("digest") if isinstance(project, dict) else None
+        if not stored or stored != spec_digest(project_file):
+            return None, f"{p} is stale: the spec files changed since it was verified"
+        check_report(report, p)
+    except ReportError as e:
+        if strict:
+            raise
+        return None, str(e)
     return report, ""
 
 
@@ -73,9 +94,11 @@ class ReportTransition:
 
 class ReportGraph:
     """The motion primitive graph of a report: G holds every verified edge (attribute `class`),
-    planner_graph() the ones the planner may take; edge(a, b) as MotionPrimitiveGraph.edge."""
+    planner_graph() the ones the planner may take; edge(a, b) as MotionPrimitiveGraph.edge.
+    A report whose graph cannot be rebuilt raises ReportError (source: where it was read)."""
 
-    def __init__(self, report: dict):
+    def __init__(self, report: dict, source="report"):
+        check_graph(report, source)
         self.report = report
         self.G = nx.DiGraph()
         for p in report.get("primitives", []):

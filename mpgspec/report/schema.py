@@ -313,6 +313,16 @@ class Sequence(_Strict):
     runs: dict[str, Run]
 
 
+class Integrity(_Strict):
+    """What plan and simulate check before they use the report (mpgspec.report.trust)."""
+
+    sha256: str = Field(pattern=r"^[0-9a-f]{64}$", description="sha256 of the report's canonical JSON (sorted keys, "
+                                                               "no whitespace) without integrity, generated_at "
+                                                               "and timing")
+    mac: str = Field(pattern=r"^[0-9a-f]{64}$", description="HMAC-SHA256 of that hash under the key of the machine "
+                                                            "that wrote it (MPGSPEC_CACHE_KEY, else its key file)")
+
+
 class ReportCore(_Strict):
     """One project's verification report; the HTML, DOT and GraphML files are rendered from it."""
 
@@ -337,6 +347,8 @@ class ReportCore(_Strict):
     assumptions: list[AssumptionCheck] = Field(default_factory=list)
     sequence: Sequence | None
     timing: dict[str, float]
+    integrity: Integrity | None = Field(default=None, description="written with report.json; absent from the "
+                                                                  "report of a run that wrote no files")
 
 
 @lru_cache(maxsize=1)
