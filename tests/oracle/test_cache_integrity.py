@@ -174,3 +174,20 @@ def test_verify_cache_catches_a_row_forged_with_the_key(capsys, tmp_path, failin
     monkeypatch.setenv(cache_mod.VERIFY_ENV, "0")
     rc, rep, _ = verify(capsys, failing, tmp_path / "after")  # the fresh results replaced the forged ones
     assert (rc, verdicts(rep)) == clean and rep["timing"]["cache_hits"] == len(rows)
+
+
+@pytest.mark.parametrize("value", ["-0.1", "1.5", "nan"])
+def test_verify_cache_takes_a_fraction(capsys, value):
+    rc = main(["verify", str(TINY), "--no-write", "-q", "--verify-cache", value])
+    _out, err = capsys.readouterr()
+    assert rc == 2 and "--verify-cache" in err
+
+
+def test_verify_cache_flag_reruns_the_stored_results(capsys, tmp_path, failing, clean, monkeypatch):
+    monkeypatch.delenv(cache_mod.VERIFY_ENV, raising=False)
+    monkeypatch.setattr(os, "environ", dict(os.environ))  # the flag sets the variable for this run only
+    rc = main(["verify", str(failing), "--out", str(tmp_path / "v"), "-q", "--verify-cache", "1"])
+    out = capsys.readouterr()
+    (path,) = (tmp_path / "v").glob("*/report.json")
+    t = json.loads(path.read_text())["timing"]
+    assert rc == 1 and t["cache_verified"] == t["oracle_calls"] > 0 and t["cache_mismatch"] == 0, out
