@@ -59,7 +59,7 @@ def safe_set_scale(p: CompiledPrimitive, n: int = 24) -> float:
         h, G = (np.array(v, float) for v in J(xk, tk, xk))
         h = h.ravel()
         scale = np.linalg.norm(G @ Wi, axis=1)
-        use = (np.abs(h) < INACTIVE / 2) & (scale > 1e-12)
+        use = (h < INACTIVE / 2) & (scale > 1e-12)
         if use.any():
             best = min(best, float(np.min(np.maximum(h[use], 0.0) / scale[use])))
     return best

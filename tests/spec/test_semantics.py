@@ -200,6 +200,14 @@ def test_a_safety_function_that_is_no_finite_constant_is_refused(tmp_path, h):
     spec_error(tmp_path, text, "MPG205", "safe_set.0.h", "not a finite number", at="wall")
 
 
+@pytest.mark.parametrize("radius", ["1e300", "1e9"])
+def test_a_region_of_attraction_reaching_far_outside_c_fails_its_check(tmp_path, radius):
+    """E larger than C: h on E's boundary is hugely negative, never taken for a parked (inactive) h."""
+    rc, p = run(tmp_path, edit("roa: {radius: 0.1}\n  - name: B", f"roa: {{radius: {radius}}}\n  - name: B"))
+    (chk,) = [a for a in p.report["assumptions"] if a["primitive"] == "A" and a["name"] == "roa_in_safe_set"]
+    assert rc == 1 and chk["status"] == "fail" and chk["numbers"]["min_h"] < -1e8, chk
+
+
 # ----------------------------------------------------------------------------- no shadowing
 @pytest.mark.parametrize("insert, key, what", [
     ("    let: {x: 3}\n", "let.x", "a state of the system"),
