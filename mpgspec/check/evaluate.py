@@ -46,10 +46,10 @@ def f_cl_many(p: CompiledPrimitive, X: np.ndarray, t: float) -> np.ndarray:
 
 
 def h_active(p: CompiledPrimitive, x: np.ndarray, t: float) -> np.ndarray:
-    """The safety functions active at (x, t) (those not parked at INACTIVE; a value far below zero or
-    NaN is active: only the marker's side is parked)."""
+    """The safety functions active at (x, t): those below INACTIVE / 2 (a parked one sits at INACTIVE;
+    a value far below zero is active, however large)."""
     v = numeric_fn(p, "h")(x, t, S_SETTLED, x)[0]
-    return v[~(v >= INACTIVE / 2)]
+    return v[v < INACTIVE / 2]
 
 
 def h_many(p: CompiledPrimitive, X: np.ndarray, t) -> np.ndarray:
@@ -71,14 +71,14 @@ def _merged(fn: ca.Function) -> ca.Function:
 
 
 def least(V: np.ndarray) -> np.ndarray:
-    """Each row's least active h (n,): NaN where a row has NaN, inf where none is active."""
-    return np.where(V >= INACTIVE / 2, np.inf, V).min(axis=1, initial=np.inf)
+    """Each row's least active h (n,) (active as in h_active; NaN is not), inf where none is active."""
+    return np.where(V < INACTIVE / 2, V, np.inf).min(axis=1, initial=np.inf)
 
 
 def active_rows(V: np.ndarray) -> np.ndarray:
     """The active h of every row of V (n, m), when every row has the same active set (as the
     checks that compare points need); raises ValueError otherwise."""
-    act = ~(V >= INACTIVE / 2)
+    act = V < INACTIVE / 2
     if V.shape[0] and not (act == act[0]).all():
         raise ValueError("the active safety functions differ between the points compared")
     return V[:, act[0]] if V.shape[0] else V[:, :0]

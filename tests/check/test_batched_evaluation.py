@@ -50,6 +50,7 @@ def test_least_and_fold_min_read_h_as_the_single_point_checks_do():
     V = np.array([[1.0, INACTIVE, -2.0], [np.nan, 3.0, INACTIVE], [INACTIVE, INACTIVE, INACTIVE]])
     assert least(V).tolist() == [-2.0, 3.0, np.inf]  # NaN and INACTIVE are not active
     assert least(np.zeros((2, 0))).tolist() == [np.inf, np.inf]  # no safety functions at all
+    assert least(np.array([[-1e300, INACTIVE]])).tolist() == [-1e300]  # far below zero is active, not parked
     assert fold_min(0.5, np.array([np.nan, 0.25, 1.0])) == 0.25
     assert fold_min(0.5, np.array([np.nan])) == 0.5
     with pytest.raises(ValueError):
@@ -65,6 +66,6 @@ def test_h_of_many_points_is_h_of_each():
         X = np.array([p.x_star(t) for t in ts]) + 0.3 * rng.normal(size=(5, len(p.x_star(0.0))))
         V = h_many(p, X, ts)
         for x, t, v in zip(X, ts, V):
-            assert np.array_equal(v[np.abs(v) < INACTIVE / 2], h_active(p, x, t))
+            assert np.array_equal(v[v < INACTIVE / 2], h_active(p, x, t))
         assert np.array_equal(h_many(p, X, ts[2]), np.array([h_many(p, x, ts[2])[0] for x in X]))
         assert np.array_equal(f_cl_many(p, X, ts[1]), np.array([f_cl(p, x, ts[1]) for x in X]))
