@@ -436,8 +436,8 @@ def _instances(project: Project, prim_locates: list[Locator], prim_sources: list
     instances: list[PrimitiveInstance] = []
     names: dict[str, Location] = {}
     for i, p in enumerate(project.primitives):
-        loc_fn = prim_locates[i]
-        resolved = _resolve_safe_set(project, p, loc_fn, errors)
+        resolved, origins = _resolve_safe_set(project, p, prim_locates[i], errors)
+        loc_fn = _safe_set_locator(prim_locates[i], merged.locate, origins)
         errors += [e for e in _event_window_errors(project, p, loc_fn, merged.locate)  # a block's: once
                    if all((e.key, str(e.location)) != (o.key, str(o.location)) for o in errors)]
         for name, arg in _expand(p):
@@ -451,15 +451,33 @@ def _instances(project: Project, prim_locates: list[Locator], prim_sources: list
     return instances
 
 
-def _resolve_safe_set(project: Project, p: Primitive, loc_fn: Locator, errors: list) -> list[SafetyFunction]:
-    """The primitive's safety functions with project blocks (`use`) expanded; the system's own
-    blocks are expanded at compile time."""
+def _safe_set_locator(loc_fn: Locator, block_loc: Locator, origins: list[tuple]) -> Locator:
+    """The primitive's locator, with ("safe_set", j, ...) of the resolved safe set mapped to where
+    function j is written: the primitive's own entry, or the item of the project block it uses."""
+    def locate(loc, offset=None):
+        if len(loc) >= 2 and loc[0] == "safe_set" and isinstance(loc[1], int) and 0 <= loc[1] < len(origins):
+            o = origins[loc[1]]
+            if o[0] == "block":
+                return block_loc(("safe_sets", o[1], o[2], *loc[2:]), offset)
+            return loc_fn(("safe_set", o[1], *loc[2:]), offset)
+        return loc_fn(loc, offset)
+    return locate
+
+
+def _resolve_safe_set(project: Project, p: Primitive, loc_fn: Locator,
+                      errors: list) -> tuple[list[SafetyFunction], list[tuple]]:
+    """The primitive's safety functions with project blocks (`use`) expanded (the system's own
+    blocks are expanded at compile time), and where each is written: ("primitive", j) or
+    ("block", name, k)."""
     resolved: list[SafetyFunction] = []
+    origins: list[tuple] = []
     for j, sf in enumerate(p.safe_set):
         if sf.use is None:
             resolved.append(sf)
+            origins.append(("primitive", j))
         elif sf.use in BUILTIN_BLOCKS and sf.use not in project.safe_sets:
             resolved.append(sf)  # expanded by the system at compile time
+            origins.append(("primitive", j))
         elif sf.use not in project.safe_sets:
             errors.append(SpecError("unknown safe-set block", location=loc_fn(("safe_set", j, "use")),
                                     key=f"primitive '{clip(p.name, 60)}': safe_set.{j}.use",
@@ -470,13 +488,14 @@ def _resolve_safe_set(project: Project, p: Primitive, loc_fn: Locator, errors: l
             for k, item in enumerate(project.safe_sets[sf.use]):
                 try:
                     resolved.append(_within(item, sf.when))
+                    origins.append(("block", sf.use, k))
                 except ValueError as why:
                     errors.append(SpecError(
                         "cannot restrict this block to the use's window", location=loc_fn(("safe_set", j, "when")),
                         key=f"primitive '{clip(p.name, 60)}': safe_set.{j}.when",
                         expected="a use window only for block functions without one, or clock windows on both",
                         found=f"{why} (safe_sets.{clip(sf.use, 60)}.{k}.when)", code="MPG104"))
-    return resolved
+    return resolved, origins
 
 
 def _reference_errors(project: Project, node_names: set[str], prim_locates: list[Locator],

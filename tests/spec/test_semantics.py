@@ -208,6 +208,15 @@ def test_a_region_of_attraction_reaching_far_outside_c_fails_its_check(tmp_path,
     assert rc == 1 and chk["status"] == "fail" and chk["numbers"]["min_h"] < -1e8, chk
 
 
+@pytest.mark.parametrize("own, block, at", [("2 - zz", "3 - x", "name: own"), ("2 - x", "3 - yy", "name: w2")])
+def test_an_error_in_a_used_block_points_at_the_block(tmp_path, own, block, at):
+    """A project block's function is located where the block writes it, and a primitive's own
+    function after a block at its own entry (not at the resolved list's index)."""
+    text = edit("safe_set: [{name: wall, h: \"2 - x\"}]", f"safe_set: [{{use: walls}}, {{name: own, h: \"{own}\"}}]")
+    text += f"safe_sets:\n  walls:\n    - {{name: w1, h: \"1 - x\"}}\n    - {{name: w2, h: \"{block}\"}}\n"
+    spec_error(tmp_path, text, "MPG204", at=at)
+
+
 # ----------------------------------------------------------------------------- no shadowing
 @pytest.mark.parametrize("insert, key, what", [
     ("    let: {x: 3}\n", "let.x", "a state of the system"),
