@@ -50,8 +50,8 @@ def _verify_args(sub) -> None:
     v.add_argument("--no-cache", action="store_true",
                    help="run every oracle call, ignoring and not storing results in the cache")
     v.add_argument("--verify-cache", type=float, default=None, metavar="F",
-                   help="also run a fraction F (0-1) of the stored oracle results again and fail (exit 1) when "
-                        "one disagrees with what was stored")
+                   help="also run a fraction F (0-1) of the stored oracle results again, and every stored call of "
+                        "the edges assertions name, and fail (exit 1) when one disagrees with what was stored")
     v.add_argument("-q", "--quiet", action="store_true", help="no progress display")
     v.set_defaults(fn=cmd_verify)
 

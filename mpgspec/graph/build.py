@@ -38,7 +38,8 @@ def _start_points(prims, gA, gB, b):
 
 
 def build_graph(prims: dict[str, CompiledPrimitive], settings: OracleSettings, n_A: int = 12, n_B: int = 12,
-                progress: Progress | None = None, executor: Executor | None = None) -> MotionPrimitiveGraph:
+                progress: Progress | None = None, executor: Executor | None = None,
+                recheck: frozenset = frozenset()) -> MotionPrimitiveGraph:
     """Run the oracle of every target B on the setpoints of every other primitive A.
 
     The start points of all targets are split into tasks for the executor (in-process unless
@@ -49,7 +50,8 @@ def build_graph(prims: dict[str, CompiledPrimitive], settings: OracleSettings, n
     gA, gB = grids(prims, n_A, n_B)
     names = list(prims)
     points = {b: _start_points(prims, gA, gB, b) for b in names}
-    tasks = split({b: points[b][:2] for b in names}, executor.workers)
+    flags = {b: np.array([(a, b) in recheck for a, _i, _j in points[b][2]], bool) for b in names}
+    tasks = split({b: (*points[b][:2], flags[b]) for b in names}, executor.workers)
     results: dict[str, list[OracleEvidence]] = {b: [] for b in names}
     for task, ev in zip(tasks, executor.run(prims, settings, tasks, progress)):
         results[task.target].extend(ev)

@@ -194,7 +194,8 @@ class CachedExecutor:
     """Runs only the start points whose results are not stored yet, through the inner executor.
 
     verify (a fraction in [0, 1]; default MPGSPEC_VERIFY_CACHE, which `verify --verify-cache` sets):
-    that share of the stored results, picked by their keys (the same ones every run), is run again
+    that share of the stored results, picked by their keys (the same ones every run), and every
+    stored result of the rows a task flags (Task.recheck: the edges assertions name) is run again
     and compared with what was stored; a different verdict is a mismatch (stats["cache_mismatch"]),
     the fresh result is used and stored, and the CLI fails."""
 
@@ -229,7 +230,8 @@ class CachedExecutor:
         found = self.store.get([k for ks in keys for k in ks])
         todo, where = [], []
         for i, (task, ks) in enumerate(zip(tasks, keys)):
-            miss = [j for j, k in enumerate(ks) if k not in found or self._rechecked(k)]
+            again = task.recheck if task.recheck is not None and self.verify > 0 else np.zeros(len(ks), bool)
+            miss = [j for j, k in enumerate(ks) if k not in found or self._rechecked(k) or again[j]]
             if miss:
                 todo.append(Task(task.target, task.x0s[miss], task.t0s[miss]))
                 where.append((i, miss))

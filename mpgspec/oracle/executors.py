@@ -17,7 +17,6 @@ import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 
-import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
 from ..cores import usable_cores
@@ -34,14 +33,15 @@ TASKS_PER_WORKER = 4
 MIN_BATCH = 16
 
 
-def split(points: dict[str, tuple[np.ndarray, np.ndarray]], workers: int) -> list[Task]:
-    """Tasks of (target, contiguous batch): about TASKS_PER_WORKER per worker, no batch under MIN_BATCH."""
-    total = sum(len(t0s) for _, t0s in points.values())
+def split(points: dict[str, tuple], workers: int) -> list[Task]:
+    """Tasks of (target, contiguous batch): about TASKS_PER_WORKER per worker, no batch under MIN_BATCH.
+    points: target -> (x0s, t0s) or (x0s, t0s, recheck flags)."""
+    total = sum(len(p[1]) for p in points.values())
     size = max(MIN_BATCH, -(-total // max(1, workers * TASKS_PER_WORKER))) if workers > 1 else max(total, 1)
     tasks = []
-    for target, (x0s, t0s) in points.items():
+    for target, (x0s, t0s, *flags) in points.items():
         for a in range(0, len(t0s), size):
-            tasks.append(Task(target, x0s[a:a + size], t0s[a:a + size]))
+            tasks.append(Task(target, x0s[a:a + size], t0s[a:a + size], flags[0][a:a + size] if flags else None))
     return tasks
 
 

@@ -21,11 +21,13 @@ Progress = Callable[[str, int, int], None]
 
 @dataclass
 class Task:
-    """Start points (rows of x0s, clocks t0s) of one target primitive."""
+    """Start points (rows of x0s, clocks t0s) of one target primitive; recheck (optional, one flag
+    per row): rows whose stored result a verifying cache runs again (the edges assertions name)."""
 
     target: str
     x0s: np.ndarray
     t0s: np.ndarray
+    recheck: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t0s)

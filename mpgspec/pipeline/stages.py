@@ -30,6 +30,7 @@ from ..spec.uncertainty_refs import check_uncertainty, check_uncertainty_compile
 from ..robust.graph import RobustResult, prefetch_robust, robust_stage
 from ..settings import OracleSettings
 from ..spec.loader import ProjectSpec
+from ..spec.project import asserted_edges
 
 def compile_project(spec: ProjectSpec) -> dict[str, CompiledPrimitive]:
     """System and every primitive of a project as CasADi Functions, keyed by node name."""
@@ -111,7 +112,9 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     prefetch_robust(spec, prims, settings, getattr(executor, "memo", None))  # gcc beside the oracle
     if progress:
         progress(spec.name, "oracle (JIT-compiling the rollouts unless cached)", 0, 0)
-    g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, executor)
+    recheck = asserted_edges(spec.project.assertions) if getattr(executor, "verify", 0) > 0 else frozenset()
+    g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, executor,
+                    recheck)
     t1 = time.perf_counter()
     names = list(prims)
     pairs = [(a, b) for a in names for b in names if a != b]

@@ -90,6 +90,12 @@ def node_refs(a) -> list[tuple[str, tuple]] | None:
     return None
 
 
+def asserted_edges(assertions) -> frozenset:
+    """(from, to) of every edge and no_edge assertion: the transitions a verdict of the project rests on."""
+    return frozenset((getattr(a, k).from_, getattr(a, k).to) for a in assertions
+                     for k in ("edge", "no_edge") if isinstance(a, (RequireEdge, ForbidEdge)) and hasattr(a, k))
+
+
 ASSERTION_KEYS = {"edge": RequireEdge, "no_edge": ForbidEdge, "plan": RequirePlan,
                   "reachable_from": RequireReachable, "simulation_safe": RequireSimulation,
                   "max_inconclusive": RequireConclusive}

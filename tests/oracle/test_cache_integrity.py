@@ -191,3 +191,16 @@ def test_verify_cache_flag_reruns_the_stored_results(capsys, tmp_path, failing, 
     (path,) = (tmp_path / "v").glob("*/report.json")
     t = json.loads(path.read_text())["timing"]
     assert rc == 1 and t["cache_verified"] == t["oracle_calls"] > 0 and t["cache_mismatch"] == 0, out
+
+
+def test_verify_cache_reruns_every_call_of_the_asserted_edges(capsys, tmp_path, failing, clean, monkeypatch):
+    """A tiny fraction samples almost nothing by key, but every stored call into an edge an assertion
+    names (Left -> Mid, Left -> Right, Mid -> Right) is run again and compared."""
+    with _db(tmp_path) as db:
+        stored = db.execute("SELECT COUNT(*) FROM results2").fetchone()[0]
+    monkeypatch.setenv(cache_mod.VERIFY_ENV, "1e-12")
+    rc, rep, _ = verify(capsys, failing, tmp_path / "asserted")
+    named = sum(len(t["t_A"]) * len(t["t_B"]) for t in rep["transitions"]
+                if (t["from"], t["to"]) in {("Left", "Mid"), ("Left", "Right"), ("Mid", "Right")})
+    t = rep["timing"]
+    assert (rc, verdicts(rep)) == clean and 0 < named == t["cache_verified"] < stored and t["cache_mismatch"] == 0
