@@ -59,7 +59,15 @@ def _key(env: str | None, path: str) -> bytes:
 
 def key() -> bytes:
     """The key of this machine or user (MPGSPEC_CACHE_KEY, else the key file)."""
-    return _key(os.environ.get(KEY_ENV) or None, str(key_file()))
+    env = os.environ
+    return _key_of(env.get(KEY_ENV) or None, env.get("XDG_CONFIG_HOME"), env.get("HOME"))
+
+
+@lru_cache(maxsize=None)
+def _key_of(given: str | None, _config: str | None, _home: str | None) -> bytes:
+    """key() for one setting of the variables it depends on (so that finding the key file, which
+    asks the system for the home folder, happens once per setting, not once per stored row)."""
+    return _key(given, str(key_file()))
 
 
 def mac(*parts: str | bytes) -> str:
