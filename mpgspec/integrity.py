@@ -4,9 +4,10 @@ reports), so that a file edited or replaced outside mpgspec is never taken for i
 The key never lives in the cache folder (CI systems restore caches across branches, so a pull
 request could otherwise write entries the main branch trusts): it is MPGSPEC_CACHE_KEY when set,
 else a random per-machine key created once in the user's configuration folder
-($XDG_CONFIG_HOME/mpgspec/cache.key, else ~/.config/mpgspec/cache.key, readable by its owner only).
-Where that file can be neither read nor created, the key is random per process: nothing stored by
-another process verifies, so everything is recomputed (correct, only slower), with one warning.
+($XDG_CONFIG_HOME/mpgspec/cache.key, else ~/.config/mpgspec/cache.key, readable by its owner only),
+or, where that folder cannot be written, in a folder of the temporary directory private to the
+user. Where neither works, the key is random per process: nothing stored by another process
+verifies, so everything is recomputed (correct, only slower), with one warning.
 """
 from __future__ import annotations
 
@@ -31,30 +32,45 @@ def key_file() -> Path:
 
 @lru_cache(maxsize=None)
 def _key(env: str | None, path: str) -> bytes:
+    """MPGSPEC_CACHE_KEY hashed, else the key file at `path`, else one in this user's private folder
+    of the temporary directory (a read-only home), else a random key for this process."""
     if env:
         return hashlib.sha256(env.encode("utf-8")).digest()
-    p = Path(path)
-    try:
-        if not p.is_file():
-            p.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=".cache.key.")
-            try:
-                os.write(fd, os.urandom(KEY_BYTES).hex().encode())
-                os.close(fd)
-                os.chmod(tmp, 0o600)
-                os.link(tmp, p)  # fails when another process created it first: then its key is read
-            except FileExistsError:
-                pass
-            finally:
-                os.unlink(tmp)
-        text = p.read_text(encoding="ascii").strip()
-        key = bytes.fromhex(text)
-        if len(key) < 16:
-            raise ValueError("too short")
-        return key
-    except (OSError, ValueError) as e:
-        warnings.warn(f"no usable cache key at {p} ({e}); set {KEY_ENV}: this run trusts nothing stored before it")
-        return os.urandom(KEY_BYTES)
+    fallback = Path(tempfile.gettempdir()) / f"mpgspec-{os.getuid() if hasattr(os, 'getuid') else 0}" / "cache.key"
+    errors = []
+    for p in (Path(path), fallback):
+        try:
+            return _read_or_create(p, private=p == fallback)
+        except (OSError, ValueError) as e:
+            errors.append(f"{p}: {e}")
+    warnings.warn(f"no usable cache key ({'; '.join(errors)}); set {KEY_ENV}: this run trusts nothing stored "
+                  "before it")
+    return os.urandom(KEY_BYTES)
+
+
+def _read_or_create(p: Path, private: bool = False) -> bytes:
+    """The key in file p, created (mode 600, atomically across processes) when missing; with
+    `private`, its folder must be this user's alone."""
+    if not p.is_file():
+        p.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=".cache.key.")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(os.urandom(KEY_BYTES).hex().encode())
+            os.chmod(tmp, 0o600)
+            os.link(tmp, p)  # fails when another process created it first: then its key is read
+        except FileExistsError:
+            pass
+        finally:
+            os.unlink(tmp)
+    if private:
+        st = p.parent.stat()
+        if hasattr(os, "getuid") and (st.st_uid != os.getuid() or st.st_mode & 0o077):
+            raise ValueError("the folder is not private to this user")
+    key = bytes.fromhex(p.read_text(encoding="ascii").strip())
+    if len(key) < 16:
+        raise ValueError("the key is too short")
+    return key
 
 
 def key() -> bytes:

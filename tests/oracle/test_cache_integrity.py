@@ -204,3 +204,30 @@ def test_verify_cache_reruns_every_call_of_the_asserted_edges(capsys, tmp_path, 
                 if (t["from"], t["to"]) in {("Left", "Mid"), ("Left", "Right"), ("Mid", "Right")})
     t = rep["timing"]
     assert (rc, verdicts(rep)) == clean and 0 < named == t["cache_verified"] < stored and t["cache_mismatch"] == 0
+
+
+def _fresh_key():
+    integrity._key.cache_clear()
+    integrity._key_of.cache_clear()
+    return integrity.key()
+
+
+def test_the_key_lives_outside_the_cache_and_survives_a_read_only_home(tmp_path, monkeypatch):
+    monkeypatch.delenv(integrity.KEY_ENV, raising=False)
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    first = _fresh_key()
+    assert (tmp_path / "config" / "mpgspec" / "cache.key").stat().st_mode & 0o777 == 0o600
+    assert _fresh_key() == first  # the same key for the next process
+    blocked = tmp_path / "a_file"
+    blocked.write_text("x")
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(blocked))  # cannot hold a folder: the private temporary one
+    monkeypatch.setattr(integrity.tempfile, "gettempdir", lambda: str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    second = _fresh_key()
+    assert _fresh_key() == second and (tmp_path / "tmp").iterdir()
+    monkeypatch.setattr(integrity.tempfile, "gettempdir", lambda: str(blocked))
+    with pytest.warns(UserWarning, match="no usable cache key"):
+        third = _fresh_key()
+    assert third != _fresh_key()  # random per process: nothing stored before verifies
+    monkeypatch.undo()
+    _fresh_key()
