@@ -130,15 +130,22 @@ class ResultStore:
             rows.append((k, text, mac("results", k, text)))
         self._write("INSERT OR REPLACE INTO results2 VALUES (?, ?, ?)", rows)
 
-    def memo_get(self, key: str):
+    def _memo_text(self, key: str, count: bool) -> str | None:
+        """The authentic JSON text stored under key, else None (counted as rejected when `count`)."""
         rows = self._rows("SELECT value, mac FROM memo2 WHERE key = ?", (key,))
-        if not rows or not self._verified("memo", key, rows[0][0], rows[0][1]):
+        if not rows:
             return None
-        return json.loads(rows[0][0])
+        value, tag = rows[0]
+        ok = isinstance(value, str) and authentic(tag, "memo", key, value)
+        self.rejected += count and not ok
+        return value if ok else None
+
+    def memo_get(self, key: str):
+        text = self._memo_text(key, count=True)
+        return None if text is None else json.loads(text)
 
     def memo_has(self, key: str) -> bool:
-        rows = self._rows("SELECT value, mac FROM memo2 WHERE key = ?", (key,))
-        return bool(rows) and isinstance(rows[0][0], str) and authentic(rows[0][1], "memo", key, rows[0][0])
+        return self._memo_text(key, count=False) is not None
 
     def memo_put(self, key: str, value) -> None:
         text = json.dumps(value, default=_plain)
@@ -238,11 +245,10 @@ class CachedExecutor:
         fresh = self.inner.run(prims, settings, todo, progress) if todo else []
         new = {}
         out = [[found.get(k) for k in ks] for ks in keys]
-        ran = 0
         for (i, miss), evs in zip(where, fresh):
             for j, e in zip(miss, evs):
-                k, ran = keys[i][j], ran + 1
-                if k in found:
+                k = keys[i][j]
+                if k in found:  # a stored result run again
                     self._stats["cache_verified"] += 1
                     old = found[k]
                     if (old.verdict, old.status, old.reason) != (e.verdict, e.status, e.reason):
@@ -251,9 +257,9 @@ class CachedExecutor:
                 if e.reason is not Reason.ERROR:  # a crash may be transient: never remembered
                     new[k] = e
         self.store.put(new)
-        rechecked = sum(1 for (i, miss) in where for j in miss if keys[i][j] in found)
-        self._stats["cache_hits"] += sum(len(ks) for ks in keys) - ran + rechecked
-        self._stats["cache_misses"] += ran - rechecked
+        hits = sum(k in found for ks in keys for k in ks)
+        self._stats["cache_hits"] += hits
+        self._stats["cache_misses"] += sum(len(ks) for ks in keys) - hits
         return out
 
 
