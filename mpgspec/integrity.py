@@ -31,14 +31,16 @@ def key_file() -> Path:
 
 
 @lru_cache(maxsize=None)
-def _key(env: str | None, path: str) -> bytes:
-    """MPGSPEC_CACHE_KEY hashed, else the key file at `path`, else one in this user's private folder
-    of the temporary directory (a read-only home), else a random key for this process."""
-    if env:
-        return hashlib.sha256(env.encode("utf-8")).digest()
+def _key(given: str | None, _config: str | None, _home: str | None) -> bytes:
+    """key() for one setting of the variables it depends on (found once per setting, not once per
+    stored row): MPGSPEC_CACHE_KEY hashed, else the key file, else one in this user's private
+    folder of the temporary directory (a read-only home), else a random key for this process."""
+    if given:
+        return hashlib.sha256(given.encode("utf-8")).digest()
+    path = key_file()
     fallback = Path(tempfile.gettempdir()) / f"mpgspec-{os.getuid() if hasattr(os, 'getuid') else 0}" / "cache.key"
     errors = []
-    for p in (Path(path), fallback):
+    for p in (path, fallback):
         try:
             return _read_or_create(p, private=p == fallback)
         except (OSError, ValueError) as e:
@@ -76,14 +78,7 @@ def _read_or_create(p: Path, private: bool = False) -> bytes:
 def key() -> bytes:
     """The key of this machine or user (MPGSPEC_CACHE_KEY, else the key file)."""
     env = os.environ
-    return _key_of(env.get(KEY_ENV) or None, env.get("XDG_CONFIG_HOME"), env.get("HOME"))
-
-
-@lru_cache(maxsize=None)
-def _key_of(given: str | None, _config: str | None, _home: str | None) -> bytes:
-    """key() for one setting of the variables it depends on (so that finding the key file, which
-    asks the system for the home folder, happens once per setting, not once per stored row)."""
-    return _key(given, str(key_file()))
+    return _key(env.get(KEY_ENV) or None, env.get("XDG_CONFIG_HOME"), env.get("HOME"))
 
 
 def mac(*parts: str | bytes) -> str:

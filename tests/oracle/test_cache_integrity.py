@@ -208,7 +208,6 @@ def test_verify_cache_reruns_every_call_of_the_asserted_edges(capsys, tmp_path, 
 
 def _fresh_key():
     integrity._key.cache_clear()
-    integrity._key_of.cache_clear()
     return integrity.key()
 
 
