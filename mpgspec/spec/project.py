@@ -80,8 +80,7 @@ def node_refs(a) -> list[tuple[str, tuple]] | None:
     """The primitive names an edge, no_edge, plan or reachable_from assertion refers to, each with
     its key path inside the assertion; None for assertions that name no primitive."""
     if isinstance(a, (RequireEdge, ForbidEdge)):
-        k = "edge" if isinstance(a, RequireEdge) else "no_edge"
-        ref = getattr(a, k)
+        k, ref = _edge_ref(a)
         return [(ref.from_, (k, "from")), (ref.to, (k, "to"))]
     if isinstance(a, RequirePlan):
         return [(a.plan.from_, ("plan", "from")), (a.plan.to, ("plan", "to"))]
@@ -90,10 +89,16 @@ def node_refs(a) -> list[tuple[str, tuple]] | None:
     return None
 
 
+def _edge_ref(a: RequireEdge | ForbidEdge) -> tuple[str, EdgeRef]:
+    """The key (edge or no_edge) of an edge assertion and the edge it names."""
+    k = "edge" if isinstance(a, RequireEdge) else "no_edge"
+    return k, getattr(a, k)
+
+
 def asserted_edges(assertions) -> frozenset:
     """(from, to) of every edge and no_edge assertion: the transitions a verdict of the project rests on."""
-    return frozenset((getattr(a, k).from_, getattr(a, k).to) for a in assertions
-                     for k in ("edge", "no_edge") if isinstance(a, (RequireEdge, ForbidEdge)) and hasattr(a, k))
+    refs = (_edge_ref(a)[1] for a in assertions if isinstance(a, (RequireEdge, ForbidEdge)))
+    return frozenset((ref.from_, ref.to) for ref in refs)
 
 
 ASSERTION_KEYS = {"edge": RequireEdge, "no_edge": ForbidEdge, "plan": RequirePlan,
