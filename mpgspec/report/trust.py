@@ -112,9 +112,7 @@ def _check_primitives(prims, where) -> list[str]:
 
 def _check_edges(edges, names: list[str], where) -> dict:
     out = {}
-    for i, e in enumerate(_objects(edges, "edges", where)):
-        key = f"edges[{i}]"
-        pair = _pair(e, key, names, where)
+    for i, key, pair, e in _between(edges, "edges", names, where):
         _need(_int_in(e.get("class"), (1, 2)), where, f"{key}.class", "1 or 2", e.get("class"))
         _need(isinstance(e.get("usable", True), bool), where, f"{key}.usable", "true or false", e.get("usable"))
         for w in WEIGHTS:
@@ -126,9 +124,7 @@ def _check_edges(edges, names: list[str], where) -> dict:
 def _check_transitions(trs, names: list[str], where) -> dict:
     """The transitions' grids, switch-in clocks, windows and weights; returns them by (from, to)."""
     out = {}
-    for i, t in enumerate(_objects(trs, "transitions", where)):
-        key = f"transitions[{i}]"
-        pair = _pair(t, key, names, where)
+    for i, key, pair, t in _between(trs, "transitions", names, where):
         t_A = _numbers(t.get("t_A"), f"{key}.t_A", where)
         best = t.get("best_t_B")
         _need(isinstance(best, (list, tuple)) and len(best) == len(t_A), where, f"{key}.best_t_B",
@@ -178,9 +174,7 @@ def _check_robust(rob, names: list[str], where) -> None:
     if rob is None:
         return
     _need(isinstance(rob, dict), where, "robust", "an object or null", rob)
-    for i, r in enumerate(_objects(rob.get("edges", []), "robust.edges", where)):
-        key = f"robust.edges[{i}]"
-        _pair(r, key, names, where)
+    for _, key, _, r in _between(rob.get("edges", []), "robust.edges", names, where):
         _need(isinstance(r.get("survives", False), bool), where, f"{key}.survives", "true or false", r.get("survives"))
         if not r.get("survives"):
             continue
@@ -225,6 +219,14 @@ def _objects(v, key: str, where) -> list:
     for i, x in enumerate(v):
         _need(isinstance(x, dict), where, f"{key}[{i}]", "an object", x)
     return v
+
+
+def _between(v, name: str, names: list[str], where):
+    """(index, key path, (from, to), object) of each entry of the list `name` of objects that each
+    name two primitives of the report (edges, transitions, robust edges)."""
+    for i, e in enumerate(_objects(v, name, where)):
+        key = f"{name}[{i}]"
+        yield i, key, _pair(e, key, names, where), e
 
 
 def _pair(e: dict, key: str, names: list[str], where) -> tuple[str, str]:
