@@ -17,7 +17,6 @@ import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 
-
 from ..compile.primitive import CompiledPrimitive
 from ..cores import usable_cores
 from ..errors import UsageError
