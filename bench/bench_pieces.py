@@ -81,7 +81,7 @@ def main(argv=None) -> int:
                   f"{count['plain']['safe']} / {count['plain']['unsafe']} / {count['plain']['inconclusive']}; "
                   f"{differ} differ")]
     mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
-    common.publish(HEADING, mach, "python bench/bench_pieces.py", args.repeats, time.perf_counter() - t_all,
+    common.publish(HEADING, mach, "bench_pieces.py", args.repeats, time.perf_counter() - t_all,
                    common.markdown_table(rows), not args.no_write)
     return 0
 

@@ -283,9 +283,27 @@ def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: 
         if jit:  # a large loop through its compiled library
             attach(prim)
         fns, nz, lay = _judged_function(prim, dt, K, B, tol, cm, doubling)
-        fns = [compile_cached(fn, caller_flags(prim, flags), libs_of(prim)) for fn in fns] if jit else fns
+        fns = [compile_cached(fn, caller_flags(prim, fl), libs_of(prim))
+               for fn, fl in zip(fns, _flags(fns, flags))] if jit else fns
         prim.cache[key] = JudgedChunk(prim, dt, fns[-1], nz, lay, K, doubling, *fns[:-1])
     return prim.cache[key]
+
+
+LOCATED_FLAGS = ("-O1",)
+"""gcc flags (at least) of the full chunk of a loop with guards, which redoes the columns where a
+guard crossed: an MX graph of calls (the smooth step, the location, the judge), 73-101 KB of C on
+the pendulum. At -O0 a column through it cost 4x one through the smooth chunk and the redone
+columns a third of the oracle's time; at -O1 gcc takes about 0.3 s more per primitive and the
+redone columns a third of the time they took (bench/bench_pieces.py)."""
+
+
+def _flags(fns: list[ca.Function], flags: tuple[str, ...]) -> list[tuple[str, ...]]:
+    """The gcc flags of each of a judged chunk's Functions: `flags`, and for the full chunk that
+    follows a smooth one (a loop with guards) LOCATED_FLAGS where `flags` optimise less."""
+    if len(fns) < 2 or any(f.startswith("-O") and f != "-O0" for f in flags):
+        return [tuple(flags)] * len(fns)
+    located = tuple(f for f in flags if not f.startswith("-O")) + LOCATED_FLAGS
+    return [tuple(flags)] * (len(fns) - 1) + [located]
 
 
 def _judged_function(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: float, cm: float,
@@ -332,7 +350,8 @@ def prebuild(prims: list[CompiledPrimitive], dt: float, K: int, B: int, tol: flo
         attach(p)  # attached libraries are found at once; build_all compiled the rest side by side
     built = [_judged_function(p, dt, K, B, tol, margins[p.name], doubling) for p in new]
     owners = [p for p, b in zip(new, built) for _fn in b[0]]
-    compiled = iter(compile_callers(owners, [fn for b in built for fn in b[0]], flags))
+    compiled = iter(compile_callers(owners, [fn for b in built for fn in b[0]],
+                                    [fl for b in built for fl in _flags(b[0], flags)]))
     for p, (fns, nz, lay) in zip(new, built):
         fns = [next(compiled) for _fn in fns]
         p.cache[key(p)] = JudgedChunk(p, dt, fns[-1], nz, lay, K, doubling, *fns[:-1])

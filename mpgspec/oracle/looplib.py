@@ -204,12 +204,15 @@ def part(prim: CompiledPrimitive, kind: str) -> ca.Function | None:
     return lib.get(kind) if lib is not None else None
 
 
-def compile_callers(prims: list[CompiledPrimitive], fns: list[ca.Function], flags: tuple[str, ...]) -> list:
+def compile_callers(prims: list[CompiledPrimitive], fns: list[ca.Function],
+                    flags: tuple[str, ...] | list[tuple[str, ...]]) -> list:
     """fns (each built from the primitive beside it) compiled side by side, in their order: those
-    calling a loop library at CALLER_FLAGS and linked against it, the others at `flags`."""
+    calling a loop library at CALLER_FLAGS and linked against it, the others at `flags` (one tuple
+    for all, or one per Function)."""
+    each = flags if isinstance(flags, list) else [tuple(flags)] * len(fns)
     groups: dict = {}
     for k, p in enumerate(prims):
-        groups.setdefault(caller_flags(p, flags), []).append(k)
+        groups.setdefault(caller_flags(p, each[k]), []).append(k)
     out: list = [None] * len(fns)
     for fl, ks in groups.items():
         for k, fn in zip(ks, compile_many([fns[k] for k in ks], fl, libs=[libs_of(prims[k]) for k in ks])):
