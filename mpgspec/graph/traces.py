@@ -22,7 +22,7 @@ def _f(v):
     return v if np.isfinite(v) else None
 
 
-TRACE_RECORD = 1
+TRACE_RECORD = 2
 """Layout of a memoised trace (part of its key)."""
 
 

@@ -6,6 +6,7 @@ import numpy as np
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from ..settings import OracleSettings
 from .integrator import build_chunk, build_chunks, initial_state
+from .pieces import guarded
 
 TRACE_STEPS = 64
 """Steps per compiled call of a trace."""
@@ -57,9 +58,25 @@ def trace(prim: CompiledPrimitive, x0: np.ndarray, t0: float, horizon: float, se
 
     return {
         "t": [float(a) for a in t],
+        **({"crossings": _crossings(O[r.s], O[r.dt], settings.dt)} if guarded(prim) else {}),
         "h": {name: clean(O[i, sel]) for i, name in enumerate(prim.h_names)},
         "roa_margin": clean(O[r.margin, sel]),
         "u": [clean(O[r.u.start + i, sel]) for i in range(r.nu)],
         "x": [clean(O[r.x.start + i, sel]) for i in range(prim.system.nx)],
         **({"failed": failed} if failed else {}),
     }
+
+
+MAX_CROSSINGS = 50
+"""Times of located guard crossings a trace keeps (their count is always whole)."""
+
+
+def _crossings(s: np.ndarray, dt: np.ndarray, step: float) -> dict:
+    """Where the rollout's steps ended at a located guard crossing: a trace steps without window
+    boundaries, so a step shorter than `step` is a piece that ends just before a crossing, or a
+    sliver stepped across one right after its start (oracle/pieces.py); short steps ending within
+    1e-4 `step` of each other are one crossing. {count, t: the first MAX_CROSSINGS crossings, in
+    seconds after switch-in}."""
+    ends = (s + dt)[dt < step * (1 - 1e-9)]
+    ends = ends[np.concatenate([[True], np.diff(ends) > 1e-4 * step])] if len(ends) else ends
+    return {"count": int(len(ends)), "t": [float(v) for v in ends[:MAX_CROSSINGS]]}

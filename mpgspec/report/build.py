@@ -131,7 +131,8 @@ def build_report(cp, vg, ch, digest: str | None = None) -> dict:
         "settings": asdict(cp.settings),
         "system": {"name": sysm.name, "kind": sysm.kind, "states": list(csys.state_names),
                    "inputs": list(csys.input_names), "input_bounds": bounds},
-        "primitives": [primitive_entry(prims[i.name], i.spec, (cp.roa or {}).get(i.name)) for i in spec.primitives],
+        "primitives": [_with_crossings(primitive_entry(prims[i.name], i.spec, (cp.roa or {}).get(i.name)),
+                                       vg.edge_traces + vg.failure_traces) for i in spec.primitives],
         "transitions": [transition_entry(tr, prims[tr.target].h_names) for tr in graph.transitions.values()],
         "verdicts": verdict_counts(graph),
         "edges": edge_entries(graph),
@@ -171,6 +172,17 @@ def section_entries(data: dict[str, dict | None]) -> dict:
     if plugin_sections():
         out["sections"] = plugins
     return out
+
+
+def _with_crossings(entry: dict, traces: list[dict]) -> dict:
+    """The primitive's guard record with the crossings located along the traced rollouts that run
+    its closed loop (edge and failure traces into it): {located, rollouts}, for a loop stepped piece
+    by piece."""
+    counts = [t["series"]["crossings"]["count"] for t in traces
+              if t.get("to") == entry["name"] and isinstance((t.get("series") or {}).get("crossings"), dict)]
+    if counts:
+        entry["guards"] = {**entry["guards"], "crossings": {"located": int(sum(counts)), "rollouts": len(counts)}}
+    return entry
 
 
 def _traced(f: dict) -> dict:

@@ -121,6 +121,8 @@ def compact_series(s: dict, t_keep=None) -> dict:
     for key, v in s.items():
         if key == "t":
             out[key] = rnd(pick(v))
+        elif key == "crossings":  # located guard crossings: a count and their times, not a series
+            out[key] = {"count": v.get("count"), "t": rnd(v.get("t") or [])}
         elif isinstance(v, dict):
             out[key] = {name: rnd(pick(c), TRACE_DIGITS) for name, c in v.items()}
         elif isinstance(v, list) and v and isinstance(v[0], list):

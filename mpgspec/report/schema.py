@@ -60,12 +60,21 @@ class System(_Strict):
     input_bounds: dict[str, tuple[float, float]]
 
 
+class Crossings(_Strict):
+    """Where the oracle ended steps at a guard, counted along the report's traced rollouts."""
+
+    located: int = Field(ge=0, description="steps ended at a located crossing, summed over the rollouts")
+    rollouts: int = Field(ge=0, description="traced rollouts of this closed loop")
+
+
 class Guards(_Strict):
     """The closed loop's switching points (compile/guards.py): the oracle ends a step where one crosses."""
 
     exposed: bool = Field(True, description="false when the loop's switching points could not be searched")
     guards: list[str] = Field(default_factory=list, description="each guard: the operation and its expression")
     why: str = Field("", description="why the loop's switching points are not exposed")
+    crossings: Crossings | None = Field(None, description="guard crossings located along the traced rollouts "
+                                                          "of this closed loop (edge and failure traces into it)")
 
 
 class Primitive(_Strict):
@@ -182,6 +191,13 @@ class Edge(_Strict):
     unusable_reason: str | None = None
 
 
+class TraceCrossings(_Strict):
+    """The located guard crossings of one rollout: their count and the first times (s after switch-in)."""
+
+    count: int = Field(ge=0)
+    t: list[float]
+
+
 class Series(_Strict):
     """Dense rollout from one start point: h, RoA margin, inputs and states over time."""
 
@@ -190,6 +206,8 @@ class Series(_Strict):
     roa_margin: list[Num]
     u: list[list[Num]]
     x: list[list[Num]]
+    crossings: TraceCrossings | None = Field(None, description="steps of a loop with guards that ended at a "
+                                                               "located crossing")
 
 
 class SeriesError(_Strict):

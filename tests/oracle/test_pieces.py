@@ -143,6 +143,19 @@ def test_a_law_that_chatters_ends_inconclusive(tmp_path):
     assert e.status != "safe" and e.steps <= 2.0 / 0.01 + 5, e
 
 
+@pytest.mark.parametrize("law, at", [("if_else(x < 0.50537, 1, 3)", [0.50537]), ("if_else(t < 0.3137, 1, 3)", [0.3137]),
+                                     ("if_else(t < 0.2537, 1, 3) - if_else(t < 0.4211, 2, 0)", [0.2537, 0.4211])])
+def test_a_trace_counts_the_crossings_it_located(tmp_path, law, at):
+    """The report's traces count the steps that ended at a guard: one per switch of the law, at
+    its time (x' = 1 from x0 = 0 reaches 0.50537 at t = 0.50537); a smooth loop's trace has none."""
+    from mpgspec.oracle.trace import trace
+
+    s = OracleSettings(horizon=1.0, dt=0.01, jit=False)
+    c = trace(_switching(tmp_path, law, 10.0), np.array([0.0]), 0.0, 0.8, s)["crossings"]
+    assert c["count"] == len(at) and c["t"] == pytest.approx(at, abs=1e-9), c
+    assert "crossings" not in trace(one(tmp_path, GOAL, bounds=("-.inf", ".inf")), np.array([0.0]), 0.0, 0.8, s)
+
+
 # ----------------------------------------------------------------------------- generated families
 @pytest.fixture(scope="module")
 def generated(tmp_path_factory):

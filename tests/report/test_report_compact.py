@@ -7,7 +7,6 @@ from pathlib import Path
 
 import pytest
 
-from mpgspec import api
 from mpgspec.report.compact import (MAX_RUN, MAX_TRACE, compact_cells, compact_run, compact_series, expand_cells,
                                     rnd, run_rows)
 from mpgspec.report.schema import validate_report
@@ -59,3 +58,15 @@ def test_pendulum_report_is_a_quarter_of_v1(pendulum):
     size = len(json_text(pendulum, compact=True).encode())
     assert size < 2_757_477 / 4, size  # v1 of the same project: 2.76 MB
     assert pendulum["schema_version"].startswith("2.") and pendulum["project"]["digest"].startswith("sha256:")
+
+
+def test_guarded_primitives_count_the_crossings_of_their_traces(pendulum):
+    """Each loop stepped piece by piece reports the crossings located along the traced rollouts into
+    it: the sum of those traces' counts, over as many rollouts as there are traces into it."""
+    traces = pendulum["edge_traces"] + pendulum["failures"]
+    for p in pendulum["primitives"]:
+        into = [t["series"]["crossings"] for t in traces if t["to"] == p["name"] and "crossings" in t["series"]]
+        assert p["guards"]["guards"] and into, p["name"]  # every pendulum loop saturates
+        assert p["guards"]["crossings"] == {"located": sum(c["count"] for c in into), "rollouts": len(into)}
+        assert all(len(c["t"]) == min(c["count"], 50) and c["t"] == sorted(c["t"]) for c in into)
+    assert sum(p["guards"]["crossings"]["located"] for p in pendulum["primitives"]) > 0
