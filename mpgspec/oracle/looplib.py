@@ -251,6 +251,25 @@ def windowed(prim: CompiledPrimitive, h_all, x, t, s):
     return ca.Function("windows", [hs, xs, ts, ss], [ca.vertcat(*out)])(h_all, x, t, s)
 
 
+def held_law(prim: CompiledPrimitive) -> tuple[NumericFunction, NumericFunction] | None:
+    """(solve, open loop) of a sampled law (the ID-QP), None for any other: solve(x, t, s, x_sw, w)
+    -> (u_raw, w_next) is the solve the oracle makes at every control sample, warm-started from the
+    previous one; open(x, t, s, x_sw, u) -> (h with its windows, u saturated) the loop under that
+    held input. Through the primitive's loop library (attached, built when not yet compiled), else
+    in CasADi's virtual machine. A compiled solve that does not converge raises; the virtual machine
+    returns its last iterate."""
+    if prim.sampled is None:
+        return None
+    if "looplib_held" not in prim.cache:
+        lib = attach(prim)
+        lib = lib if lib is not None and lib.get("solve") is not None and lib.get("loop_u") is not None else None
+        a = [ca.MX.sym(n, *prim.loop_u.sparsity_in(i).shape) for i, n in enumerate(("x", "t", "s", "x_sw", "u"))]
+        _xdot, h_all, _u_raw, u = (lib.get("loop_u") if lib is not None else prim.loop_u).call(a)
+        prim.cache["looplib_held"] = (numeric(lib.get("solve") if lib is not None else prim.sampled.solve),
+                                      numeric(ca.Function("held", a, [windowed(prim, h_all, a[0], a[1], a[2]), u])))
+    return prim.cache["looplib_held"]
+
+
 def law(prim: CompiledPrimitive) -> NumericFunction | None:
     """(x, t, s, x_sw) -> (h with its windows, u) through the attached library's loop (None without
     one): what prim.loop gives the cross-check, evaluated in compiled code on numpy buffers."""

@@ -205,6 +205,7 @@ def test_lie_stand_replay_agrees_with_mpgspec(tmp_path):
         assert run["contact"]["lift_off"] is None and run["contact"]["trunk_contact"] is None
         assert all(w["mujoco"] >= 0 for w in run["worst"])
         assert all(s["roa_margin"] is None or np.isfinite(s["roa_margin"]) for s in run["switches"])
+        assert run["law_failures"] == {}  # Stand's warm-started ID-QP solves all converge
     assert [a["kind"] for a in report["assertions"]].count("crosscheck") == 2
     html = Path(res.files["html"]).read_text()
     assert 'id="crosscheck"' in html and "Cross-check in MuJoCo" in html and "2 / 2" in html
@@ -274,6 +275,39 @@ def test_comparisons_are_kept_by_content(a1, monkeypatch):
     monkeypatch.setattr(cmp, "replay", lambda *a, **k: pytest.fail("replayed again"))
     again = crosscheck_runs(prims, {"naive": run}, seq.duration, xs, robot=robot, memo=memo)
     assert again.runs["naive"]["divergence"] == first.runs["naive"]["divergence"]
+
+
+def test_a_sampled_law_replays_warm_started_and_held(a1, monkeypatch):
+    """Stand's ID-QP in the replay is the oracle's: each solve starts from the previous one's
+    solution (cold at switch-in) and its input is held; u is the saturated solve and h that of the
+    open loop under it. A solve the compiled solver cannot finish is counted, and the virtual
+    machine's last iterate applied."""
+    from mpgspec.execute.crosscheck import replay as rp
+    from mpgspec.oracle import looplib
+
+    prims, _settings, _robot = a1
+    p = prims["Stand"]
+    law = rp._Law(p, 1000.0, failures := {})
+    x_sw = prims["Lie"].x_star(0.0)
+    w, xs = np.zeros(p.sampled.nw), [x_sw + 1e-3 * k * (np.arange(len(x_sw)) >= 7) for k in range(3)]
+    for k, x in enumerate(xs):
+        hv, u = law(x, 1e-3 * k, 1e-3 * k, x_sw)
+        u_raw, w = (np.asarray(v, float).ravel() for v in p.sampled.solve(x, 1e-3 * k, 1e-3 * k, x_sw, w))
+        assert np.allclose(u, np.clip(u_raw, p.system.u_lo, p.system.u_hi), atol=1e-9, rtol=0)
+        h_ref = np.asarray(p.loop_u(x, 1e-3 * k, 1e-3 * k, x_sw, u_raw)[1], float).ravel()
+        act = (h_ref < 1e8) & (hv < 1e8)  # h outside its window is parked at INACTIVE
+        assert act.sum() > 10 and np.allclose(hv[act], h_ref[act], atol=1e-9, rtol=1e-9)
+    assert failures == {}
+    solve, open_loop = looplib.held_law(p)
+
+    def fails(*a):
+        raise RuntimeError("no convergence")
+
+    monkeypatch.setitem(p.cache, "looplib_held", (fails, open_loop))
+    law = rp._Law(p, 1000.0, failures)
+    _hv, u = law(xs[0], 0.0, 0.0, x_sw)
+    u_raw = np.asarray(p.sampled.solve(xs[0], 0.0, 0.0, x_sw, np.zeros(p.sampled.nw))[0], float).ravel()
+    assert failures == {"Stand": 1} and np.allclose(u, np.clip(u_raw, p.system.u_lo, p.system.u_hi))
 
 
 def test_runs_replayed_side_by_side_equal_the_runs_replayed_here(a1):

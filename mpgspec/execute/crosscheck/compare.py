@@ -143,6 +143,7 @@ def compare(prims: dict[str, CompiledPrimitive], rep: Replay, run: SequenceRun, 
         "worst": [{"primitive": p, "h": h, "mujoco": v, "t": tt, "violated_in_mpgspec": (p, h) in mpg_bad}
                   for p, h, v, tt in worst],
         "contact": rep.contact, "start_offset": rep.start_offset, "wall_s": rep.wall_s,
+        "law_failures": dict(rep.law_failures),
         "series": {"t": t[d].tolist(), "com_z": {"mujoco": rep.com[k[d], 2].tolist(), "mpgspec": com[d, 2].tolist()},
                    "least_h": {"mujoco": rep.least_h[k[d]].tolist(), "mpgspec": least[d].tolist()}},
     }

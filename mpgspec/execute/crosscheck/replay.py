@@ -2,8 +2,12 @@
 
 The run's switches (time, primitive, clock of the new primitive) are taken as they are; the law
 (x, t, s, x_sw) -> u of the active primitive (CompiledPrimitive.loop, which also gives h) is
-evaluated at the control rate from MuJoCo's state and the input held until the next update. At a
-switch the primitive's clock starts at the switch's clock, s at 0 and x_sw is MuJoCo's state.
+evaluated at the control rate from MuJoCo's state and the input held until the next update. A
+sampled law (the ID-QP) runs as the oracle runs it: solved at its own rate from the previous
+solve's warm start (cold at switch-in), compiled, and held in between; a solve that does not
+converge is counted (`law_failures`) and its last iterate applied, as CasADi's virtual machine
+returns it. At a switch the primitive's clock starts at the switch's clock, s at 0 and x_sw is
+MuJoCo's state.
 Before t = 0 the start primitive's law holds the start state x*(t0) for `settle` seconds with its
 clock frozen, so that the soft contacts carry the weight when the run begins.
 """
@@ -42,6 +46,7 @@ class Replay:
     start_offset: float = 0.0
     failed: str = ""
     wall_s: float = 0.0
+    law_failures: dict = field(default_factory=dict)  # primitive -> solves of a sampled law that did not converge
 
 
 def held_feet(p: CompiledPrimitive, clock: float) -> tuple[str, ...] | None:
@@ -139,19 +144,22 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
     sm = robot.state
     if sm.nx > sm.nq + sm.nv:
         sim.events = _Events(x0, sm.nq + sm.nv, len(robot.feet))
-    settled = all(sim.step(_evaluate(p, sim.state(), clock0, 0.0, x0)[1], n_sub)
+    out_failures: dict = {}
+    law = _Law(p, rate, out_failures)
+    settled = all(sim.step(law(sim.state(), clock0, 0.0, x0)[1], n_sub)
                   for _ in range(int(round(settings.settle * rate))))
     x = sim.state()
     offset = float(np.linalg.norm((x - x0)[: robot.state.nq]))
     n = int(np.floor(duration * rate + 1e-9)) + 1
     T, X, C, L = np.arange(n) / rate, np.full((n, len(x)), np.nan), np.full((n, 3), np.nan), np.full(n, np.nan)
-    out = Replay(T, X, C, L, [], start_offset=offset)
+    out = Replay(T, X, C, L, [], start_offset=offset, law_failures=out_failures)
     if not settled:
         out.safe, out.failed, n = False, f"the simulator diverged while {p.name} held the start state", 0
     out.switches.append({"t": 0.0, "from": None, "to": p.name, "clock": clock0, "roa_margin": None})
     contact = {"max_penetration": 0.0, "max_slip_speed": 0.0, "slip_at": None, "lift_off": None,
                "trunk_contact": None}
     queue, sw = list(switches[1:]), (p, clock0, 0.0, x)
+    law = _Law(p, rate, out_failures)  # the run starts from the settled state: a fresh solve
     for k in range(n):
         t = T[k]
         x = sim.state()
@@ -162,12 +170,13 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
             out.switches.append({"t": float(t), "from": left.name, "to": s["to"], "clock": float(s["clock"]),
                                  "roa_margin": margin if np.isfinite(margin) else None})
             sw = (prims[s["to"]], float(s["clock"]), t, x.copy())
+            law = _Law(sw[0], rate, out_failures)
         p, c0, t_sw, x_sw = sw
         clock = c0 + (t - t_sw)
         if not np.isfinite(x).all():
             out.safe, out.failed = False, f"non-finite state at t = {t:.3f} s in {p.name}"
             break
-        hv, u = _evaluate(p, x, clock, t - t_sw, x_sw)
+        hv, u = law(x, clock, t - t_sw, x_sw)
         X[k], C[k] = x, sim.d.subtree_com[sim.root]
         out.active.append(p.name)
         act = hv < INACTIVE / 2
@@ -182,6 +191,35 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
     out.contact = contact
     out.wall_s = time.perf_counter() - t_wall
     return out
+
+
+class _Law:
+    """The active primitive's law from its switch-in: a sampled law solved every `every` control
+    updates from the previous solve's warm start and held in between (through its loop library, as
+    the oracle's chunks run it); any other law evaluated at every update (_evaluate)."""
+
+    def __init__(self, p: CompiledPrimitive, rate: float, failures: dict):
+        self.p, self.failures = p, failures
+        self.held = looplib.held_law(p)
+        if self.held is not None:
+            period = p.sampled.period
+            self.every = max(1, int(round(period * rate))) if period else 1
+            self.w, self.u, self.k = np.zeros(p.sampled.nw), None, 0
+
+    def __call__(self, x, clock: float, s: float, x_sw) -> tuple[np.ndarray, np.ndarray]:
+        if self.held is None:
+            return _evaluate(self.p, x, clock, s, x_sw)
+        solve, open_loop = self.held
+        if self.k % self.every == 0:
+            try:
+                self.u, self.w = solve(x, clock, s, x_sw, self.w)
+            except RuntimeError:  # the compiled solver reports no convergence: its last iterate, from the VM
+                u, w = self.p.sampled.solve(x, clock, s, x_sw, self.w)
+                self.u, self.w = np.asarray(u, float).ravel(), np.asarray(w, float).ravel()
+                self.failures[self.p.name] = self.failures.get(self.p.name, 0) + 1
+        self.k += 1
+        hv, u = open_loop(x, clock, s, x_sw, self.u)
+        return np.asarray(hv, float).ravel(), np.asarray(u, float).ravel()
 
 
 def _evaluate(p: CompiledPrimitive, x, clock: float, s: float, x_sw) -> tuple[np.ndarray, np.ndarray]:

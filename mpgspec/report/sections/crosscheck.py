@@ -100,6 +100,9 @@ class CrossCheckRun(_Strict):
     contact: CrossCheckContact
     start_offset: Num = Field(description="distance of the settled start configuration from x*(t0)")
     wall_s: float
+    law_failures: dict[str, int] = Field(default_factory=dict, description="per primitive, solves of a sampled "
+                                         "law (the ID-QP) that did not converge in the replay (their last iterate "
+                                         "was applied)")
     series: CrossCheckSeries
 
 
