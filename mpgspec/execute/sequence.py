@@ -50,6 +50,9 @@ class SequenceRun:
 
 
 POSE_EVENTS = ("start", "switch", "first_violation", "end")
+MAX_RECORDED = 50
+"""Violating samples whose most violated function a run records (beyond the first after each switch
+and each function's first violation)."""
 TRUNK_HEIGHT = 0.3
 """Half-height of the drawn trunk as a fraction of its half-length (hip to hip)."""
 
@@ -166,6 +169,8 @@ class _Simulation:
         self.stride = max(1, self.nsteps // max_points)
         self.k = 0
         self.seen = False  # a violation recorded since the last switch
+        self.firsts: set[tuple[str, int]] = set()  # (primitive, h index) whose first violation is recorded
+        self.recorded = 0  # violating samples recorded
         self.z = None
 
     def start(self) -> bool:
@@ -243,16 +248,23 @@ class _Simulation:
         return None
 
     def _monitor(self, p: CompiledPrimitive, nh: int, hv, xi, t_now: float) -> None:
-        """Record a violated safety function (the first of the run as a pose; at most 50, and the
-        first after every switch)."""
+        """Record violated safety functions: the most violated one at each of the first MAX_RECORDED
+        violating samples and at the first after every switch, and every function's first violation
+        in each primitive (so that one function violated for long hides no other); the first of the
+        run also as a pose."""
         run = self.run
-        if nh and ((hv < -self.tol) | ~np.isfinite(hv)).any():
+        bad = ((hv < -self.tol) | ~np.isfinite(hv)) if nh else None
+        if bad is not None and bad.any():
             run.safe = False
             if not run.violations:
                 self.snaps.append((t_now, self.cur, "first_violation", np.array(xi, float)))
-            if len(run.violations) < 50 or not self.seen:  # the first of every switch is kept
-                self.seen = True
-                j = int(np.argmin(np.where(np.isfinite(hv), hv, -np.inf)))
+            worst = int(np.argmin(np.where(np.isfinite(hv), hv, -np.inf)))
+            first = [int(j) for j in np.flatnonzero(bad) if (self.cur, int(j)) not in self.firsts]
+            keep = self.recorded < MAX_RECORDED or not self.seen or worst in first
+            rows = ([worst] if keep else []) + [j for j in first if j != worst]
+            self.seen, self.recorded = True, self.recorded + keep
+            for j in rows:
+                self.firsts.add((self.cur, j))
                 v = float(hv[j]) if np.isfinite(hv[j]) else None
                 run.violations.append({"t": t_now, "primitive": self.cur, "h": p.h_names[j], "value": v})
 

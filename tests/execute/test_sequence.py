@@ -121,3 +121,22 @@ def test_graph_mode_hands_over_at_the_end_when_not_yet_converged(world):
     assert r.switches[2]["t"] == pytest.approx(0.4, abs=DT + 1e-9)
     assert r.switches[2]["clock"] == g.edge("Ramp", "Right").switch_clock(1.0) == 0.0
     assert r.safe and r.final_primitive == "Right"
+
+
+def test_a_function_violated_for_long_hides_no_other(tmp_path):
+    """Right with a second function that is always the more violated one (x - 2 < x - 1): every
+    sample's worst is `far`, yet right_floor's first violation (t = 0.5, -1) is recorded too, once;
+    the most violated function is kept for the first 50 violating samples only."""
+    text = FIXTURE.read_text().replace('      - {name: right_floor, h: "x - 1"}\n',
+                                       '      - {name: right_floor, h: "x - 1"}\n      - {name: far, h: "x - 2"}\n')
+    path = tmp_path / "project.yaml"
+    path.write_text(text)
+    spec = load_project(path)
+    prims = compile_project(spec)
+    seq = Sequence(start="Home", duration=3.0, commands=[GoalCommand(t=0.5, goal="Right")])
+    r = simulate_sequence(prims, None, None, seq, settings_for(spec).replace(jit=False), "naive")
+    assert r.violations[0]["h"] == "far" and r.violations[0]["value"] == pytest.approx(-2.0)
+    floor = [v for v in r.violations if v["h"] == "right_floor"]
+    assert len(floor) == 1 and floor[0]["t"] == pytest.approx(0.5) and floor[0]["value"] == pytest.approx(-1.0)
+    far = [v for v in r.violations if v["h"] == "far"]
+    assert len(far) == 50 and len({v["t"] for v in r.violations}) == 50  # x < 2 for the whole run

@@ -133,7 +133,7 @@ def compare(prims: dict[str, CompiledPrimitive], rep: Replay, run: SequenceRun, 
     mine = {"safe": rep.safe, "first_violation": rep.first_violation, "violation_samples": rep.violation_samples,
             "failed": rep.failed}
     theirs = {"safe": run.safe, "first_violation": run.violations[0] if run.violations else None,
-              "violation_samples": len(run.violations), "failed": run.failed}
+              "violation_samples": len({v["t"] for v in run.violations}), "failed": run.failed}
     d = _decimate(len(t))
     least = np.asarray(run.min_h if len(run.min_h) == len(ok) else [None] * len(ok), dtype=float)[ok]
     return {

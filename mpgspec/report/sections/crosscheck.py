@@ -59,7 +59,7 @@ class CrossCheckWorst(_Strict):
     mujoco: Num = Field(description="least value in the simulator")
     t: float
     violated_in_mpgspec: bool = Field(description="whether it is among the violations mpgspec's run recorded "
-                                                  "(its first 50 violation samples)")
+                                                  "(its first 50 violating samples, the first after each switch and each function's first violation)")
 
 
 class CrossCheckFoot(_Strict):
