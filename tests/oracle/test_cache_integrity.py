@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import sqlite3
 import subprocess
 import sys
@@ -45,9 +46,27 @@ def verdicts(report: dict) -> dict:
             "verdicts": {k: report["verdicts"][k] for k in ("safe", "unsafe", "inconclusive", "errors")}}
 
 
+@pytest.fixture(scope="module")
+def compiled(tmp_path_factory) -> Path:
+    """A jit folder with the tiny project's compiled chunks (sealed under this process's key), built
+    once: each test's fresh cache starts with a copy, so its runs start without stored results but
+    do not compile the same code again. A test that changes the key or the libraries still sees
+    them rejected and rebuilt."""
+    root = tmp_path_factory.mktemp("compiled")
+    spec = root / "spec" / "project.yaml"
+    spec.parent.mkdir()
+    spec.write_text(TINY.read_text())
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("MPGSPEC_CACHE", str(root / "cache"))
+        main(["verify", str(spec), "--out", str(root / "out"), "-q"])
+    return root / "cache" / "jit"
+
+
 @pytest.fixture()
-def clean(capsys, tmp_path, monkeypatch, failing):
-    """(exit code, verdicts) of a run on a fresh cache, which it leaves filled."""
+def clean(capsys, tmp_path, monkeypatch, failing, compiled):
+    """(exit code, verdicts) of a run on a fresh cache (no stored results; the compiled chunks
+    copied), which it leaves filled."""
+    shutil.copytree(compiled, tmp_path / "cache" / "jit")
     monkeypatch.setenv("MPGSPEC_CACHE", str(tmp_path / "cache"))
     rc, rep, _ = verify(capsys, failing, tmp_path / "clean")
     assert rc == 1
