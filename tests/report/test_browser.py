@@ -114,3 +114,21 @@ def test_report_in_chromium(pages, browser, name, width):
     want = set(SECTIONS) | ({"sequence"} if report.get("sequence") else set())
     assert want <= set(v["ids"]), f"{name}: missing sections {sorted(want - set(v['ids']))}"
     assert v["svgs"] >= 1 + len(report["transitions"]) and v["nav_sticky"] == "sticky" and v["details_open"] == 0
+
+
+@pytest.mark.slow
+def test_a_run_the_cross_check_disputes_is_not_shown_as_safe(pages):
+    """The A1's sequence runs: a run whose replay in MuJoCo disagrees carries a 'disputed' badge and
+    the replay's first violation next to its own verdict; a run that agrees carries its verdict."""
+    html, report, errors = pages("a1")
+    assert html is not None, errors
+    text = html.read_text(encoding="utf-8")
+    runs = report["crosscheck"]["runs"]
+    assert runs and set(runs) <= {"naive", "graph"}
+    for mode, q in runs.items():
+        start = text.index(f'<div id="run-{mode}">')
+        head = text[start:text.index("</h3>", start)]
+        own = "safe" if report["sequence"]["runs"][mode]["safe"] else "unsafe"
+        assert (f">disputed: {own}<" in head) == (not q["agree"]) and own in head, head
+        if not q["agree"] and q["mujoco"]["first_violation"]:
+            assert q["mujoco"]["first_violation"]["h"] in text[start:start + 2000]
