@@ -64,8 +64,9 @@ def _plan_args(sub) -> None:
     p.add_argument("project", metavar="PROJECT", help="a project.yaml or its folder")
     p.add_argument("--from", dest="source", required=True, metavar="A", help="the primitive to start from")
     p.add_argument("--to", dest="goal", required=True, metavar="B", help="the primitive to reach")
-    p.add_argument("--weight", choices=("duration", "peak_input", "hops"), default="duration",
-                   help="what the plan minimises: summed transition duration (default), peak input, or hops")
+    p.add_argument("--weight", choices=("duration", "peak_input", "hops", "margin"), default="duration",
+                   help="what the plan minimises: summed transition duration (default), peak input, hops, or "
+                        "margin (the sum of 1 / each edge's least normalised safety margin: thin edges avoided)")
     p.add_argument("--format", choices=("human", "json"), default="human",
                    help="human: the path and each hop with its class and waiting window; json: the same as JSON")
     _verified_results_args(p, "its graph is")

@@ -30,7 +30,8 @@ def cmd_plan(args) -> int:
     if args.format == "json":
         print(json.dumps(doc, indent=1))
     elif path is not None:
-        print(" -> ".join(path) + f"   ({args.weight} {cost:.4g})")
+        what = f"{args.weight} {cost:.4g}" if args.weight != "margin" else f"margin cost {cost:.4g}: the sum of 1 / margin"
+        print(" -> ".join(path) + f"   ({what})")
         for h in doc["hops"]:
             wait = (f"wait until t_A of {h['from']} is in {_window_text(h['windows'])} s" if h["class"] == 2
                     else "switch at any t_A")

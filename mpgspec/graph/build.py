@@ -37,6 +37,13 @@ def _start_points(prims, gA, gB, b):
     return np.array(x0s).reshape(-1, nx), np.array(t0s, float), index
 
 
+def _scales(p: CompiledPrimitive, t_B: np.ndarray) -> np.ndarray:
+    """Each safety function's value at the setpoint x*(t_B), switched in there (one row per t_B):
+    how far from its boundary the primitive keeps it at rest, the unit of the margin weight."""
+    return np.array([np.asarray(p.h(p.x_star(float(t)), float(t), 0.0, p.x_star(float(t))), float).ravel()
+                     for t in t_B]).reshape(len(t_B), len(p.h_names))
+
+
 def build_graph(prims: dict[str, CompiledPrimitive], settings: OracleSettings, n_A: int = 12, n_B: int = 12,
                 progress: Progress | None = None, executor: Executor | None = None,
                 recheck: frozenset = frozenset()) -> MotionPrimitiveGraph:
@@ -63,8 +70,15 @@ def build_graph(prims: dict[str, CompiledPrimitive], settings: OracleSettings, n
             transitions[(a, b)] = Transition(a, b, gA[a], gB[b], cells)
         for (a, i, j), e in zip(points[b][2], results[b]):
             transitions[(a, b)].evidence[i][j] = e
+        scales = None
         for a in sources:
-            transitions[(a, b)].classify()
+            tr = transitions[(a, b)]
+            tr.classify()
+            if tr.weights:
+                scales = _scales(prims[b], gB[b]) if scales is None else scales
+                m = tr.least_margin(prims[b].h_names, scales)
+                if m is not None:
+                    tr.weights["margin"] = m
     if progress:
         progress("oracle", len(tasks), len(tasks))
     nodes = {n: {"cls": p.cls.value, "period": p.period, "domain": p.domain, "next": p.next}

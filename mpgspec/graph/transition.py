@@ -7,6 +7,7 @@ from enum import IntEnum
 import networkx as nx
 import numpy as np
 
+from ..compile.primitive import INACTIVE
 from ..oracle.evidence import OracleEvidence
 
 
@@ -61,6 +62,27 @@ class Transition:
         self.windows = _windows(self.t_A, avail)
         if durations:
             self.weights = {"duration": float(max(durations)), "peak_input": float(max(peaks)), "hops": 1.0}
+
+    def least_margin(self, names: list[str], scales: np.ndarray) -> float | None:
+        """The least normalised safety margin over the cells the edge switches through (the verified t_B
+        of each t_A): each safety function's error-aware lower bound over the rollout divided by its
+        value at B's setpoint at that t_B (scales[j], one row per t_B in the order of names; a function at most 0 there, or
+        parked outside its window, is left out). 1: the flow keeps every function as far from its
+        boundary as the setpoint does; 0: it touches one. 1 when no function can be normalised (B has
+        none, or none is positive at its setpoint); None without a verified cell."""
+        out, cells = None, 0
+        for i, t_b in enumerate(self.best_t_B):
+            if t_b is None:
+                continue
+            j = int(np.argmin(np.abs(self.t_B - t_b)))
+            e, cells = self.evidence[i][j], cells + 1
+            for k, h in enumerate(names):
+                lb, ref = e.lower_bounds.get(h), float(scales[j][k])
+                if lb is None or not np.isfinite(lb) or not (0 < ref < INACTIVE / 2):
+                    continue
+                m = max(float(lb), 0.0) / ref
+                out = m if out is None else min(out, m)
+        return out if out is not None or not cells else 1.0
 
     def switch_clock(self, t_A: float) -> float | None:
         """The verified t_B for a grid time t_A, None where no transition starts."""

@@ -13,7 +13,19 @@ import networkx as nx
 if TYPE_CHECKING:  # the planner itself needs only networkx, so that planning from a report stays light
     from ..graph.transition import MotionPrimitiveGraph
 
-WEIGHTS = ("duration", "peak_input", "hops")
+WEIGHTS = ("duration", "peak_input", "hops", "margin")
+MARGIN_FLOOR = 1e-6
+"""The least margin the margin weight divides by (an edge that touches a boundary costs 1e6)."""
+
+
+def cost(weight: str):
+    """What Dijkstra minimises for a weight: the edge attribute of that name, summed along the path;
+    for `margin` (an edge's least normalised safety margin, 0 to about 1) its reciprocal, so that a
+    path avoids thin edges (one edge of margin 0.01 costs as much as fifty of 0.5); an edge without
+    a margin (none computed, or a robust edge) is not taken."""
+    if weight != "margin":
+        return weight
+    return lambda _a, _b, d: 1.0 / max(d["margin"], MARGIN_FLOOR) if d.get("margin") is not None else None
 
 
 @dataclass
@@ -52,17 +64,17 @@ def plan_graph(g: MotionPrimitiveGraph) -> nx.DiGraph:
 
 def shortest_path(G: nx.DiGraph, source: str, goal: str,
                   weight: str = "duration") -> tuple[list[str] | None, float | None]:
-    """Dijkstra on the chosen weight (transition duration, peak input or hop count) over a planner's
+    """Dijkstra on the chosen weight (transition duration, peak input, hop count or margin) over a planner's
     graph; (None, None) when the goal cannot be reached."""
     if weight not in WEIGHTS:
         raise ValueError(f"unknown weight {weight!r}; expected one of {', '.join(WEIGHTS)}")
     if source == goal:
         return [source], 0.0
     try:
-        cost, path = nx.single_source_dijkstra(G, source, goal, weight=weight)
+        total, path = nx.single_source_dijkstra(G, source, goal, weight=cost(weight))
     except (nx.NetworkXNoPath, nx.NodeNotFound):
         return None, None
-    return path, float(cost)
+    return path, float(total)
 
 
 def shortest_plan(g: MotionPrimitiveGraph, source: str, goal: str, weight: str = "duration",
@@ -92,6 +104,6 @@ def lookup_table(g: MotionPrimitiveGraph, weight: str = "duration") -> dict[str,
     G = plan_graph(g)
     table: dict[str, dict[str, str | None]] = {}
     for a in G.nodes:
-        paths = nx.single_source_dijkstra_path(G, a, weight=weight)
+        paths = nx.single_source_dijkstra_path(G, a, weight=cost(weight))
         table[a] = {b: (paths[b][1] if len(paths[b]) > 1 else a) if b in paths else None for b in G.nodes}
     return table

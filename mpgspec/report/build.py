@@ -98,7 +98,7 @@ def edge_entries(graph) -> list[dict]:
     usable = plan_graph(graph)
     out = []
     for a, b, d in graph.G.edges(data=True):
-        e = {"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in ("duration", "peak_input", "hops") if k in d}}
+        e = {"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in ("duration", "peak_input", "hops", "margin") if k in d}}
         e["usable"] = usable.has_edge(a, b)
         if not e["usable"]:
             nd = graph.G.nodes[a]

@@ -14,7 +14,7 @@ import networkx as nx
 SHAPES = {"fixed": "box", "periodic": "circle", "transient": "diamond"}
 STYLES = {1: "solid", 2: "dashed"}
 NOMINAL_ONLY = "#D55E00"
-EDGE_WEIGHTS = ("duration", "peak_input", "hops")
+EDGE_WEIGHTS = ("duration", "peak_input", "hops", "margin")
 
 
 def _q(s) -> str:

@@ -186,6 +186,8 @@ class Edge(_Strict):
     duration: Num = None
     peak_input: Num = None
     hops: Num = None
+    margin: Num = Field(None, description="the least normalised safety margin over the cells the edge switches "
+                                          "through: each h's lower bound over the rollout / its value at B's setpoint")
     usable: bool = Field(default=True, description="whether the planner may take the edge (a transient hands over "
                                                    "only to its next primitive, at the end of its domain)")
     unusable_reason: str | None = None

@@ -16,7 +16,8 @@ def robust_report_graph(report: dict) -> ReportGraph:
     for e in report.get("edges", []):
         r = keep.get((e["from"], e["to"]))
         if r is not None:
-            edges.append({**e, "class": r["robust_class"], **(r.get("robust_weights") or {})})
+            nominal = {k: v for k, v in e.items() if k != "margin"}  # the nominal margin says nothing robust
+            edges.append({**nominal, "class": r["robust_class"], **(r.get("robust_weights") or {})})
     trs = []
     for t in report.get("transitions", []):
         r = keep.get((t["from"], t["to"]))
@@ -32,9 +33,11 @@ def report_lookup_table(g: ReportGraph, weight: str = "duration") -> dict[str, d
     mpgspec.plan.planner.lookup_table, for a graph read from a report)."""
     import networkx as nx
 
+    from ..plan.planner import cost
+
     G = g.planner_graph()
     table: dict[str, dict[str, str | None]] = {}
     for a in G.nodes:
-        paths = nx.single_source_dijkstra_path(G, a, weight=weight)
+        paths = nx.single_source_dijkstra_path(G, a, weight=cost(weight))
         table[a] = {b: (paths[b][1] if len(paths[b]) > 1 else a) if b in paths else None for b in G.nodes}
     return table

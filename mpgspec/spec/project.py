@@ -54,7 +54,7 @@ class PlanRef(Strict):
     from_: Text = Field(alias="from")
     to: Text
     max_cost: Number | None = None
-    weight: Literal["duration", "peak_input", "hops"] = "duration"
+    weight: Literal["duration", "peak_input", "hops", "margin"] = "duration"
 
 
 class RequirePlan(Strict):

@@ -140,3 +140,19 @@ def test_a_function_violated_for_long_hides_no_other(tmp_path):
     assert len(floor) == 1 and floor[0]["t"] == pytest.approx(0.5) and floor[0]["value"] == pytest.approx(-1.0)
     far = [v for v in r.violations if v["h"] == "far"]
     assert len(far) == 50 and len({v["t"] for v in r.violations}) == 50  # x < 2 for the whole run
+
+
+def test_the_margin_weight_avoids_thin_edges(world):
+    """Right's floor x >= 1 is 0.5 from its setpoint 1.5. Osc -> Right switches from x = 2 sin(pi/4)
+    at the earliest (the flow then rises monotonically to 1.5): least margin (sqrt 2 - 1) / 0.5;
+    Ramp -> Right from x = 1.5 * 0.75: (1.125 - 1) / 0.5 = 0.25; edges into a primitive without
+    safety functions have margin 1. Home -> Right: the fastest plan goes through Ramp, the one that
+    keeps the most margin through Osc (cost 1 + 1/0.83 against 1 + 1/0.25)."""
+    _prims, g, _table, _settings = world
+    m = {k: tr.weights.get("margin") for k, tr in g.transitions.items() if tr.weights}
+    assert m[("Osc", "Right")] == pytest.approx(2 * (math.sqrt(2) - 1), abs=2e-3)
+    assert m[("Ramp", "Right")] == pytest.approx(0.25, abs=2e-3)
+    assert m[("Home", "Osc")] == m[("Home", "Ramp")] == 1.0
+    fast, wide = shortest_plan(g, "Home", "Right", "duration"), shortest_plan(g, "Home", "Right", "margin")
+    assert fast.path == ["Home", "Ramp", "Right"] and wide.path == ["Home", "Osc", "Right"]
+    assert wide.cost == pytest.approx(1 + 1 / m[("Osc", "Right")])
