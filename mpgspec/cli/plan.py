@@ -37,5 +37,6 @@ def cmd_plan(args) -> int:
                     else "switch at any t_A")
             print(f"  {h['from']} -> {h['to']}: class {h['class']}, {_num(h['duration'], '.3g')} s; {wait}")
     else:
-        print(f"no safe transition sequence from {args.source} to {args.goal}")
+        why = f": {doc['why']}" if doc.get("why") else ""
+        print(f"no safe {'robust ' if args.robust else ''}transition sequence from {args.source} to {args.goal}{why}")
     return args.exit_code

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import UsageError
-from ..plan.planner import hops, shortest_path, shortest_plan
+from ..plan.planner import hops, plan_graph, shortest_path, shortest_plan
 from ..report.read import ReportGraph
 from .reuse import Notify, load_one, quick_report, rebuild, verified
 
@@ -39,11 +39,30 @@ def plan_project(project, source: str, goal: str, weight: str = "duration", out=
             g = robust_report_graph(report)
         else:
             g = ReportGraph(report)
-        path, cost = shortest_path(g.planner_graph(), source, goal, weight)
+        G = g.planner_graph()
+        path, cost = shortest_path(G, source, goal, weight)
         edge, where = g.edge, str(Path(out) / name / "report.json")
     else:
         graph = _robust_graph(spec) if robust else rebuild(spec)[1].graph
-        plan = shortest_plan(graph, source, goal, weight)
+        G = plan_graph(graph)
+        plan = shortest_plan(graph, source, goal, weight, G)
         path, cost, edge, where = plan.path, plan.cost, graph.edge, "rebuilt"
-    return {"from": source, "to": goal, "weight": weight, "path": path, "cost": cost, "hops": hops(edge, path),
-            "source": where}
+    doc = {"from": source, "to": goal, "weight": weight, "path": path, "cost": cost, "hops": hops(edge, path),
+           "source": where}
+    if path is None:
+        doc["why"] = unreachable(G, source, goal, weight, robust)
+    return doc
+
+
+def unreachable(G, source: str, goal: str, weight: str, robust: bool) -> str:
+    """Why no plan exists: what the source reaches, and which edges enter the goal."""
+    import networkx as nx
+
+    kind = "robust " if robust else ""
+    usable = G if weight != "margin" else G.edge_subgraph([(a, b) for a, b, d in G.edges(data=True)
+                                                           if d.get("margin") is not None])
+    reach = sorted(nx.descendants(usable, source)) if source in usable else []
+    into = sorted(a for a, _b in usable.in_edges(goal)) if goal in usable else []
+    text = (f"{source} reaches {', '.join(reach)} through {kind}edges" if reach else f"{source} has no {kind}edge out")
+    text += "; " + (f"{goal} is entered only from {', '.join(into)}" if into else f"no {kind}edge enters {goal}")
+    return text + (" (edges without a margin are not taken by --weight margin)" if weight == "margin" else "")

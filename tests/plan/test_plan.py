@@ -137,3 +137,20 @@ def test_built_graph_plans(tmp_path):
     assert table["Home"]["Right"] == "Ramp"
     assert shortest_plan(g, "Home", "Right").path == ["Home", "Ramp", "Right"]
     assert shortest_plan(g, "Home", "Right", "hops").cost == 2.0
+
+
+def test_no_plan_says_why():
+    """Without a path the plan names what the start reaches and where the goal is entered from."""
+    import networkx as nx
+
+    from mpgspec.pipeline.plan import unreachable
+
+    G = nx.DiGraph([("A", "B"), ("B", "A"), ("C", "D")])
+    G.add_node("E")
+    assert unreachable(G, "A", "D", "duration", False) == "A reaches B through edges; D is entered only from C"
+    assert unreachable(G, "E", "A", "duration", True) == "E has no robust edge out; A is entered only from B"
+    G.add_node("F")
+    assert unreachable(G, "A", "F", "duration", False).endswith("no edge enters F")
+    G.edges["A", "B"]["margin"] = 0.5
+    why = unreachable(G, "A", "B", "margin", False)  # B -> A has no margin: A reaches B only
+    assert why.startswith("A reaches B through edges") and "without a margin" in why
