@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import UsageError
-from ..plan.planner import hops, plan_graph, shortest_path, shortest_plan
+from ..plan.planner import hops, plan_graph, shortest_path, shortest_plan, takeable
 from ..report.read import ReportGraph
 from .reuse import Notify, load_one, quick_report, rebuild, verified
 
@@ -59,8 +59,7 @@ def unreachable(G, source: str, goal: str, weight: str, robust: bool) -> str:
     import networkx as nx
 
     kind = "robust " if robust else ""
-    usable = G if weight != "margin" else G.edge_subgraph([(a, b) for a, b, d in G.edges(data=True)
-                                                           if d.get("margin") is not None])
+    usable = takeable(G, weight)
     reach = sorted(nx.descendants(usable, source)) if source in usable else []
     into = sorted(a for a, _b in usable.in_edges(goal)) if goal in usable else []
     text = (f"{source} reaches {', '.join(reach)} through {kind}edges" if reach else f"{source} has no {kind}edge out")

@@ -101,9 +101,20 @@ def hops(edge, path: list[str] | None) -> list[dict]:
 
 def lookup_table(g: MotionPrimitiveGraph, weight: str = "duration") -> dict[str, dict[str, str | None]]:
     """table[current][goal] = next primitive to switch to (None when the goal is unreachable)."""
-    G = plan_graph(g)
+    return next_table(plan_graph(g), weight)
+
+
+def next_table(G: nx.DiGraph, weight: str = "duration") -> dict[str, dict[str, str | None]]:
+    """table[current][goal] = the next primitive on the shortest path of a planner's graph G."""
     table: dict[str, dict[str, str | None]] = {}
     for a in G.nodes:
         paths = nx.single_source_dijkstra_path(G, a, weight=cost(weight))
         table[a] = {b: (paths[b][1] if len(paths[b]) > 1 else a) if b in paths else None for b in G.nodes}
     return table
+
+
+def takeable(G: nx.DiGraph, weight: str) -> nx.DiGraph:
+    """G without the edges a weight cannot take (for margin: those without a margin)."""
+    w = cost(weight)
+    return G if isinstance(w, str) else G.edge_subgraph([(a, b) for a, b, d in G.edges(data=True)
+                                                          if w(a, b, d) is not None])

@@ -93,12 +93,12 @@ def verdict_counts(graph) -> dict:
 def edge_entries(graph) -> list[dict]:
     """Every verified edge with its weights and whether the planner may take it (a transient hands
     over only to its `next`, at the end of its domain)."""
-    from ..plan.planner import plan_graph
+    from ..plan.planner import WEIGHTS, plan_graph
 
     usable = plan_graph(graph)
     out = []
     for a, b, d in graph.G.edges(data=True):
-        e = {"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in ("duration", "peak_input", "hops", "margin") if k in d}}
+        e = {"from": a, "to": b, "class": d["cls"], **{k: d[k] for k in WEIGHTS if k in d}}
         e["usable"] = usable.has_edge(a, b)
         if not e["usable"]:
             nd = graph.G.nodes[a]

@@ -11,10 +11,12 @@ import math
 
 import networkx as nx
 
+from ..plan.planner import WEIGHTS
+
 SHAPES = {"fixed": "box", "periodic": "circle", "transient": "diamond"}
 STYLES = {1: "solid", 2: "dashed"}
 NOMINAL_ONLY = "#D55E00"
-EDGE_WEIGHTS = ("duration", "peak_input", "hops", "margin")
+EDGE_WEIGHTS = WEIGHTS
 
 
 def _q(s) -> str:

@@ -31,13 +31,6 @@ def robust_report_graph(report: dict) -> ReportGraph:
 def report_lookup_table(g: ReportGraph, weight: str = "duration") -> dict[str, dict[str, str | None]]:
     """table[current][goal] = next primitive on the shortest path of g's planner graph (as
     mpgspec.plan.planner.lookup_table, for a graph read from a report)."""
-    import networkx as nx
+    from ..plan.planner import next_table
 
-    from ..plan.planner import cost
-
-    G = g.planner_graph()
-    table: dict[str, dict[str, str | None]] = {}
-    for a in G.nodes:
-        paths = nx.single_source_dijkstra_path(G, a, weight=cost(weight))
-        table[a] = {b: (paths[b][1] if len(paths[b]) > 1 else a) if b in paths else None for b in G.nodes}
-    return table
+    return next_table(g.planner_graph(), weight)
