@@ -15,7 +15,8 @@ from ..plugins import load_plugins
 from .backend import OracleBackend, check_backend
 
 GROUP = "mpgspec.verifiers"
-_BUILTIN = {"rk4": "verifiers.rk4:backend", "scipy": "verifiers.scipy_ref:backend"}
+_BUILTIN = {"rk4": "verifiers.rk4:backend", "scipy": "verifiers.scipy_ref:backend",
+            "validated": "verifiers.validated:backend"}
 
 
 @lru_cache(maxsize=None)
