@@ -8,7 +8,7 @@ from mpgspec import api
 SPECS = Path(__file__).parents[1] / "specs"
 
 
-@pytest.mark.parametrize("name", ["pendulum", "cart"])
+@pytest.mark.parametrize("name", ["pendulum", "cart", "ladder"])
 def test_example_project_passes(example, name):
     res = example(name)
     p = res.projects[0]

@@ -7,6 +7,9 @@ then {V <= rho} is invariant, safe and attracted to x*, and E is the largest W-b
 Each part is certified by a checked SOS certificate (sos_certificates.py) when its polynomial is exact (the
 closed loop, or h_i, read as a polynomial from CasADi); otherwise it is estimated by dense
 sampling plus local optimisation and labelled 'empirical'. The result's level is the weakest.
+With `require_certified` (set when the spec says `require: certified`) the sampled parts are then
+proved at the sampled level or a fraction of it by interval branch-and-bound over boxes in ball
+arithmetic (lyapunov_bnb.py), and the result fails unless every part is certified.
 With `degree` > 2 (polynomial loops and h only) V is a polynomial of that degree found by V-rho
 alternation from y'Py (polyv.py).
 """
@@ -21,7 +24,7 @@ from scipy.optimize import minimize
 
 from mpgspec.certify.problem import RoAProblem, RoAResult, weakest
 
-from . import polyv
+from . import lyapunov_bnb, polyv
 from .roa_common import ball_radius, batch, bisect, linearise, lyapunov_P, unit_sphere
 from .sos_certificates import LevelSetProgram, NotPolynomial, Poly, from_casadi, padd, pmul, quadratic
 
@@ -55,9 +58,12 @@ class LyapunovVerifier:
         need_cert = bool(o.get("require_certified", False))
         fpoly = _polys(ca.Function("fy", [y], [fy]), o.get("polynomial"))
         hpoly = [_polys(ca.Function("hy", [y], [hy[i]]), None) for i in range(hy.numel())]
+        boxes = None
         if need_cert and (isinstance(fpoly, str) or any(isinstance(p, str) for p in hpoly)):
             why = fpoly if isinstance(fpoly, str) else next(p for p in hpoly if isinstance(p, str))
-            return RoAResult(0.0, "failed", method, ev, f"no certificate possible: {why}")
+            boxes = lyapunov_bnb.tapes(problem.f, problem.h) if o.get("branch_and_bound", True) else why
+            if isinstance(boxes, str):
+                return RoAResult(0.0, "failed", method, ev, f"no certificate possible: {boxes}")
         if o.get("polynomial") and isinstance(fpoly, str):
             return RoAResult(0.0, "failed", method, ev, f"closed loop declared polynomial but {fpoly}")
         degree = o.get("degree", 2)
@@ -99,19 +105,57 @@ class LyapunovVerifier:
         parts.append({"part": "Vdot", "level": lev, "rho": rho_dyn, **info})
         levels.append(lev)
         rho = min(rho_dyn, rho_safe)
-        if fixed is not None:
-            rho = float(fixed) if all(pt["rho"] >= float(fixed) for pt in parts) else 0.0
+        if fixed is not None:  # sampled parts do not veto a level the branch-and-bound will decide
+            rho = float(fixed) if all(pt["rho"] >= float(fixed) for pt in parts
+                                      if boxes is None or pt["level"] != "empirical") else 0.0
+        proof = None
+        if boxes is not None and rho > 0 and "failed" not in levels:
+            proof, rho, levels, ev["branch_and_bound"] = _branch_and_bound(boxes, xs, P, rho, fixed, parts, o)
         ev.update(rho=rho, parts=parts, rho_capped=bool(rho >= cap), time_s=time.perf_counter() - t0)
         level = weakest(*levels)
-        if rho <= 0 or level == "failed":
+        if rho <= 0 or level == "failed" or (need_cert and level != "certified"):
             why = "; ".join(f"{pt['part']}: {pt.get('reason', 'rho = 0')}" for pt in parts
-                            if pt["level"] == "failed" or pt["rho"] <= 0)
+                            if pt["level"] != "certified" or pt["rho"] <= 0)
             return RoAResult(0.0, "failed", method, ev, f"no validated level set: {why}")
+        if proof is not None:
+            r = lyapunov_bnb.inscribed_radius(P, rho, problem.W)
+            return RoAResult(r, "certified", method, ev, _bnb_message(proof, parts, r))
         r = ball_radius(P, rho, problem.W)
         msg = f"{{V <= {rho:.6g}}} " + ("certified by SOS" if level == "certified" else
                                          "estimated by sampling for " +
                                          ", ".join(pt["part"] for pt in parts if pt["level"] == "empirical"))
         return RoAResult(r, level, method, ev, msg)
+
+
+def _branch_and_bound(tapes, xs: np.ndarray, P: np.ndarray, rho: float, fixed,
+                      parts: list[dict], o: dict):
+    """(proof or None, rho, levels, attempts) after proving the sampled parts by interval
+    branch-and-bound at rho (or `fixed`) or the first fraction of it that holds; the parts are
+    relabelled in place."""
+    sampled = [pt for pt in parts if pt["level"] == "empirical"]
+    names = {pt["part"] for pt in sampled}
+    h_rows = sorted(int(nm[2:-1]) for nm in names if nm.startswith("h["))
+    prover = lyapunov_bnb.LevelProver(*tapes, xs, P, prove_vdot="Vdot" in names, h_rows=h_rows)
+    proof, attempts = lyapunov_bnb.certify_level(prover, rho, fixed, int(o.get("boxes", 50_000)))
+    for pt in sampled:
+        if proof.ok:
+            pt.update(level="certified", rho=proof.rho, estimated_rho=pt["rho"], certified_by="branch_and_bound")
+        else:
+            pt["reason"] = f"interval branch-and-bound failed: {proof.reason}"
+    levels = [pt["level"] for pt in parts]
+    return (proof, proof.rho, levels, attempts) if proof.ok else (None, rho, levels, attempts)
+
+
+def _bnb_message(proof, parts: list[dict], r: float) -> str:
+    what = " and ".join(w for w, on in (("Vdot < 0", "Vdot" in proof.parts), ("h > 0", "h" in proof.parts)) if on)
+    sos = [pt["part"] for pt in parts if pt["level"] == "certified" and "certified_by" not in pt]
+    near = ""
+    if "Vdot" in proof.parts:
+        near = f"; around x* by the interval Jacobian (P J + J'P < 0 on {proof.inner} boxes" + (
+            f", outside ||x - x*||_2 <= {proof.eps:.2g}, the rounding of f(x*) = 0)" if proof.eps > 0 else ")")
+    return (f"{{V <= {proof.rho:.6g}}} certified: {what} on it proved by interval branch-and-bound over "
+            f"{proof.boxes} boxes in {proof.seconds:.2g} s{near}" + (f"; {', '.join(sos)} by SOS" if sos else "")
+            + f"; the W-ball r = {r:.6g} lies inside it (checked in ball arithmetic)")
 
 
 def _linear_lyapunov(problem: RoAProblem, xs: np.ndarray, o: dict, method: str):

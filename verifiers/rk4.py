@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from mpgspec.compile.primitive import CompiledPrimitive
-from mpgspec.oracle.backend import HYBRID
+from mpgspec.oracle.backend import COMPILED, HYBRID
 from mpgspec.oracle.evidence import OracleEvidence, Reason
 from mpgspec.oracle.integrator import Chunk, build_chunk, build_first, start_states
 from mpgspec.oracle.judged import LANES, JudgedChunk, build_judged_chunk, decided_evidence, prebuild
@@ -267,11 +267,11 @@ def _non_finite(out: np.ndarray, r, end_state: bool) -> str:
 
 
 class RK4Backend:
-    """The `rk4` entry point (an OracleBackend): it runs jump maps, so it declares HYBRID."""
+    """The `rk4` entry point (an OracleBackend): it runs jump maps and compiled code (HYBRID, COMPILED)."""
 
     name = "rk4"
     description = "jit-compiled RK4, batched, early termination, error-aware three-valued verdicts"
-    capabilities = frozenset({HYBRID})
+    capabilities = frozenset({HYBRID, COMPILED})
 
     @staticmethod
     def is_installed() -> bool:

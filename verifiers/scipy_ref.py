@@ -26,6 +26,7 @@ from scipy.integrate import solve_ivp
 from mpgspec.compile.contacts import wrap_clock
 from mpgspec.compile.numeric import numeric
 from mpgspec.compile.primitive import INACTIVE, CompiledPrimitive
+from mpgspec.oracle.backend import COMPILED
 from mpgspec.oracle.evidence import OracleEvidence, Reason
 from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidence, judge
 from mpgspec.settings import OracleSettings
@@ -219,11 +220,11 @@ def _active(p: CompiledPrimitive, t: np.ndarray) -> np.ndarray:
 
 
 class ScipyBackend:
-    """The `scipy` entry point (an OracleBackend): it has no discrete part, so it declares no capability."""
+    """The `scipy` entry point (an OracleBackend): it has no discrete part; it calls compiled code (COMPILED)."""
 
     name = "scipy"
     description = "scipy LSODA at rtol 1e-10 with the same error-aware judge (reference, slow; no jump maps)"
-    capabilities = frozenset()
+    capabilities = frozenset({COMPILED})
 
     @staticmethod
     def is_installed() -> bool:

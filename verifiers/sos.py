@@ -21,7 +21,8 @@ class SOSVerifier:
         return bool({"CLARABEL", "SCS"} & set(cp.installed_solvers()))
 
     def estimate(self, problem, options: dict | None = None):
-        return lyapunov.estimate(problem, {**(options or {}), "require_certified": True, "method_name": self.name})
+        return lyapunov.estimate(problem, {**(options or {}), "require_certified": True, "branch_and_bound": False,
+                                           "method_name": self.name})
 
 
 verifier = SOSVerifier()

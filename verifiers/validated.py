@@ -27,25 +27,18 @@ from flint import arb
 from mpgspec.compile.primitive import CompiledPrimitive
 from mpgspec.oracle.evidence import OracleEvidence, Reason
 from mpgspec.settings import OracleSettings
-from mpgspec.validated.flow import Loop, Options, run
+from mpgspec.validated.flow import Options, loop_of, run
 from mpgspec.validated.lohner import LohnerSet
-from mpgspec.validated.tape import Tape
 
 _REASONS = {"entered_E": Reason.ENTERED_E, "left_C": Reason.LEFT_C, "horizon_reached": Reason.HORIZON,
             "inconclusive": Reason.INCONCLUSIVE}
-
-
-def loop_of(prim: CompiledPrimitive) -> Loop:
-    """The tapes of a primitive's closed loop, safe set and E."""
-    windows = [None if w is None else (float(w[0]), float(w[1])) for w in prim.windows]
-    return Loop(Tape.of(prim.f_cl), Tape.of(prim.h), Tape.of(prim.roa_margin).of_psd(), list(prim.h_names),
-                windows or [None] * len(prim.h_names), tuple(float(b) for b in prim.boundaries), prim.period)
 
 
 class ValidatedRunner:
     """Evaluates O_B(x0, t_B) of one primitive by validated integration, one start point at a time."""
 
     def __init__(self, prim: CompiledPrimitive, settings: OracleSettings, options: Options = Options()):
+        """Reads the primitive's closed loop, safe set and E as tapes (refusing what is no expression graph)."""
         self.prim, self.s, self.o = prim, settings, options
         self.loop = loop_of(prim)
 

@@ -67,7 +67,12 @@ class LevelSetOptions(BaseModel):
 class LyapunovOptions(LevelSetOptions):
     """Options of the `lyapunov` verifier."""
 
-    require_certified: StrictBool = False
+    require_certified: StrictBool = Field(
+        default=False, description="fail unless every part is certified (set by the spec's `require: certified`)")
+    branch_and_bound: StrictBool = Field(
+        default=True, description="with require_certified, prove non-polynomial parts by interval branch-and-bound")
+    boxes: StrictInt = Field(default=50_000, ge=1, le=MAX_SAMPLES,
+                             description="most boxes of the branch-and-bound at each level tried")
 
 
 class SearchOptions(BaseModel):

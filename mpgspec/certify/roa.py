@@ -5,7 +5,8 @@ than the verified one, the smaller one is used and the record says so. A verifie
 leaves the spec's radius (labelled 'given') or, without one, an empty E (radius 0): no flow can
 enter it, so no transition into the primitive is claimed. A level-set verifier's region is recorded
 as {V <= rho} and as the W-ball inside it; with `roa.options.region: level_set` E is the level set
-itself (level_set.py).
+itself (level_set.py). A spec's `require: certified` turns on `require_certified` of a verifier
+that reads it (lyapunov's certified route).
 """
 from __future__ import annotations
 
@@ -131,14 +132,14 @@ def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=No
             records[inst.name] = RoARecord(inst.name, "given", "given", float(roa.radius), roa.radius,
                                            "radius chosen by the spec author")
             continue
-        keys[inst.name] = memo.key("roa", prim.digest(), roa.method, sorted(roa.options.items()), roa.radius) \
+        keys[inst.name] = memo.key("roa", prim.digest(), roa.method, sorted(_options(inst).items()), roa.radius) \
             if memo else None
         known = memo.get(keys[inst.name]) if memo else None
         if known is not None:
             records[inst.name] = RoARecord(**known)
             continue
         todo.append(inst)
-    jobs = [(inst.name, inst.spec.roa.method, dict(inst.spec.roa.options)) for inst in todo]
+    jobs = [(inst.name, inst.spec.roa.method, _options(inst)) for inst in todo]
     methods = roa_methods()
     pooled = [j for j in jobs if getattr(methods.get(j[1]), "simulates", False)]
     done = dict(zip((j[0] for j in pooled), (executor or InProcess()).map(
@@ -154,6 +155,17 @@ def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=No
     apply_radii(prims, {n: r.radius for n, r in records.items()})
     _regions(spec, prims, records)
     return records
+
+
+def _options(inst) -> dict:
+    """The options a primitive's RoA verifier is given: the spec's `roa.options`, with
+    `require_certified` on when the spec says `require: certified` and the verifier reads that
+    option (its certified route, e.g. lyapunov's branch-and-bound for non-polynomial loops)."""
+    roa = inst.spec.roa
+    opts = dict(roa.options)
+    if roa.require == "certified" and "require_certified" in (accepted_options(roa.method) or ()):
+        opts.setdefault("require_certified", True)
+    return opts
 
 
 def _sized(prims: dict, job: tuple) -> tuple:

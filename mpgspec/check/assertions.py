@@ -32,6 +32,14 @@ def _edge_text(a, b):
     return f"{a} -> {b}"
 
 
+def _not_certified(tr) -> str:
+    """Why an edge is not certified: how many of the safe cells it rests on are proved."""
+    safe = tr.rests_on()
+    n = sum(c.method == "certified" for c in safe)
+    return (f"edge {_edge_text(tr.source, tr.target)} is {tr.method}, not certified: "
+            f"{n} of {len(safe)} safe cells certified")
+
+
 def _run_text(run) -> str:
     """What happened in a sequence run: safe, the first violation, or why it stopped (a state that
     blew up, an unverified hand-over); a run that failed without a violation is unsafe too."""
@@ -57,13 +65,15 @@ def evaluate_assertions(assertions, g: MotionPrimitiveGraph, runs: dict) -> list
             e = a.edge
             tr = g.edge(e.from_, e.to)
             want = f" of class {e.class_}" if e.class_ else ""
-            desc = f"edge {_edge_text(e.from_, e.to)}{want}"
+            desc = f"edge {_edge_text(e.from_, e.to)}{want}" + (", certified" if e.evidence == "certified" else "")
             if tr is None:
                 ok, msg = False, "no transition was verified"
             elif e.class_ and int(tr.cls) != e.class_:
                 ok, msg = False, f"found class {int(tr.cls)}"
+            elif e.evidence == "certified" and tr.method != "certified":
+                ok, msg = False, _not_certified(tr)
             else:
-                ok, msg = True, f"class {int(tr.cls)}"
+                ok, msg = True, f"class {int(tr.cls)}" + (", certified" if e.evidence == "certified" else "")
             out.append(AssertionResult(i, "edge", desc, "pass" if ok else "fail", msg))
         elif isinstance(a, ForbidEdge):
             e = a.no_edge

@@ -70,6 +70,12 @@ def _cached(t: dict) -> str:
     return out
 
 
+def _proved(report: dict) -> str:
+    """How the oracle calls were answered: simulated, or how many verdicts were proved."""
+    n = int((report.get("verdicts") or {}).get("certified") or 0)
+    return f"{n} certified" if n else "simulated"
+
+
 def _human(res: VerifyResult, fmt: str):
     def out(text: str):
         print(_line(text, fmt))
@@ -84,10 +90,12 @@ def _human(res: VerifyResult, fmt: str):
         total = sum(v for k, v in t.items() if k.endswith("_s") and not k.endswith("per_s")
                     and isinstance(v, (int, float)))
         out(f"{MARK[p.status]} {p.name}: {len(r['primitives'])} primitives, {len(r['edges'])} edges, "
-            f"{t['oracle_calls']} oracle calls (simulated) in {_num(t['graph_s'], '.2f')} s"
+            f"{t['oracle_calls']} oracle calls ({_proved(r)}) in {_num(t['graph_s'], '.2f')} s"
             f"{_inconclusive(r)}{_cached(t)}; {_num(total, '.1f')} s for the project")
+        methods = {(tr["from"], tr["to"]): tr["method"] for tr in r.get("transitions", [])}
         for e in r["edges"]:
-            out(f"    {e['from']} -> {e['to']}  class {e['class']}  duration {_num(e.get('duration') or 0)} s")
+            out(f"    {e['from']} -> {e['to']}  class {e['class']}  duration {_num(e.get('duration') or 0)} s"
+                f"  {methods.get((e['from'], e['to']), 'simulated')}")
         for a in r["assertions"]:
             if fmt == "github" and a["status"] != "pass":
                 print(_annotation("error", f"{a['description']}: {a['message']}", a.get("location"),

@@ -72,7 +72,10 @@ class CompiledPrimitive:
     @property
     def needs(self) -> set[str]:
         """Capabilities a backend must have to run this closed loop."""
-        return {"hybrid"} if self.hybrid else set()
+        out = {"hybrid"} if self.hybrid else set()
+        if self.sampled is not None or not self.f_cl.is_a("SXFunction"):
+            out.add("compiled")
+        return out
 
     def horizons(self, T: float, t0s) -> np.ndarray:
         """How long the oracle runs from each switch-in clock t0: the primitive's own horizon, else

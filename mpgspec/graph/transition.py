@@ -32,6 +32,10 @@ class Transition:
     best_t_B: list[float | None] = field(default_factory=list)  # per t_A: the t_B to switch in at
     windows: list[tuple[float, float]] = field(default_factory=list)  # t_A intervals with a safe t_B
     weights: dict[str, float] = field(default_factory=dict)
+    certified: dict = field(default_factory=dict)
+    """t_A intervals proved for every t_A in them, not only at grid points: {windows: [[a, b], ...],
+    boxes: start boxes used, order: Taylor order, width: largest start-box width, seconds}; empty
+    when no such proof was run."""
 
     @property
     def verdicts(self) -> np.ndarray:
@@ -41,6 +45,18 @@ class Transition:
     def available(self) -> np.ndarray:
         """Per t_A: does some t_B give O_B = 1."""
         return self.verdicts.any(axis=1)
+
+    def rests_on(self) -> list[OracleEvidence]:
+        """The cells the pair's verdict rests on: the safe cells of an edge, every cell of a pair without one."""
+        flat = [e for row in self.evidence for e in row]
+        return [e for e in flat if e.verdict == 1] or flat
+
+    @property
+    def method(self) -> str:
+        """'certified' when every cell the verdict rests on was proved (evidence method 'certified'),
+        else 'simulated': one rollout judged by its error bounds is enough to make the pair simulated."""
+        cells = self.rests_on()
+        return "certified" if cells and all(e.method == "certified" for e in cells) else "simulated"
 
     def classify(self) -> None:
         """Algorithm 1 lines 9-14, then the switch-in clock, windows and weights."""

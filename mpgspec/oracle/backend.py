@@ -19,7 +19,10 @@ from ..settings import OracleSettings
 from .evidence import OracleEvidence
 
 HYBRID = "hybrid"
-CAPABILITIES = {HYBRID: "the state jumps at contact events or a contact schedule"}
+COMPILED = "compiled"
+CAPABILITIES = {HYBRID: "the state jumps at contact events or a contact schedule",
+                COMPILED: "the closed loop calls compiled code (a loop library or an optimizer solved at a "
+                          "control rate), not an expression graph"}
 """Capabilities a backend may declare, with what a primitive that needs one does."""
 
 

@@ -18,6 +18,7 @@ from ..execute.crosscheck import CrossCheckResult, crosscheck_runs
 from ..execute.crosscheck.settings import settings_of as crosscheck_settings
 from ..execute.sequence import SequenceRun, simulate_sequence
 from ..graph.build import build_graph
+from ..graph.certified import certify_windows
 from ..graph.traces import edge_traces, failure_traces
 from ..graph.transition import MotionPrimitiveGraph
 from ..oracle.executors import Executor, InProcess
@@ -115,6 +116,10 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     recheck = asserted_edges(spec.project.assertions) if getattr(executor, "verify", 0) > 0 else frozenset()
     g = build_graph(prims, settings, spec.project.oracle.grid.t_A, spec.project.oracle.grid.t_B, cb, executor,
                     recheck)
+    if settings.method == "validated":  # proofs between the grid points of t_A
+        if progress:
+            progress(spec.name, "certified windows (validated integration over t_A intervals)", 0, 0)
+        certify_windows(g, prims, settings, executor, cb)
     t1 = time.perf_counter()
     names = list(prims)
     pairs = [(a, b) for a in names for b in names if a != b]

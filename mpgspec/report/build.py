@@ -9,10 +9,10 @@ import numpy as np
 
 from .. import __version__
 from ..compile.primitive import CompiledPrimitive
-from .compact import REASONS, STATUS, compact_cells, compact_run, compact_series, rnd
+from .compact import METHODS, REASONS, STATUS, compact_cells, compact_run, compact_series, rnd
 from .sections.registry import plugin_sections, report_sections
 
-SCHEMA_VERSION = "2.0"
+SCHEMA_VERSION = "2.1"
 
 
 def _f(v):
@@ -62,7 +62,8 @@ def _round(v, digits: int = 6):
 
 def transition_entry(tr, h_names: list[str]) -> dict:
     """One ordered pair's grid, its cells by field (see compact.py); each cell's least margins are
-    listed in the order of h_names."""
+    listed in the order of h_names. method: 'certified' when every cell the verdict rests on was proved
+    (Transition.method); certified: the t_A intervals proved for every t_A in them, or None."""
     ev = tr.evidence
     cells = [[{"verdict": e.verdict, "status": e.status, "reason": e.reason.value, "t_stop": _round(e.t_stop),
                "t_enter": _round(e.t_enter), "violated": e.violated, "checked": e.checked, "refined": e.refined,
@@ -70,16 +71,20 @@ def transition_entry(tr, h_names: list[str]) -> dict:
                "peak_input": [_round(v) for v in e.peak_input], "peak_demand": [_round(v) for v in e.peak_demand],
                "saturated": e.saturated,
                "min_margins": [_round(e.min_margins.get(k)) for k in h_names],
-               "best_roa_margin": _round(e.best_roa_margin), "message": e.message} for e in row] for row in ev]
+               "best_roa_margin": _round(e.best_roa_margin), "message": e.message, "method": e.method}
+              for e in row] for row in ev]
     flat = [e for row in ev for e in row]
     return {
-        "from": tr.source, "to": tr.target, "class": int(tr.cls), "method": "simulated", "h_names": h_names,
+        "from": tr.source, "to": tr.target, "class": int(tr.cls), "method": tr.method, "h_names": h_names,
         "t_A": [float(t) for t in tr.t_A], "t_B": [float(t) for t in tr.t_B],
         "verdicts": tr.verdicts.tolist(), "cells": compact_cells(cells, h_names),
         "windows": [list(w) for w in tr.windows], "best_t_B": tr.best_t_B, "weights": tr.weights,
         "counts": {"safe": sum(e.verdict for e in flat), "total": len(flat),
                    "inconclusive": sum(e.status == "inconclusive" for e in flat),
-                   "refined": sum(e.refined for e in flat), "errors": sum(e.reason.value == "error" for e in flat)},
+                   "refined": sum(e.refined for e in flat), "errors": sum(e.reason.value == "error" for e in flat),
+                   "certified": sum(e.method == "certified" for e in flat),
+                   "certified_safe": sum(e.verdict == 1 and e.method == "certified" for e in flat)},
+        "certified": finite_json(tr.certified) or None,  # unrounded: rounding could widen a proved interval
     }
 
 
@@ -87,7 +92,8 @@ def verdict_counts(graph) -> dict:
     """Oracle calls of the whole graph by status, with the refined and errored ones."""
     flat = [e for tr in graph.transitions.values() for row in tr.evidence for e in row]
     return {"total": len(flat), **{k: sum(e.status == k for e in flat) for k in ("safe", "unsafe", "inconclusive")},
-            "refined": sum(e.refined for e in flat), "errors": sum(e.reason.value == "error" for e in flat)}
+            "refined": sum(e.refined for e in flat), "errors": sum(e.reason.value == "error" for e in flat),
+            "certified": sum(e.method == "certified" for e in flat)}
 
 
 def edge_entries(graph) -> list[dict]:
@@ -126,7 +132,7 @@ def build_report(cp, vg, ch, digest: str | None = None) -> dict:
         "generated_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "project": {"name": spec.name, "path": str(spec.path), "description": spec.project.description.strip(),
                     "digest": digest},
-        "codes": {"status": list(STATUS), "reason": list(REASONS)},
+        "codes": {"status": list(STATUS), "reason": list(REASONS), "method": list(METHODS)},
         "status": ch.status,
         "settings": asdict(cp.settings),
         "system": {"name": sysm.name, "kind": sysm.kind, "states": list(csys.state_names),

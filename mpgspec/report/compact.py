@@ -7,7 +7,9 @@ floats, and the functions that turn them back into one dict per cell or one row 
   `saturated` are one string of digits per t_A row (a character per t_B: the index into STATUS
   or REASONS, 0/1 for flags), `violated` an index into `h_names` (or null), and non-empty
   messages are listed sparsely as `[i_A, i_B, text]`; the verdict of a cell is the transition's
-  `verdicts[i_A][i_B]`.
+  `verdicts[i_A][i_B]`. `method` (schema 2.1) is a string of digits per row too, an index into
+  METHODS: how the cell's verdict was obtained (a backend's other names count as simulated, never
+  as certified); reports without it are simulated throughout.
 - A sequence run stores at most MAX_RUN samples, its states by column (`x[k]` is state k over
   `t`) and the active primitive as runs `[[name, samples], ...]`; its `body` series (CoM height,
   trunk angles) are sampled at the same `t`; switches, violations and poses are kept in full.
@@ -20,6 +22,8 @@ import math
 
 STATUS = ("safe", "unsafe", "inconclusive")
 REASONS = ("entered_E", "left_C", "horizon_reached", "integration_failed", "inconclusive", "error")
+METHODS = ("simulated", "certified", "validated", "empirical")
+"""certified: proved; validated: validated integration that proved neither verdict; simulated: a rollout."""
 CELL_NUMBERS = ("t_stop", "t_enter", "margin", "error_bound", "best_roa_margin")
 CELL_VECTORS = ("peak_input", "peak_demand", "min_margins")
 CELL_FLAGS = ("checked", "refined", "saturated")
@@ -54,6 +58,7 @@ def compact_cells(rows: list[list[dict]], h_names: list[str]) -> dict:
         "status": ["".join(code(c["status"], STATUS, "unsafe") for c in row) for row in rows],
         "reason": ["".join(code(c["reason"], REASONS, "error") for c in row) for row in rows],
         "violated": [[hidx.get(c["violated"]) if c.get("violated") is not None else None for c in row] for row in rows],
+        "method": ["".join(code(c.get("method", "simulated"), METHODS, "simulated") for c in row) for row in rows],
     }
     for k in CELL_NUMBERS:
         out[k] = [[rnd(c.get(k), BOUND_DIGITS if k == "error_bound" else DIGITS) for c in row] for row in rows]
@@ -91,6 +96,7 @@ def expand_cells(tr: dict) -> list[list[dict]]:
             for k in CELL_FLAGS:
                 cell[k] = c[k][i][j] == "1"
             cell["message"] = msgs.get((i, j), "")
+            cell["method"] = METHODS[int(c["method"][i][j])] if c.get("method") else "simulated"
             row.append(cell)
         rows.append(row)
     return rows

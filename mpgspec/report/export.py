@@ -1,7 +1,8 @@
 """The motion primitive graph of a report as Graphviz DOT and GraphML, for use outside mpgspec.
 
 Both are built from the report dict alone, in the paper's notation (Table I, Definition 3):
-box = fixed, circle = periodic, diamond = transient; solid = Class 1, dashed = Class 2. With a robust
+box = fixed, circle = periodic, diamond = transient; solid = Class 1, dashed = Class 2. Each edge
+carries its evidence (certified or simulated) and the t_A intervals proved for every t_A. With a robust
 graph in the report, an edge lost under uncertainty (nominal only) is vermillion in DOT and carries
 `robust = false` in GraphML.
 """
@@ -12,6 +13,7 @@ import math
 import networkx as nx
 
 from ..plan.planner import WEIGHTS
+from .proved import proved_text, proved_windows
 
 SHAPES = {"fixed": "box", "periodic": "circle", "transient": "diamond"}
 STYLES = {1: "solid", 2: "dashed"}
@@ -73,6 +75,8 @@ def to_dot(report: dict) -> str:
         tip = f"Class {e['class']}" + (f", {tr['method']}" if tr else "")
         if tr and e["class"] == 2:
             tip += ", t_A windows " + " ".join(f"[{_num(a)}, {_num(b)}]" for a, b in tr["windows"])
+        if proved_text(tr):
+            tip += ", " + proved_text(tr)
         if survives.get((e["from"], e["to"])) is False:
             tip += ", nominal only (lost under uncertainty)"
             attrs += [f"color={_q(NOMINAL_ONLY)}", f"fontcolor={_q(NOMINAL_ONLY)}"]
@@ -104,6 +108,9 @@ def to_networkx(report: dict) -> nx.DiGraph:
             attrs["method"] = tr["method"]
             attrs["windows"] = len(tr["windows"])
             attrs["safe_cells"], attrs["total_cells"] = tr["counts"]["safe"], tr["counts"]["total"]
+            attrs["certified_safe_cells"] = tr["counts"].get("certified_safe", 0)
+            if proved_windows(tr):
+                attrs["certified_windows"] = " ".join(f"[{float(a)!r}, {float(b)!r}]" for a, b in proved_windows(tr))
         if (e["from"], e["to"]) in survives:
             attrs["robust"] = survives[(e["from"], e["to"])]
         G.add_edge(e["from"], e["to"], **attrs)

@@ -15,11 +15,15 @@ from markupsafe import Markup
 
 from . import fig6, svg
 from .compact import readable
+from .proved import proved_text
 from .sections.registry import report_sections, section_data
 from .traversal import command_rows
 
 SYMBOLS = {"fixed": "□", "periodic": "○", "transient": "◇"}
-EVIDENCE = (("certified", "a checked certificate"),
+EVIDENCE = (("certified", "proved, not sampled: a checked certificate, or validated integration (ball arithmetic) "
+                          "enclosing the closed loop's flow; an edge is certified when every safe cell it rests on "
+                          "is proved at its grid point (t_A, t_B), and covers the t_A between grid points only in "
+                          "the intervals it lists as certified for every t_A"),
             ("simulated", "a rollout of the safety oracle: the closed loop integrated from each grid point"),
             ("empirical", "sampled executions"))
 
@@ -66,7 +70,7 @@ def _transitions(report: dict, ids: Anchors) -> list[dict]:
     """Every ordered pair in primitive order, with its grid picture."""
     order = ids.index
     trs = sorted(report["transitions"], key=lambda t: (order.get(t["from"], 1e9), order.get(t["to"], 1e9)))
-    return [{"tr": t, "has_edge": t["class"] in (1, 2), "svg": Markup(svg.grid_svg(t)),
+    return [{"tr": t, "has_edge": t["class"] in (1, 2), "svg": Markup(svg.grid_svg(t)), "proved": proved_text(t),
              "id": ids.pair("grid", t["from"], t["to"])} for t in trs]
 
 
@@ -224,6 +228,17 @@ def _sequence(report: dict) -> dict | None:
             "tiles": tiles, "colors": {m: fig6.run_color(m, k) for k, m in enumerate(seq["runs"])}}
 
 
+def _evidence(tr: dict | None) -> dict:
+    """An edge's evidence for the page: its level, how many of its safe cells are proved, and the t_A
+    intervals proved for every t_A."""
+    if not tr:
+        return {"method": None, "cells_proved": "", "proved": ""}
+    safe = [c for row in tr["cells"] for c in row if c.get("verdict") == 1]
+    n = sum(c.get("method") == "certified" for c in safe)
+    return {"method": tr["method"], "proved": proved_text(tr),
+            "cells_proved": f"{n} of {len(safe)} safe cells certified" if n and tr["method"] != "certified" else ""}
+
+
 def view(report: dict) -> dict:
     """Everything the template shows, derived from the report dict."""
     report = readable(report)
@@ -231,7 +246,8 @@ def view(report: dict) -> dict:
     ids = Anchors(report)
     trs = {(t["from"], t["to"]): t for t in report["transitions"]}
     edges = [{"e": e, "tr": trs.get((e["from"], e["to"])), "grid": ids.pair("grid", e["from"], e["to"]),
-              "trace": ids.pair("trace", e["from"], e["to"])} for e in report["edges"]]
+              "trace": ids.pair("trace", e["from"], e["to"]), **_evidence(trs.get((e["from"], e["to"])))}
+             for e in report["edges"]]
     edge_methods = Counter(x["tr"]["method"] if x["tr"] else "unknown" for x in edges)
     graph = svg.graphviz_svg(report)
     v = {
@@ -246,6 +262,7 @@ def view(report: dict) -> dict:
         "edge_methods": dict(edge_methods),
         "roa_methods": dict(Counter(p["roa_method"] for p in report["primitives"])),
         "all_simulated": bool(edges) and set(edge_methods) == {"simulated"},
+        "any_certified": "certified" in edge_methods,
         "graph_svg": Markup(graph or svg.graph_svg(report)),
         "periods": {p["name"]: _period(p) for p in report["primitives"]},
         "edges": edges,

@@ -2,7 +2,9 @@
 
 The committed file schema/report-v2.json is generated from these models; regenerate it with
 `python -m mpgspec.report.schema` whenever the report changes. Version 2 stores oracle cells and
-sequence runs by column and rounds floats (see compact.py).
+sequence runs by column and rounds floats (see compact.py); 2.1 adds how each cell's verdict was
+obtained (cells.method), the certified counts and the t_A intervals proved for every t_A (certified),
+all optional so that 2.0 reports still validate.
 """
 from __future__ import annotations
 
@@ -41,6 +43,7 @@ class Codes(_Strict):
 
     status: list[str]
     reason: list[str]
+    method: list[str] | None = Field(None, description="how a cell's verdict was obtained (schema 2.1)")
 
 
 class Settings(BaseModel):
@@ -122,6 +125,8 @@ class Cells(_Strict):
     refined: Digits = Field(description="one string per t_A row: 1 where the verdict was refined with a finer step")
     saturated: Digits = Field(description="one string per t_A row: 1 where an input saturated")
     messages: list[tuple[int, int, str]] = Field(description="[i_A, i_B, text] of the cells with a message")
+    method: Digits | None = Field(None, description="one string per t_A row, a digit per t_B: index into "
+                                  "codes.method (certified: the verdict is proved; absent: every cell simulated)")
 
 
 class Counts(_Strict):
@@ -130,6 +135,8 @@ class Counts(_Strict):
     inconclusive: int = 0
     refined: int
     errors: int
+    certified: int = Field(0, description="cells whose verdict (safe or unsafe) is proved")
+    certified_safe: int = Field(0, description="safe cells whose verdict is proved")
 
 
 class VerdictCounts(_Strict):
@@ -141,6 +148,18 @@ class VerdictCounts(_Strict):
     inconclusive: int
     refined: int
     errors: int
+    certified: int = Field(0, description="oracle calls whose verdict is proved")
+
+
+class Certified(_Strict):
+    """What a validated stage proved of an edge beyond its grid points."""
+
+    windows: list[tuple[float, float]] = Field(description="t_A intervals [a, b]: the switch is proved safe for "
+                                                           "every t_A in them, not only at grid points")
+    boxes: int = Field(ge=0, description="start boxes the proof used")
+    order: int = Field(ge=0, description="Taylor order of the validated integration")
+    width: float = Field(ge=0, description="the largest start box's width")
+    seconds: float = Field(ge=0, description="time the proof took")
 
 
 class Transition(_Strict):
@@ -149,7 +168,8 @@ class Transition(_Strict):
     from_: str = Field(alias="from")
     to: str
     cls: Literal[0, 1, 2] = Field(alias="class")
-    method: Method
+    method: Method = Field(description="certified: every cell the verdict rests on (the safe cells of an edge, "
+                                       "every cell of a pair without one) is proved; else simulated")
     h_names: list[str] = Field(description="safety functions of the target, the order of each cell's min_margins")
     t_A: list[float]
     t_B: list[float]
@@ -159,6 +179,7 @@ class Transition(_Strict):
     best_t_B: list[Num]
     weights: dict[str, float]
     counts: Counts
+    certified: Certified | None = Field(None, description="t_A intervals proved for every t_A in them (null: none)")
 
     @model_validator(mode="after")
     def _grid_shape(self):
@@ -166,13 +187,13 @@ class Transition(_Strict):
         c = self.cells
         grids = [("verdicts", self.verdicts)] + [(k, getattr(c, k)) for k in (
             "status", "reason", "violated", "t_stop", "t_enter", "margin", "error_bound", "best_roa_margin",
-            "checked", "refined", "saturated")] + [(f"{k}[{m}]", g) for k in ("peak_input", "peak_demand", "min_margins")
-                                                   for m, g in enumerate(getattr(c, k))]
+            "checked", "refined", "saturated", "method") if getattr(c, k) is not None] + [
+            (f"{k}[{m}]", g) for k in ("peak_input", "peak_demand", "min_margins") for m, g in enumerate(getattr(c, k))]
         for name, grid in grids:
             if len(grid) != shape[0] or any(len(row) != shape[1] for row in grid):
                 raise ValueError(f"{name} of {self.from_} -> {self.to} is not len(t_A) x len(t_B) = {shape}")
-        for name in ("status", "reason", "checked", "refined", "saturated"):
-            if any(not row.isdigit() for row in getattr(c, name) if row):
+        for name in ("status", "reason", "checked", "refined", "saturated", "method"):
+            if any(not row.isdigit() for row in getattr(c, name) or () if row):
                 raise ValueError(f"{name} of {self.from_} -> {self.to} must be strings of digits")
         if len(self.best_t_B) != shape[0]:
             raise ValueError(f"best_t_B of {self.from_} -> {self.to} has {len(self.best_t_B)} entries, not {shape[0]}")

@@ -10,6 +10,8 @@ from html import escape
 
 import networkx as nx
 
+from .proved import proved_text
+
 # Okabe-Ito colours: distinguishable with the common colour-vision deficiencies.
 BLUE, ORANGE, VERMILLION, SKY, GREEN, YELLOW, PURPLE, BLACK = ("#0072B2", "#E69F00", "#D55E00", "#56B4E9",
                                                                "#009E73", "#F0E442", "#CC79A7", "#000000")
@@ -334,8 +336,9 @@ def robust_edges(report: dict) -> dict[tuple[str, str], dict]:
 
 
 def edge_views(report: dict) -> list[dict]:
-    """Each edge with what the pictures show: label, tooltip, whether the planner may use it and
-    whether it survives the project's uncertainty (`robust`: True, False for nominal only, None unchecked)."""
+    """Each edge with what the pictures show: label, tooltip, whether the planner may use it, whether it
+    survives the project's uncertainty (`robust`: True, False for nominal only, None unchecked) and its
+    evidence (`method`: certified edges carry ✓ in their label; the tooltip says which)."""
     trs = {(t["from"], t["to"]): t for t in report.get("transitions", [])}
     rob = robust_edges(report)
     out = []
@@ -345,7 +348,10 @@ def edge_views(report: dict) -> list[dict]:
         usable = e.get("usable", True) is not False
         r = rob.get((e["from"], e["to"]))
         robust = None if r is None else bool(r.get("survives"))
+        method = tr.get("method") if tr else None
         label = f" {fmt(e.get('duration'))} s " if e.get("duration") is not None else ""
+        if method == "certified":
+            label = (label.rstrip() + " ✓ ") if label else " ✓ "
         if ws:
             label += f"\nt_A ∈ {windows_text(ws, 1)}"
         if robust is False:
@@ -354,6 +360,8 @@ def edge_views(report: dict) -> list[dict]:
                f"peak input {fmt(e.get('peak_input'))}")
         if ws:
             tip += f"; safe only from t_A in {windows_text(ws, 8)} s"
+        if method:
+            tip += f"; evidence: {method}" + (f", {proved_text(tr)} s" if proved_text(tr) else "")
         if not usable:
             tip += f"; not used by the planner: {e.get('unusable_reason') or 'not executable'}"
         if robust is False:
@@ -361,7 +369,7 @@ def edge_views(report: dict) -> list[dict]:
                     f"{fmt(r.get('worst_margin'))})")
         elif robust and r.get("robust_class") != e["class"]:
             tip += f"; Class {r.get('robust_class')} under uncertainty"
-        out.append({"e": e, "label": label, "tip": tip, "usable": usable, "robust": robust})
+        out.append({"e": e, "label": label, "tip": tip, "usable": usable, "robust": robust, "method": method})
     return out
 
 

@@ -40,6 +40,9 @@ class EdgeRef(Strict):
 
 class EdgeWithClass(EdgeRef):
     class_: Literal[1, 2] | None = Field(default=None, alias="class")
+    evidence: Literal["simulated", "certified"] = Field(
+        default="simulated", description="least evidence the edge needs: simulated (any) or certified (every "
+        "safe cell of the edge proved)")
 
 
 class RequireEdge(Strict):

@@ -29,7 +29,7 @@ DESCRIPTIONS = {
     "domain": "clock interval [t_0, t_f] of a transient primitive (seconds)",
     "duration": "length in seconds",
     "dynamics": "xdot = f(x) + g(x) u (control-affine) or a full xdot",
-    "edge": "a transition that must exist: from, to and optionally its class",
+    "edge": "a transition that must exist: from, to and optionally its class and evidence (simulated | certified)",
     "eq": "an equality constraint expression, held within tol",
     "expect": "the expected outcome (true: safe)",
     "expr": "one expression per state, in the primitive's clock t",

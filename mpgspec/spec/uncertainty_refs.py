@@ -5,7 +5,7 @@ import difflib
 
 from ..errors import SpecError, SpecErrors
 from .loader import ProjectSpec
-from .project import node_refs
+from .project import RequireEdge, node_refs
 
 
 def _hint(word: str, choices) -> str:
@@ -24,8 +24,8 @@ def _err(errors, message, where, key, code, expected="", found="", hint=""):
 
 def check_uncertainty(spec: ProjectSpec) -> None:
     """Raise SpecErrors for unknown parameters, inputs, states and primitives, a nominal value that
-    is not the system's, what a system kind does not support and assertion kinds the robust graph
-    cannot answer."""
+    is not the system's, what a system kind does not support and assertions the robust graph cannot
+    answer (its kinds but for edge, no_edge, plan and reachable_from; certified evidence)."""
     unc = spec.project.uncertainty
     if unc is None:
         return
@@ -95,6 +95,11 @@ def check_uncertainty(spec: ProjectSpec) -> None:
         if refs is None:
             _err(errors, "this assertion does not apply to the robust graph", loc(*base), f"assertions.{i}",
                  "MPG104", "edge, no_edge, plan or reachable_from", type(a).__name__)
+        elif isinstance(a, RequireEdge) and a.edge.evidence == "certified":
+            _err(errors, "the robust graph rests on sampled scenarios, so none of its edges is certified",
+                 loc(*base, "edge", "evidence"), f"assertions.{i}.edge.evidence", "MPG104",
+                 "evidence: simulated (or no evidence key)", "certified",
+                 "require `evidence: certified` in the project's assertions, on the nominal graph")
     n = len(chosen & nodes)
     if unc.rollouts(n) > unc.budget:
         where = ("budget",) if "budget" in unc.model_fields_set else ()

@@ -49,7 +49,7 @@ class Options:
     min_step: float = 1e-4
     remainder: float = 1e-10
     box: float = 1e-12
-    depth: int = 6
+    depth: int = 10
     max_steps: int = 20000
     blowup: float = 10.0
 
@@ -83,6 +83,14 @@ class Enclosure:
     width: float = 0.0  # the end set's largest width
     message: str = ""
     seconds: float = 0.0
+    end: LohnerSet | None = None  # the set enclosing every flow at the last step end reached
+
+
+def loop_of(prim) -> Loop:
+    """The tapes of a compiled primitive's closed loop, safe set and E (a CompiledPrimitive)."""
+    windows = [None if w is None else (float(w[0]), float(w[1])) for w in prim.windows]
+    return Loop(Tape.of(prim.f_cl), Tape.of(prim.h), Tape.of(prim.roa_margin).of_psd(), list(prim.h_names),
+                windows or [None] * len(prim.h_names), tuple(float(b) for b in prim.boundaries), prim.period)
 
 
 def run(loop: Loop, start: LohnerSet, t0: float, horizon: float, x_sw: list, opts: Options = Options()) -> Enclosure:
@@ -101,11 +109,12 @@ class _Run:
         self.maybe_E = False
         self.best_roa = -math.inf
         self.steps = self.hull_steps = 0
+        self.doubt = None  # (h, lower bound, s_a, s_b): the first enclosure where some h may be negative
 
     def done(self, status, reason, s, **kw) -> Enclosure:
         lower = {k: v for k, v in self.lower.items() if v < math.inf}
         return Enclosure(status, reason, s, lower=lower, best_roa=self.best_roa, steps=self.steps,
-                         hull_steps=self.hull_steps, width=self.S.width(), **kw)
+                         hull_steps=self.hull_steps, width=self.S.width(), end=self.S, **kw)
 
     def go(self) -> Enclosure:
         s, h = 0.0, self.o.max_step
@@ -127,7 +136,7 @@ class _Run:
                     step /= 2
                     res = self._taylor_step(t, s, step)
                 if res is None:
-                    res = self._hull_step(t, s, min(step, self.o.min_step))
+                    res = self._kink_step(t, s, min(step, self.o.min_step))
                 else:
                     h = min(self.o.max_step, 2 * step)
             if isinstance(res, str):
@@ -142,6 +151,8 @@ class _Run:
                 return self.done("inconclusive", "inconclusive", s,
                                  message=f"the enclosure grew past {self.o.blowup:g} at s = {s:.4g}")
             if self._in_E(self.S.hull(), self.t0 + s):
+                if self.doubt is not None:
+                    return self.inconclusive(s, "the flow entered E after it")
                 return self.done("safe", "entered_E", s, s_enter=s)
         if self.maybe_E:
             return self.done("inconclusive", "inconclusive", self.H,
@@ -150,7 +161,11 @@ class _Run:
 
     # -- the safe set and E over a step --------------------------------------------------------
     def _judge(self, checks, s) -> Enclosure | None:
-        """Fold a step's checks (in time order) into the running bounds; an Enclosure when decided."""
+        """Fold a step's checks (in time order) into the running bounds; an Enclosure when decided.
+
+        A safety function that may be negative rules out `safe`, but the run goes on: it may still
+        be proved unsafe, by a later enclosure on which the function is certainly negative, as long
+        as the flow cannot have entered E before it."""
         for tau, lows, highs, roa_hi, sure in checks:
             if roa_hi > 0:
                 self.maybe_E = True
@@ -162,12 +177,17 @@ class _Run:
                                  message=f"{bad[0]} is certainly negative on an enclosure at s in "
                                          f"[{s + tau[0]:.6g}, {s + tau[1]:.6g}]")
             neg = [k for k, lo in lows.items() if lo < 0]
-            if neg:
-                why = "may be negative" + (" (the flow may already be in E)" if bad else "")
-                return self.done("inconclusive", "inconclusive", s + tau[0], violated=neg[0],
-                                 message=f"{neg[0]} {why} at s in [{s + tau[0]:.6g}, {s + tau[1]:.6g}]: "
-                                         f"lower bound {lows[neg[0]]:.3g}")
+            if neg and self.doubt is None:
+                self.doubt = (neg[0], lows[neg[0]], s + tau[0], s + tau[1])
+            if self.doubt is not None and self.maybe_E:
+                return self.inconclusive(s + tau[0], "the flow may have entered E before")
         return None
+
+    def inconclusive(self, s, why) -> Enclosure:
+        k, lo, a, b = self.doubt
+        return self.done("inconclusive", "inconclusive", s, violated=k,
+                         message=f"{k} may be negative at s in [{a:.6g}, {b:.6g}] (lower bound {lo:.3g}) and is "
+                                 f"nowhere certainly negative; {why}")
 
     def _checks(self, enclose, t, s, step):
         """Bounds of h and E's margin over [0, step], bisected where some lower bound is negative:
@@ -183,7 +203,7 @@ class _Run:
             for k, v, (maybe, surely) in zip(self.L.h_names, hv, act or [(True, True)] * len(hv)):
                 if maybe:
                     lows[k], highs[k], sure[k] = _lo(v), _hi(v), surely
-            if any(lo < 0 for lo in lows.values()) and d < self.o.depth:
+            if any(lo < 0 <= highs[k] for k, lo in lows.items()) and d < self.o.depth:
                 m = (a + b) / 2
                 todo[:0] = [(a, m, d + 1), (m, b, d + 1)]
                 continue
@@ -218,6 +238,36 @@ class _Run:
         F = self._eval(self.L.f, Y, t, t + step)[0]
         self.hull_steps += 1
         return self.S.shifted([arb(step) * v for v in F]), step, self._checks(lambda tau: Y, t, s, step)
+
+    def _kink_step(self, t, s, step):
+        """A first-order Lohner step over a switch or kink of a Lipschitz law: the point m moved by
+        a hull step, the set by V(h) in I + h J (I + E), J the generalized (Clarke) Jacobian of f
+        over the a-priori box, E the Gronwall bound of V - I over the step; a hull step where the
+        law jumps (no Jacobian)."""
+        n = len(self.S.m)
+        X = self.S.hull()
+        Y = self._a_priori(X, t, step)
+        if Y is None or self._boundary_near(t, t + step) is not None:
+            return self._hull_step(t, s, step)
+        T, S = _ball(t, t + step), _ball(s, s + step)
+        _, decisions = self.L.f([Y, [T], [S], self.x_sw])
+        (F, *_), _ = self.L.f([Jet.seed(Y, arb(0)), [T], [S], self.x_sw], decisions, clarke=True)
+        if any(v is None for v in F):
+            return self._hull_step(t, s, step)
+        Jm = arb_mat([[v.d[j] if isinstance(v, Jet) else arb(0) for j in range(n)] for v in F])
+        Ym = self._a_priori(list(self.S.m), t, step)
+        if Ym is None:
+            return self._hull_step(t, s, step)
+        Fm = self._eval(self.L.f, Ym, t, t + step)[0]
+        h = arb(step)
+        norm = max(sum(abs(float(Jm[i, j].mid())) + float(Jm[i, j].rad()) for j in range(n)) for i in range(n))
+        e = math.expm1(step * norm) * (1 + 1e-12) + 1e-300
+        I = arb_mat([[arb(1) if i == j else arb(0) for j in range(n)] for i in range(n)])
+        Vbox = arb_mat([[arb(1 if i == j else 0, e) for j in range(n)] for i in range(n)])
+        V = I + (Jm * Vbox) * h
+        image = [self.S.m[i] + h * Fm[i] for i in range(n)]
+        self.hull_steps += 1
+        return self.S.through(image, V * arb_mat(self.S.B.tolist())), step, self._checks(lambda tau: Y, t, s, step)
 
     def _taylor_step(self, t, s, step):
         """(new set, step, checks), or None when this step is too long (no a-priori box, a branch

@@ -1,8 +1,9 @@
 """Lohner sets {m + B r}: a point m, an orthogonal float matrix B and a ball vector r.
 
-Carrying the set in the coordinates of B (re-orthogonalised by QR each step, columns ordered by
-length) keeps a rotating box from growing into the box around it: the wrapping effect that makes
-plain interval boxes explode within seconds. All arithmetic on r is in arb balls; B and m are
+Carrying the set in the coordinates of B (the midpoint of the flow's Jacobian times the last B,
+re-orthogonalised by QR with columns ordered by length when it becomes ill-conditioned) keeps a
+rotating box from growing into the box around it: the wrapping effect that makes plain interval
+boxes explode within seconds. All arithmetic on r is in arb balls; B and m are
 exact floats, and B's inverse is enclosed rigorously (arb_mat.inv).
 """
 from __future__ import annotations
@@ -13,10 +14,15 @@ import numpy as np
 from flint import arb, arb_mat
 
 
+COND = 1e3
+"""The set's matrix B follows the flow's Jacobian (the parallelepiped method: no wrapping at all for
+a linear flow) while its condition number stays below this; beyond, it is re-orthogonalised by QR."""
+
+
 @dataclass
 class LohnerSet:
     m: list  # exact float points as arb
-    B: np.ndarray
+    B: np.ndarray  # invertible, well conditioned (COND)
     Binv: arb_mat  # an enclosure of B^-1
     r: arb_mat  # n x 1 balls
 
@@ -38,7 +44,7 @@ class LohnerSet:
         `image` (balls) and whose Jacobian over the set, times B, is enclosed by C."""
         n = len(self.m)
         A = np.array([[float(C[i, j].mid()) for j in range(n)] for i in range(n)])
-        Q = _orthonormal(A)
+        Q = A if np.all(np.isfinite(A)) and np.linalg.cond(A) < COND else _orthonormal(A)
         m = [arb(float(v.mid())) for v in image]
         Qinv = arb_mat(Q.tolist()).inv()
         rest = arb_mat([[image[i] - m[i]] for i in range(n)])

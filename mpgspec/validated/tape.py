@@ -70,7 +70,7 @@ class Tape:
         return cls(fn.name(), tuple(ops), fn.sz_w(), tuple(fn.nnz_in(i) for i in range(fn.n_in())),
                    tuple(fn.nnz_out(i) for i in range(fn.n_out())))
 
-    def __call__(self, inputs, decisions: dict | None = None):
+    def __call__(self, inputs, decisions: dict | None = None, clarke: bool = False):
         """Outputs (lists of values) at `inputs` (one list of values per Function input).
 
         Without `decisions`, non-smooth operations act on balls and the decision each took is
@@ -99,7 +99,9 @@ class Tape:
             elif record:
                 w[o[0]], taken[k] = _decide(op, [w[j] for j in i])
             else:
-                w[o[0]] = _replay(op, [w[j] for j in i], decisions.get(k))
+                args = [w[j] for j in i]
+                d = decisions.get(k)
+                w[o[0]] = _clarke(op, args) if clarke and d is None else _replay(op, args, d)
         return outs, taken
 
 
@@ -160,6 +162,26 @@ def _replay(op, args, d):
     if op == ca.OP_FMOD:
         return UNDECIDED if UNDECIDED in args else args[0] - args[1] * d
     return arb(d)  # comparisons, logic, floor, ceil, sign: constant on the domain
+
+
+def _clarke(op, args):
+    """An undecided abs / min / max of jets over balls: hull value, convex hull of the gradients."""
+    if UNDECIDED in args or not all(isinstance(a, (J.Jet, arb)) for a in args):
+        return UNDECIDED
+    if not any(isinstance(a, J.Jet) for a in args):
+        return _decide(op, args)[0]
+    if op == ca.OP_FABS:
+        a = args[0]
+        return J.Jet(abs(a.v), [ZERO_ONE * 2 * g - g for g in a.d])
+    if op in (ca.OP_FMIN, ca.OP_FMAX):
+        a, b = (x if isinstance(x, J.Jet) else J.Jet(x, None) for x in args)
+        n = len((a.d or b.d))
+        da, db = a.d or [arb(0)] * n, b.d or [arb(0)] * n
+        v = a.v.min(b.v) if op == ca.OP_FMIN else a.v.max(b.v)
+        return J.Jet(v, [y + ZERO_ONE * (x - y) for x, y in zip(da, db)])
+    if op in (ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_NOT, ca.OP_AND, ca.OP_OR):
+        return _decide(op, [a.v if isinstance(a, J.Jet) else a for a in args])[0]
+    return UNDECIDED
 
 
 def _truth(v):

@@ -46,16 +46,22 @@ def solution(tape: Tape, x0: list, t0: arb, s0: arb, x_sw: list, decisions: dict
         (F, *_), _ = tape([X, [t], [s], x_sw], decisions)
         if any(v is UNDECIDED for v in F):
             return None
-        X = [a + integral(_lift(f, a)) for a, f in zip(start, F)]
+        X = [a + integral(_lift(f, a, L)) for a, f in zip(start, F)]
     return X
 
 
-def _lift(f, like):
-    """f as a jet when the state is one (a rate that does not depend on the state has no gradient)."""
-    if isinstance(like, Jet) and not isinstance(f, Jet):
-        zero = like.d[0] * 0
-        return Jet(f, [zero for _ in like.d])
-    return f
+def _lift(f, like, L: int):
+    """f as a series (a constant rate is a ball), and as a jet when the state is one (a rate that
+    does not depend on the state has no gradient)."""
+    if isinstance(f, Jet):
+        return Jet(_series(f.v, L), [_series(d, L) for d in f.d])
+    if isinstance(like, Jet):
+        return Jet(_series(f, L), [arb_series([0], prec=L) for _ in like.d])
+    return _series(f, L)
+
+
+def _series(v, L: int):
+    return v if isinstance(v, arb_series) else arb_series([v], prec=L)
 
 
 def coefficient(v, k: int):

@@ -45,7 +45,9 @@ def _grid(tr: dict) -> None:
     flat = [e for row in cells for e in row]
     tr["counts"] = {"safe": sum(e["verdict"] for e in flat), "total": len(flat),
                     "inconclusive": sum(e["status"] == "inconclusive" for e in flat),
-                    "refined": sum(e["refined"] for e in flat), "errors": sum(e["reason"] == "error" for e in flat)}
+                    "refined": sum(e["refined"] for e in flat), "errors": sum(e["reason"] == "error" for e in flat),
+                    "certified": sum(e["method"] == "certified" for e in flat),
+                    "certified_safe": sum(e["verdict"] == 1 and e["method"] == "certified" for e in flat)}
 
 
 def _series(d: dict, m: int, per_time: tuple[str, ...] = (), per_channel: tuple[str, ...] = (),

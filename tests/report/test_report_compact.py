@@ -20,7 +20,8 @@ def _cell(i, j, **kw):
             "left_C", "t_stop": 0.1 * i + 1 / 3, "t_enter": None, "violated": None if i == j else "b",
             "checked": True, "refined": j == 1, "margin": 1 / 7, "error_bound": 1.23456e-5,
             "peak_input": [2.0, 3.0], "peak_demand": [2.5, 3.0], "saturated": False, "min_margins": [0.5, -0.25],
-            "best_roa_margin": None, "message": "m" if (i, j) == (1, 0) else "", **kw}
+            "best_roa_margin": None, "message": "m" if (i, j) == (1, 0) else "",
+            "method": "certified" if i == j else "validated" if j == 2 else "simulated", **kw}
 
 
 def test_cells_round_trip():
@@ -32,6 +33,7 @@ def test_cells_round_trip():
         for c0, c1 in zip(r0, r1):
             assert c1 == {**c0, "t_stop": rnd(c0["t_stop"]), "margin": rnd(c0["margin"]), "error_bound": 1.23e-5}
     assert tr["cells"]["status"] == ["011", "101"] and tr["cells"]["messages"] == [[1, 0, "m"]]
+    assert tr["cells"]["method"] == ["102", "012"]
 
 
 def test_runs_and_series_round_trip():
