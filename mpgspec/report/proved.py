@@ -31,4 +31,6 @@ def interval_text(a: float, b: float, digits: int = 4) -> str:
 def proved_text(tr: dict | None, digits: int = 4) -> str:
     """'certified for every t_A in [a, b], ...' of a report transition, or '' when nothing was proved."""
     ws = proved_windows(tr)
+    if ws and all(a == b for a, b in ws):  # a fixed source: its one t_A is its grid cell
+        return "certified at its one t_A = " + ", ".join(f"{a:.{digits}g}" for a, _ in ws)
     return "certified for every t_A in " + ", ".join(interval_text(a, b, digits) for a, b in ws) if ws else ""
