@@ -60,7 +60,7 @@ class BoxProof:
     def to_dict(self) -> dict:
         d = {"ok": self.ok, "rho": self.rho, "boxes": self.boxes, "proved": self.proved, "dropped": self.dropped,
              "boxes_holding_x_star": self.inner, "exceptional_radius": self.eps, "depth": self.depth,
-             "seconds": self.seconds, "parts": list(self.parts)}
+             "time_s": self.seconds, "parts": list(self.parts)}
         if np.isfinite(self.mu):
             d["least_mu"] = self.mu
         if self.reason:

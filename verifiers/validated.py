@@ -60,7 +60,7 @@ class ValidatedRunner:
         decided = enc.status != "inconclusive"
         margin = min(enc.lower.values(), default=None)
         how = (f"{enc.steps} steps of order {self.o.order} ({enc.hull_steps} first-order hull steps), "
-               f"end width {enc.width:.2g}, {enc.seconds:.2f} s")
+               f"end width {enc.width:.2g}")
         return OracleEvidence(
             verdict=int(enc.status == "safe"), reason=_REASONS[enc.reason], t_stop=enc.s_stop,
             t_enter=enc.s_enter, violated=enc.violated, min_margins=dict(enc.lower), lower_bounds=dict(enc.lower),

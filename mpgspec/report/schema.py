@@ -159,7 +159,7 @@ class Certified(_Strict):
     boxes: int = Field(ge=0, description="start boxes the proof used")
     order: int = Field(ge=0, description="Taylor order of the validated integration")
     width: float = Field(ge=0, description="the largest start box's width")
-    seconds: float = Field(ge=0, description="time the proof took")
+    time_s: float = Field(ge=0, description="wall-clock time the proof took, s")
 
 
 class Transition(_Strict):

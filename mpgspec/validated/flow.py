@@ -197,18 +197,18 @@ class _Run:
         while todo:
             a, b, d = todo.pop(0)
             X = enclose(_ball(a, b))
-            hv = self._eval(self.L.h, X, t + a, t + b)[0]
+            hv = self._bounds(self.L.h, X, t + a, t + b)
             act = [_active(w, t + a, t + b, self.L.period) for w in self.L.windows] or []
             lows, highs, sure = {}, {}, {}
-            for k, v, (maybe, surely) in zip(self.L.h_names, hv, act or [(True, True)] * len(hv)):
+            for k, (lo, hi), (maybe, surely) in zip(self.L.h_names, hv, act or [(True, True)] * len(hv)):
                 if maybe:
-                    lows[k], highs[k], sure[k] = _lo(v), _hi(v), surely
+                    lows[k], highs[k], sure[k] = lo, hi, surely
             if any(lo < 0 <= highs[k] for k, lo in lows.items()) and d < self.o.depth:
                 m = (a + b) / 2
                 todo[:0] = [(a, m, d + 1), (m, b, d + 1)]
                 continue
-            roa = self._eval(self.L.roa, X, t + a, t + b)[0]
-            out.append(((a, b), lows, highs, _hi(roa[0]), sure))
+            roa = self._bounds(self.L.roa, X, t + a, t + b)
+            out.append(((a, b), lows, highs, roa[0][1], sure))
         return out
 
     def _in_E(self, X, t) -> bool:
@@ -317,7 +317,22 @@ class _Run:
         return min(ahead) if ahead else math.inf
 
     def _eval(self, tape: Tape, X, ta: float, tb: float):
-        """A tape's outputs over the states X and the clock interval [ta, tb] (s alongside).
+        """A tape's outputs over the states X and the clock interval [ta, tb], as one ball each."""
+        parts = self._eval_parts(tape, X, ta, tb)
+        if len(parts) == 1:
+            return parts[0]
+        return [[u.union(v) for u, v in zip(p, q)] for p, q in zip(*parts)]
+
+    def _bounds(self, tape: Tape, X, ta: float, tb: float):
+        """Each output's (lower, upper) bound over X and [ta, tb], taken per side of a clock switch:
+        a ball joining an active side (h = 0.3) with an inactive one (1e9) would lose the lower bound
+        to its radius's rounding."""
+        parts = [p[0] for p in self._eval_parts(tape, X, ta, tb)]
+        return [(min(_lo(v) for v in vs), max(_hi(v) for v in vs)) for vs in zip(*parts)]
+
+    def _eval_parts(self, tape: Tape, X, ta: float, tb: float):
+        """A tape's outputs over the states X and the clock interval [ta, tb] (s alongside), one
+        result per side of a clock switching time near the interval.
 
         Near a switching time b of the clock (within ETA), each side's branches are decided on that
         side alone ([ta, b - ETA], at least ETA wide, and likewise after b) and replayed over the
@@ -327,7 +342,7 @@ class _Run:
         """
         b = self._boundary_near(ta, tb)
         if b is None:
-            return tape(self._args(tape, X, ta, tb))[0]
+            return [tape(self._args(tape, X, ta, tb))[0]]
         eta = ETA * max(1.0, abs(b))
         parts = []
         if ta < b + eta:
@@ -338,9 +353,7 @@ class _Run:
             hi = max(tb, b + 2 * eta)
             _, right = tape(self._args(tape, X, b + eta, hi))
             parts.append(tape(self._args(tape, X, max(ta, b - eta), tb), right)[0])
-        if len(parts) == 1:
-            return parts[0]
-        return [[u.union(v) for u, v in zip(p, q)] for p, q in zip(*parts)]
+        return parts
 
     def _args(self, tape, X, ta, tb):
         T = _ball(ta, tb)

@@ -22,7 +22,7 @@ from mpgspec.report.proved import interval_text
 from mpgspec.report.schema import validate_report
 
 SAMPLE = Path(__file__).with_name("data") / "sample_report.json"
-PROVED = {"windows": [[0.1, 1.2345678]], "boxes": 12, "order": 6, "width": 0.01, "seconds": 3.25}
+PROVED = {"windows": [[0.1, 1.2345678]], "boxes": 12, "order": 6, "width": 0.01, "time_s": 3.25}
 
 
 def ev(verdict: int, method: str) -> OracleEvidence:
