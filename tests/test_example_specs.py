@@ -33,3 +33,4 @@ def test_every_edge_has_its_verified_switch_over_time(example):
         k = next(i for i, t in enumerate(s["t"]) if t >= e["t_stop"] - 1e-9)
         assert s["roa_margin"][k] > 0  # inside E at the reported time
         assert all(v is None or v >= 0 for vs in s["h"].values() for v in vs[:k + 1])  # safe until then
+        assert s["h_count"] >= len(s["h"]) and all(v >= 0 for v in s["h_least"][:k + 1])  # every function, not only those kept

@@ -9,10 +9,11 @@ import numpy as np
 
 from .. import __version__
 from ..compile.primitive import CompiledPrimitive
-from .compact import METHODS, REASONS, STATUS, compact_cells, compact_run, compact_series, rnd
+from .compact import (METHODS, REASONS, STATUS, compact_cells, compact_run, compact_series, h_families, rnd,
+                      trace_samples)
 from .sections.registry import plugin_sections, report_sections
 
-SCHEMA_VERSION = "2.1"
+SCHEMA_VERSION = "2.2"
 
 
 def _f(v):
@@ -60,22 +61,30 @@ def _round(v, digits: int = 6):
     return None if v is None else float(f"{v:.{digits}g}")
 
 
+def _least(margins: dict, names: list[str]):
+    vals = [v for v in (_f(margins.get(k)) for k in names) if v is not None]
+    return min(vals) if vals else None
+
+
 def transition_entry(tr, h_names: list[str]) -> dict:
     """One ordered pair's grid, its cells by field (see compact.py); each cell's least margins are
-    listed in the order of h_names. method: 'certified' when every cell the verdict rests on was proved
+    listed by family (h_families, or the target's safety functions when every family has one member;
+    cells.violated indexes those functions, the target primitive's safety_functions). method: 'certified' when every cell the verdict rests on was proved
     (Transition.method); certified: the t_A intervals proved for every t_A in them, or None."""
     ev = tr.evidence
+    families, members = h_families(h_names)
     cells = [[{"verdict": e.verdict, "status": e.status, "reason": e.reason.value, "t_stop": _round(e.t_stop),
                "t_enter": _round(e.t_enter), "violated": e.violated, "checked": e.checked, "refined": e.refined,
                "margin": _round(e.margin), "error_bound": _round(e.error_bound),
                "peak_input": [_round(v) for v in e.peak_input], "peak_demand": [_round(v) for v in e.peak_demand],
                "saturated": e.saturated,
-               "min_margins": [_round(e.min_margins.get(k)) for k in h_names],
+               "min_margins": [_round(_least(e.min_margins, m)) for m in members],
                "best_roa_margin": _round(e.best_roa_margin), "message": e.message, "method": e.method}
               for e in row] for row in ev]
     flat = [e for row in ev for e in row]
     return {
-        "from": tr.source, "to": tr.target, "class": int(tr.cls), "method": tr.method, "h_names": h_names,
+        "from": tr.source, "to": tr.target, "class": int(tr.cls), "method": tr.method,
+        **({"h_families": families} if families != h_names else {}),
         "t_A": [float(t) for t in tr.t_A], "t_B": [float(t) for t in tr.t_B],
         "verdicts": tr.verdicts.tolist(), "cells": compact_cells(cells, h_names),
         "windows": [list(w) for w in tr.windows], "best_t_B": tr.best_t_B, "weights": tr.weights,
@@ -126,6 +135,7 @@ def build_report(cp, vg, ch, digest: str | None = None) -> dict:
     csys = next(iter(prims.values())).system
     bounds = {n: [float(lo), float(hi)] for n, lo, hi in zip(csys.input_names, csys.u_lo, csys.u_hi)
               if np.isfinite(lo) or np.isfinite(hi)}
+    per_trace = trace_samples(len(vg.failure_traces) + len(vg.edge_traces))
     return {**{
         "schema_version": SCHEMA_VERSION,
         "mpgspec_version": __version__,
@@ -142,8 +152,8 @@ def build_report(cp, vg, ch, digest: str | None = None) -> dict:
         "transitions": [transition_entry(tr, prims[tr.target].h_names) for tr in graph.transitions.values()],
         "verdicts": verdict_counts(graph),
         "edges": edge_entries(graph),
-        "failures": [_traced(f) for f in vg.failure_traces],
-        "edge_traces": [_traced(f) for f in vg.edge_traces],
+        "failures": [_traced(f, per_trace) for f in vg.failure_traces],
+        "edge_traces": [_traced(f, per_trace) for f in vg.edge_traces],
         "plans": [p.to_dict() for p in ch.plans],
         "lookup_table": ch.table,
         "assertions": [a.to_dict() for a in ch.assertions],
@@ -191,8 +201,8 @@ def _with_crossings(entry: dict, traces: list[dict]) -> dict:
     return entry
 
 
-def _traced(f: dict) -> dict:
-    """A failure or edge trace with its rollout rounded for pictures."""
+def _traced(f: dict, samples: int) -> dict:
+    """A failure or edge trace with its rollout rounded and decimated for pictures."""
     f = finite_json(f)
     return {**rnd({k: v for k, v in f.items() if k != "series"}),
-            "series": compact_series(f.get("series") or {}, f.get("t_stop"))}
+            "series": compact_series(f.get("series") or {}, f.get("t_stop"), f.get("violated"), samples)}

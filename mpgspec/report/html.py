@@ -14,7 +14,7 @@ import jinja2
 from markupsafe import Markup
 
 from . import fig6, svg
-from .compact import readable
+from .compact import h_families, least, readable
 from .proved import proved_text
 from .sections.registry import report_sections, section_data
 from .traversal import command_rows
@@ -195,16 +195,30 @@ def _floquet(p: dict) -> dict | None:
     return {"rows": rows, "rho": ev.get("spectral_radius"), "verdict": ev.get("verdict"), "neutral": neutral}
 
 
+PARKED = 1e3
+"""h values at or above this are drawn as gaps: a function parked while it does not apply (a foot's
+contact functions in swing hold 1e3, functions outside their clock window 1e9), which would
+otherwise flatten the plot's scale."""
+
+
+def _unparked(vs: list) -> list:
+    return [None if v is not None and v >= PARKED else v for v in vs]
+
+
 def _failures(report: dict, ids: Anchors, key: str = "failures") -> list[dict]:
     out = []
     for f in report.get(key, []):
         s = f["series"]
         title = f"h of {f['to']} after switching from {f['from']} at t_A = {_num(f['t_A'], 3)} s"
         series, shade, mark = (dict(s["h"]) if "t" in s else {}), True, None
+        if "t" in s:
+            floor_ = s.get("h_least") or least(s["h"], len(s["t"]))
+            n = s.get("h_count") or len(s["h"])
+            if key != "edge_traces" and n > len(series):  # the binding functions and the rest's floor
+                series[f"least of all {n}"] = floor_
+            series = {k: _unparked(vs) for k, vs in series.items()}
         if key == "edge_traces" and "t" in s:  # the safety margin and the approach to E, not every h
-            rows = list(s["h"].values())
-            least = [min((r[k] for r in rows if r[k] is not None), default=None) for k in range(len(s["t"]))]
-            series = {"least h (safety margin)": least, "E margin r - ||x - x*||": s["roa_margin"]}
+            series = {"least h (safety margin)": floor_, "E margin r - ||x - x*||": s["roa_margin"]}
             shade, title = "least h (safety margin)", f"{f['to']} after switching from {f['from']} at t_A = {_num(f['t_A'], 3)} s"
             mark = (f.get("t_stop"), "enters E")
         pic = Markup(svg.series_svg(s["t"], series, title=title, shade_negative=shade, ylabel="margin"
@@ -265,6 +279,7 @@ def view(report: dict) -> dict:
         "any_certified": "certified" in edge_methods,
         "graph_svg": Markup(graph or svg.graph_svg(report)),
         "periods": {p["name"]: _period(p) for p in report["primitives"]},
+        "families": {p["name"]: h_families(list(p.get("safety_functions") or []))[0] for p in report["primitives"]},
         "edges": edges,
         "transitions": _transitions(report, ids),
         "failures": _failures(report, ids),

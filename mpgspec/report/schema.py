@@ -4,7 +4,8 @@ The committed file schema/report-v2.json is generated from these models; regener
 `python -m mpgspec.report.schema` whenever the report changes. Version 2 stores oracle cells and
 sequence runs by column and rounds floats (see compact.py); 2.1 adds how each cell's verdict was
 obtained (cells.method), the certified counts and the t_A intervals proved for every t_A (certified),
-all optional so that 2.0 reports still validate.
+all optional so that 2.0 reports still validate; 2.2 keeps a trace's binding safety functions and
+their least instead of every function, the inputs and the states.
 """
 from __future__ import annotations
 
@@ -112,7 +113,9 @@ class Cells(_Strict):
     status: Digits = Field(description="one string per t_A row, a digit per t_B: index into codes.status "
                                        "(safe only when every margin exceeds its numerical error bound)")
     reason: Digits = Field(description="one string per t_A row, a digit per t_B: index into codes.reason")
-    violated: list[list[int | None]] = Field(description="index into h_names of the violated safety function, or null")
+    violated: list[list[int | None]] = Field(description="index into the target's safety functions (h_names, or the "
+                                                             "target primitive's safety_functions) of the "
+                                                             "violated one, or null")
     t_stop: Grid
     t_enter: Grid
     margin: Grid = Field(description="least sampled value of any active safety function")
@@ -120,7 +123,9 @@ class Cells(_Strict):
     best_roa_margin: Grid
     peak_input: list[Grid] = Field(description="per input: largest |u| applied, after saturation")
     peak_demand: list[Grid] = Field(description="per input: largest |u| asked for, before saturation")
-    min_margins: list[Grid] = Field(description="per safety function (order of h_names): its least value")
+    min_margins: list[Grid] = Field(description="per safety function family (order of h_families, else of "
+                                                "the target's safety functions): the least value of its "
+                                                "functions")
     checked: Digits = Field(description="one string per t_A row: 1 where every active h was evaluated")
     refined: Digits = Field(description="one string per t_A row: 1 where the verdict was refined with a finer step")
     saturated: Digits = Field(description="one string per t_A row: 1 where an input saturated")
@@ -170,7 +175,12 @@ class Transition(_Strict):
     cls: Literal[0, 1, 2] = Field(alias="class")
     method: Method = Field(description="certified: every cell the verdict rests on (the safe cells of an edge, "
                                        "every cell of a pair without one) is proved; else simulated")
-    h_names: list[str] = Field(description="safety functions of the target, the order of each cell's min_margins")
+    h_names: list[str] | None = Field(None, description="safety functions of the target, which cells.violated "
+                                                       "indexes (reports before 2.2; since, the target "
+                                                       "primitive's safety_functions)")
+    h_families: list[str] | None = Field(None, description="the safety functions grouped by the name before "
+                                                           "an index (friction_cone[4]), the order of each "
+                                                           "cell's min_margins; absent when each has its own")
     t_A: list[float]
     t_B: list[float]
     verdicts: list[list[Literal[0, 1]]]
@@ -222,13 +232,17 @@ class TraceCrossings(_Strict):
 
 
 class Series(_Strict):
-    """Dense rollout from one start point: h, RoA margin, inputs and states over time."""
+    """Dense rollout from one start point over time: the binding safety functions, their least, the
+    RoA margin (schema 2.2; earlier reports: every h, the inputs and the states)."""
 
     t: list[float]
-    h: dict[str, list[Num]]
+    h: dict[str, list[Num]] = Field(description="the binding safety functions (2.2: the violated one, then "
+                                                "the least ones), each over t")
+    h_least: list[Num] | None = Field(None, description="the least of all h_count safety functions at each t")
+    h_count: int | None = Field(None, ge=0, description="how many safety functions h_least is taken over")
     roa_margin: list[Num]
-    u: list[list[Num]]
-    x: list[list[Num]]
+    u: list[list[Num]] | None = Field(None, description="inputs over t (reports before 2.2)")
+    x: list[list[Num]] | None = Field(None, description="states over t (reports before 2.2)")
     crossings: TraceCrossings | None = Field(None, description="steps of a loop with guards that ended at a "
                                                                "located crossing")
 

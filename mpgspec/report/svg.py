@@ -215,7 +215,10 @@ def trajectory_svg(run: dict, state_names, commands=(), *, width: int = 760, max
     """States and min h of one sequence run; switches labelled by the new primitive, violations marked.
     limits: (state y range, min h y range), e.g. run_limits of all runs, to share the y axes."""
     t = [_num(v) for v in run.get("t", [])]
-    cols = [[_num(row[k]) if k < len(row) else None for row in run.get("x", [])] for k in range(len(state_names))]
+    n_x = min(len(state_names), max((len(row) for row in run.get("x", [])), default=len(state_names)))
+    hidden = len(state_names) - n_x
+    state_names = list(state_names)[:n_x]  # a run keeps its first states only (compact.RUN_STATES)
+    cols = [[_num(row[k]) if k < len(row) else None for row in run.get("x", [])] for k in range(n_x)]
     min_h = [_num(v) for v in run.get("min_h", [])] + [None] * (len(t) - len(run.get("min_h", [])))
     ts = [v for v in t if v is not None] or [0.0]
     xlim = (min(ts), max(ts) if max(ts) > min(ts) else min(ts) + 1.0)
@@ -244,7 +247,11 @@ def trajectory_svg(run: dict, state_names, commands=(), *, width: int = 760, max
         body.append(_el("path", _tip(tip), d=f"M{_n(x - 3)} {_n(y - 3)}L{_n(x + 3)} {_n(y + 3)}M{_n(x - 3)} "
                         f"{_n(y + 3)}L{_n(x + 3)} {_n(y - 3)}", stroke=VERMILLION, stroke_width=1.5))
     body += _legend(top.x0 + pw + 10, top.y0 + 6, state_names)
-    title = f"{run.get('mode', '')}: {'safe' if run.get('safe') else 'unsafe'}, {len(viol)} violation samples"
+    if hidden:
+        body.append(_text(top.x0 + pw + 10, top.y0 + 6 + 13 * n_x + 3.5, f"({hidden} more not drawn)", 10, "start",
+                          fill="#555"))
+    title = f"{run.get('mode', '')}: {'safe' if run.get('safe') else 'unsafe'}, {len(viol)} violation samples" + (
+        f"; the first {n_x} of {n_x + hidden} states" if hidden else "")
     return _svg(width, bot.y0 + bot.h + 34, body, title)
 
 

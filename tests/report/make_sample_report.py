@@ -59,9 +59,11 @@ def _series(d: dict, m: int, per_time: tuple[str, ...] = (), per_channel: tuple[
         return [v[i] for i in idx]
 
     for k in per_time:
-        d[k] = pick(d[k])
+        if k in d:
+            d[k] = pick(d[k])
     for k in per_channel:
-        d[k] = [pick(c) for c in d[k]]
+        if k in d:
+            d[k] = [pick(c) for c in d[k]]
     for k in named:
         d[k] = {n: pick(c) for n, c in d[k].items()}
     d["t"] = pick(d["t"])
@@ -73,7 +75,7 @@ def shrink(report: dict) -> dict:
         _grid(tr)
     for f in r["failures"]:
         if "t" in f["series"]:
-            _series(f["series"], MAX_POINTS // 2, ("roa_margin",), ("u", "x"), ("h",))
+            _series(f["series"], MAX_POINTS // 2, ("roa_margin", "h_least"), ("u", "x"), ("h",))
     for run in (r["sequence"] or {}).get("runs", {}).values():
         active = [name for name, k in run["active"] for _ in range(k)]
         run["active"] = active

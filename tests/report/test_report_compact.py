@@ -48,6 +48,49 @@ def test_runs_and_series_round_trip():
          "u": [[0.0] * 1000], "x": [[1.0] * 1000]}
     cs = compact_series(s, t_keep=2.0021)
     assert len(cs["t"]) <= MAX_TRACE + 2 and 2.005 in cs["t"] and cs["h"]["a"][0] == 0.1235
+    assert "x" not in cs and "u" not in cs and cs["h_count"] == 1
+
+
+def test_safety_functions_are_grouped_by_family_for_the_cells_least_margins():
+    from mpgspec.report.build import _least
+    from mpgspec.report.compact import h_families
+    names = ["trunk_clearance", "friction_cone[FR_foot]", "q_min[FR_hip]", "friction_cone[FL_foot]"]
+    fams, members = h_families(names)
+    assert fams == ["trunk_clearance", "friction_cone[2]", "q_min[FR_hip]"]
+    assert members[1] == ["friction_cone[FR_foot]", "friction_cone[FL_foot]"]
+    assert _least({"friction_cone[FR_foot]": 0.5, "friction_cone[FL_foot]": -0.25}, members[1]) == -0.25
+    assert h_families(["speed_limit", "upright_cone"])[0] == ["speed_limit", "upright_cone"]
+
+
+def test_traces_share_a_sample_budget_and_keep_the_least_margin():
+    from mpgspec.report.compact import TRACE_BUDGET, trace_samples
+    assert trace_samples(1) == MAX_TRACE and trace_samples(10 ** 6) == 40
+    assert trace_samples(56) * 56 <= TRACE_BUDGET
+    n = 1000
+    dip = [1.0] * n
+    dip[517] = -2.0  # between every-k-th samples
+    cs = compact_series({"t": [0.01 * i for i in range(n)], "h": {"a": dip}, "roa_margin": [0.0] * n}, samples=50)
+    assert len(cs["t"]) <= 52 and -2.0 in cs["h"]["a"] and min(cs["h_least"]) == -2.0
+
+
+def test_a_sequence_run_keeps_its_first_states():
+    from mpgspec.report.compact import RUN_STATES
+    run = {"mode": "graph", "t": [0.0, 0.1], "x": [[float(k) for k in range(43)]] * 2, "min_h": [1.0, 1.0],
+           "active": ["A", "A"], "switches": [], "violations": []}
+    c = compact_run(run)
+    assert len(c["x"]) == RUN_STATES and c["x"][RUN_STATES - 1] == [RUN_STATES - 1.0] * 2
+
+
+def test_a_trace_keeps_the_violated_and_the_least_functions_and_the_floor_of_all():
+    n = 10
+    h = {f"far{k}": [5.0 + k] * n for k in range(40)}
+    h["dips"] = [1.0] * 5 + [-0.5] + [1.0] * 4        # least minimum
+    h["low"] = [0.2] * n
+    h["broken"] = [0.9] * 9 + [-0.1]                  # the violated one, not the least
+    h["none"] = [None] * n
+    cs = compact_series({"t": [0.1 * i for i in range(n)], "h": h, "roa_margin": [0.0] * n}, violated="broken")
+    assert list(cs["h"]) == ["broken", "dips", "low"] and cs["h_count"] == 44
+    assert cs["h_least"] == [0.2] * 5 + [-0.5] + [0.2] * 3 + [-0.1]
 
 
 @pytest.fixture(scope="module")

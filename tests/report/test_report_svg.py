@@ -71,6 +71,10 @@ def test_grid_and_trajectory(sample):
         root = _parse(trajectory_svg(run_rows(run), seq["state_names"], seq["commands"]))
         labels = "".join(root.itertext())
         assert all(f"→ {s['to']}" in labels for s in run["switches"])
+    run = {"t": [0.0, 1.0], "x": [[1.0, 2.0], [1.5, 2.5]], "min_h": [1.0, 1.0], "switches": [], "violations": []}
+    names = ["a", "b", "c", "d"]  # the run kept its first two states
+    labels = "".join(_parse(trajectory_svg(run, names)).itertext())
+    assert "a" in labels and "b" in labels and "(2 more not drawn)" in labels and "c" not in labels.replace("(2 more not drawn)", "")
 
 
 def _edge_paths(root: ET.Element) -> dict[tuple[str, str], ET.Element]:
