@@ -18,8 +18,7 @@ floats, and the functions that turn them back into one dict per cell or one row 
   and at most MAX_TRACE samples (every k-th, the last, and the first at or after the decision).
 - A trace (schema 2.2) keeps what its picture shows: the BINDING safety functions (the violated one
   first, then those with the least minimum), `h_least` (the least of all `h_count` functions at each
-  sample: the safety margin) and the RoA margin; not the states and inputs (`mpgspec simulate`
-  rolls the same switch again with them).
+  sample: the safety margin) and the RoA margin; not the states and inputs.
 """
 from __future__ import annotations
 
