@@ -152,6 +152,12 @@ def test_robust_edges_in_summary_legend_and_sequence_fractions(sample_text):
     html = render_html(report)
     assert "<b>19</b> robust edges" in html and "nominal only: Balance -&gt; SwingUp" in html
     assert "disturbed sequence safe: naive 0/8, nominal graph 6/8, robust graph 8/8" in html
+    lost = [f"A{k} -> B{k}" for k in range(23)]  # many: counted on the first screen, listed under robust
+    report["robust"]["summary"] = {**report["robust"]["summary"], "robust_edges": 1, "nominal_only": lost}
+    many = render_html(report)
+    card = many[many.index('id="summary"'):many.index('id="graph"')]
+    assert "23 nominal only (listed under robust)" in card and "A7 -&gt; B7" not in card
+    assert "A7 -&gt; B7" in many[many.index('id="robust"'):]
     assert 'class="key nominal"' in html  # the graph legend
     table = html[html.index('id="robust-sequence"'):]
     table = table[: table.index("</table>")]

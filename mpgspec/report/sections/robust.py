@@ -12,6 +12,10 @@ def data(cp, vg, ch) -> dict | None:
     return ch.robust.to_dict() if ch.robust is not None else None
 
 
+LISTED = 4
+"""Nominal-only edges the summary names; more are counted (the robust section lists them)."""
+
+
 def count(rob: dict) -> tuple:
     """The summary line of the robust graph: edges that survive uncertainty, the nominal-only ones and
     the safe runs of the goal sequence under sampled uncertainty per mode."""
@@ -21,7 +25,9 @@ def count(rob: dict) -> tuple:
     names = {"graph": "nominal graph", "robust_graph": "robust graph"}
     seq = "; disturbed sequence safe: " + ", ".join(f"{names.get(m, m)} {x['safe_runs']}/{x['runs']}" for m, x in runs)
     return ("robust edges", sm.get("robust_edges", "–"),
-            f"of {sm.get('nominal_edges', '–')}; " + (f"nominal only: {', '.join(lost)}" if lost else "none lost")
+            f"of {sm.get('nominal_edges', '–')}; " + ((f"nominal only: {', '.join(lost)}" if len(lost) <= LISTED
+                                                        else f"{len(lost)} nominal only (listed under robust)")
+                                                       if lost else "none lost")
             + (seq if runs else "") + " (empirical)")
 
 
