@@ -129,6 +129,18 @@ class UsageError(MpgError, ValueError):
     code = "MPG001"
 
 
+def unknown_primitive(name: str, names) -> UsageError:
+    """A UsageError for a primitive name that is not in `names`, with the nearest name when one is
+    close (case aside: `lie` -> `Lie`)."""
+    import difflib
+
+    names = list(names)
+    lower = {n.lower(): n for n in names}
+    near = [lower[m] for m in difflib.get_close_matches(str(name).lower(), list(lower), n=1, cutoff=0.6)]
+    hint = f"; did you mean {near[0]!r}?" if near else ""
+    return UsageError(f"unknown primitive {name!r}{hint} (expected one of {', '.join(names)})")
+
+
 class CompileError(MpgError, RuntimeError):
     """A valid spec could not be compiled to CasADi (e.g. singular linearisation for LQR)."""
 

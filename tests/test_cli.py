@@ -194,7 +194,9 @@ def test_plan_json(capsys):
 def test_plan_unknown_primitive_exits_2(capsys):
     rc, _, err = run(capsys, "plan", TINY, "--from", "Left", "--to", "Nowhere")
     assert rc == 2
-    assert "unknown primitive 'Nowhere'" in err
+    assert "unknown primitive 'Nowhere'" in err and "did you mean" not in err
+    rc, _, err = run(capsys, "plan", TINY, "--from", "left", "--to", "Right")
+    assert rc == 2 and "unknown primitive 'left'; did you mean 'Left'?" in err
 
 
 def test_simulate_runs_both_modes(capsys):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import UsageError
+from ..errors import UsageError, unknown_primitive
 from ..plan.planner import hops, plan_graph, shortest_path, shortest_plan, takeable
 from ..report.read import ReportGraph
 from .reuse import Notify, load_one, quick_report, rebuild, verified
@@ -29,7 +29,7 @@ def plan_project(project, source: str, goal: str, weight: str = "duration", out=
     names = [p["name"] for p in report["primitives"]] if report is not None else [p.name for p in spec.primitives]
     for n in (source, goal):
         if n not in names:
-            raise UsageError(f"unknown primitive {n!r}; expected one of {', '.join(names)}")
+            raise unknown_primitive(n, names)
     if report is None:
         report = verified(spec, out, rebuild_, notify)
     if report is not None:

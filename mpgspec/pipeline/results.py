@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, UsageError
+from ..errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, UsageError, unknown_primitive
 from ..plan.planner import hops, lookup_table, plan_graph, shortest_path
 from ..report.read import ReportGraph, load_report as read
 
@@ -54,7 +54,7 @@ class ProjectResult:
             raise UsageError(f"{self.path}: no verified graph ({'; '.join(e.get('message', '') for e in self.errors)})")
         for n in (source, goal):
             if n not in G:
-                raise UsageError(f"unknown primitive {n!r}; expected one of {', '.join(G.nodes)}")
+                raise unknown_primitive(n, G.nodes)
         path, cost = shortest_path(G, source, goal, weight)
         edge = self.mpg.edge if self.mpg is not None else ReportGraph(self.report).edge
         return {"from": source, "to": goal, "weight": weight, "path": path, "cost": cost, "hops": hops(edge, path)}
