@@ -7,11 +7,12 @@ import sys
 from .. import api
 from ..errors import EXIT_CHECK_FAILED, EXIT_OK
 from ..streams import stdout_to_stderr
+from ..report.svg import window_text
 from .output import _num
 
 
 def _window_text(ws) -> str:
-    return ", ".join(f"[{_num(a, '.4g')}, {_num(b, '.4g')}]" for a, b in ws)
+    return " ∪ ".join(window_text(a, b, lambda v: _num(v, ".4g")) for a, b in ws)
 
 
 def notifier(args):

@@ -330,10 +330,16 @@ def _size(shape: str, name: str) -> tuple[float, float]:
     return {"box": (w, 15.0), "diamond": (w + 16, 22.0)}.get(shape, (max(w + 4, 22.0), 20.0))
 
 
+def window_text(a, b, number=fmt) -> str:
+    """One t_A window: '[a, b]', or '{a}' when it is one grid point (safe there, not at its
+    neighbours: nothing is claimed between)."""
+    return f"{{{number(a)}}}" if a == b else f"[{number(a)}, {number(b)}]"
+
+
 def windows_text(ws, limit: int = 3) -> str:
-    """t_A windows as '[a, b], [c, d]' (at most limit of them, then the count of the others)."""
+    """t_A windows as '[a, b] ∪ {c}' (at most limit of them, then the count of the others)."""
     ws = list(ws or [])
-    txt = ", ".join(f"[{fmt(a)}, {fmt(b)}]" for a, b in ws[:limit])
+    txt = " ∪ ".join(window_text(a, b) for a, b in ws[:limit])
     return txt + (f" and {len(ws) - limit} more" if len(ws) > limit else "")
 
 

@@ -110,3 +110,9 @@ def test_nominal_only_edges_in_the_graphviz_layout(sample):
     assert "style=dotted" in lost and f'color="{VERMILLION}"' in lost and "nominal only" in lost
     assert not any("style=dotted" in ln or "nominal only" in ln for ln in lines.values())
     assert "style=dotted" not in graph_dot({**sample, "robust": None})
+
+
+def test_a_window_of_one_grid_point_is_a_point():
+    from mpgspec.report.svg import windows_text
+    assert windows_text([[0.0, 0.0], [0.12, 0.24]]) == "{0} ∪ [0.12, 0.24]"
+    assert windows_text([[0.0, 0.0], [0.1, 0.1], [0.2, 0.3]], 1) == "{0} and 2 more"
