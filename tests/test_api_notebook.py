@@ -55,3 +55,16 @@ def test_load_report_round_trip(tmp_path):
 
 def test_all_names_exist():
     assert all(hasattr(api, n) for n in api.__all__)
+
+
+def test_reprs_are_one_line(tiny):
+    text = repr(tiny)
+    assert "\n" not in text and len(text) < 300 and "ProjectResult(tiny: pass" in text and "edges" in text
+
+
+def test_plan_on_the_robust_graph(tiny, example):
+    with pytest.raises(api.UsageError, match="no robust graph"):
+        tiny["tiny"].plan("Left", "Right", robust=True)
+    p = example("pendulum").projects[0]  # its assertion: robust plan Hang => Balance through the swings
+    assert p.plan("Hang", "Balance", robust=True)["path"] == ["Hang", "Swing(1)", "Swing(2.6)", "Balance"]
+    assert p.plan("Hang", "Balance")["path"] == ["Hang", "Swing(1)", "Swing(2.6)", "Balance"]

@@ -46,18 +46,43 @@ class ProjectResult:
             return ReportGraph(self.report).planner_graph()
         return None
 
-    def plan(self, source: str, goal: str, weight: str = "duration") -> dict:
+    def plan(self, source: str, goal: str, weight: str = "duration", robust: bool = False) -> dict:
         """The shortest safe sequence from source to goal: path, cost and each hop with its class and
-        the t_A windows to wait for (Class 2); path None when the goal cannot be reached."""
-        G = self.graph
-        if G is None:
-            raise UsageError(f"{self.path}: no verified graph ({'; '.join(e.get('message', '') for e in self.errors)})")
+        the t_A windows to wait for (Class 2); path None (and `why`) when the goal cannot be reached.
+        robust: only the edges that withstood the project's uncertainty (its report's robust graph)."""
+        if robust:
+            if self.report is None or not self.report.get("robust"):
+                raise UsageError(f"{self.path}: no robust graph (the project declares no `uncertainty`, or it "
+                                 "was not verified)")
+            from ..robust.plan import robust_report_graph
+
+            g = robust_report_graph(self.report)
+            G, edge = g.planner_graph(), g.edge
+        else:
+            G = self.graph
+            if G is None:
+                raise UsageError(f"{self.path}: no verified graph "
+                                 f"({'; '.join(e.get('message', '') for e in self.errors)})")
+            edge = self.mpg.edge if self.mpg is not None else ReportGraph(self.report).edge
         for n in (source, goal):
             if n not in G:
                 raise unknown_primitive(n, G.nodes)
         path, cost = shortest_path(G, source, goal, weight)
-        edge = self.mpg.edge if self.mpg is not None else ReportGraph(self.report).edge
-        return {"from": source, "to": goal, "weight": weight, "path": path, "cost": cost, "hops": hops(edge, path)}
+        doc = {"from": source, "to": goal, "weight": weight, "path": path, "cost": cost, "hops": hops(edge, path)}
+        if path is None:
+            from .plan import unreachable
+
+            doc["why"] = unreachable(G, source, goal, weight, robust)
+        return doc
+
+    def __repr__(self) -> str:
+        """One line: name, status and counts (the report itself is the `report` attribute)."""
+        r = self.report or {}
+        failed = sum(a.get("status") == "fail" for a in r.get("assertions", []))
+        parts = [f"{len(r.get('primitives', []))} primitives", f"{len(r.get('edges', []))} edges",
+                 f"{len(r.get('assertions', []))} assertions ({failed} failed)"] if r else []
+        parts += [f"{len(self.errors)} errors"] if self.errors else []
+        return f"ProjectResult({self.name or self.path!s}: {self.status}{'; ' if parts else ''}{', '.join(parts)})"
 
     def simulate(self, mode: str = "graph"):
         """Run the project's goal sequence ('naive' or 'graph'); returns the SequenceRun (its
@@ -121,6 +146,9 @@ class VerifyResult:
                     return p
             raise KeyError(key)
         return self.projects[key]
+
+    def __repr__(self) -> str:
+        return f"VerifyResult(exit_code={self.exit_code}, [{', '.join(map(repr, self.projects))}])"
 
     def _repr_html_(self) -> str:
         return "".join(p._repr_html_() for p in self.projects)
