@@ -96,7 +96,7 @@ def summary(projects, elapsed: float) -> str:
     st = [p.status for p in projects]
     calls = sum(int(((p.report or {}).get("timing") or {}).get("oracle_calls", 0)) for p in projects)
     cached = sum(int(((p.report or {}).get("timing") or {}).get("cache_hits", 0)) for p in projects)
-    warns = sum(c["status"] == "warn" for p in projects for c in (p.report or {}).get("assumptions", []))
+    warns = sum(int(getattr(p, "warnings", 0)) for p in projects)  # ProjectResult.warnings
     parts = [f"{st.count('pass')} passed", f"{st.count('fail')} failed"] + (
         [f"{st.count('error')} errors"] if "error" in st else [])
     n = len(projects)

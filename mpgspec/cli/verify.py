@@ -13,6 +13,7 @@ from .. import api
 from ..cores import usable_cores
 from ..errors import UsageError
 from ..oracle.cache import VERIFY_ENV
+from ..report.findings import disagreements, warning_count
 from ..streams import stdout_to_stderr
 from .output import MARK, _annotation, _json_doc, _line, _num, _print_errors, _progress
 
@@ -40,7 +41,7 @@ def _step_summary(res) -> None:
             continue
         r = p.report
         a = r.get("assertions", [])
-        warns = sum(c["status"] == "warn" for c in r.get("assumptions", []))
+        warns = warning_count(r)
         failed = [x for x in a if x["status"] != "pass"]
         rows.append("| " + " | ".join(cell(v) for v in (
             p.name or p.path, MARK.get(p.status, p.status.upper()), len(r.get("primitives", [])), len(r.get("edges", [])),
@@ -111,6 +112,12 @@ def _human(res: VerifyResult, fmt: str):
                                   "mpgspec assumption", file=p.path))
             else:
                 out(f"  {c['status'].upper():5} {text}")
+        for d in disagreements(r):
+            text = f"cross-check of the {d['mode']} run: {d['text']}"
+            if fmt == "github":
+                print(_annotation("warning", text, None, "mpgspec cross-check", file=p.path))
+            else:
+                out(f"  {'WARN':5} {text}")
         for k, path in p.files.items():
             out(f"  wrote {k}: {path}")
         _print_errors(p.errors, fmt)

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 from ..errors import EXIT_CHECK_FAILED, EXIT_OK, EXIT_USAGE, UsageError, unknown_primitive
 from ..plan.planner import hops, lookup_table, plan_graph, shortest_path
+from ..report.findings import warning_count
 from ..report.read import ReportGraph, load_report as read
 
 if TYPE_CHECKING:
@@ -30,6 +31,11 @@ class ProjectResult:
     files: dict[str, str] = field(default_factory=dict)
     mpg: MotionPrimitiveGraph | None = None
     compiled: CompiledProject | None = field(default=None, repr=False)
+
+    @property
+    def warnings(self) -> int:
+        """Assumption checks that warn and cross-check disagreements (mpgspec.report.findings)."""
+        return warning_count(self.report)
 
     @property
     def graph(self):
@@ -112,7 +118,7 @@ class ProjectResult:
             errs = "".join(f"<li>{escape(str(e.get('text', e.get('message', ''))))}</li>" for e in self.errors)
             return f"<div><b>{escape(str(self.path))}</b>: ERROR<ul>{errs}</ul></div>"
         r = self.report
-        warns = sum(c["status"] == "warn" for c in r.get("assumptions", []))
+        warns = warning_count(r)
         head = (f"<b>{escape(self.name)}</b>: <b>{escape(self.status.upper())}</b>"
                 f"{f' with {warns} warning' + ('s' if warns != 1 else '') if warns else ''} · "
                 f"{len(r['primitives'])} primitives · {len(r['edges'])} edges · "

@@ -15,6 +15,7 @@ from markupsafe import Markup
 
 from . import fig6, svg
 from .compact import h_families, least, readable
+from .findings import disagreements
 from .proved import proved_text
 from .sections.registry import report_sections, section_data
 from .traversal import command_rows
@@ -102,6 +103,12 @@ def assertion_link(a: dict, report: dict, ids: Anchors) -> str:
     return {"plan": "#plans", "reachable_from": "#lookup", "max_inconclusive": "#edges"}.get(kind, "#assertions")
 
 
+def _disagreements(report: dict) -> list[dict]:
+    """The summary's WARN items for cross-check disagreements (findings.disagreements)."""
+    return [{"status": "warn", "what": f"cross-check of the {d['mode']} run", "text": d["text"],
+             "href": "#crosscheck", "row": "#crosscheck"} for d in disagreements(report)]
+
+
 def _summary(report: dict, ids: Anchors) -> dict:
     """The verdict line, the counts and every FAIL, ERROR and WARN with a link to its evidence."""
     asserts, assumed = report["assertions"], report.get("assumptions", [])
@@ -115,6 +122,7 @@ def _summary(report: dict, ids: Anchors) -> dict:
             problems.append({"status": c["status"], "what": f"assumption of {c['primitive']}",
                              "text": f"{c['name']}: {c['message']}", "href": "#" + ids.prim(c["primitive"]),
                              "row": f"#assumption-{k}"})
+    problems[:0] = _disagreements(report)
     runs = ((report.get("sequence") or {}).get("runs") or {})
     warns = sum(p["status"] == "warn" for p in problems)
     status = report["status"]

@@ -52,6 +52,27 @@ def test_without_sequence_or_failures(sample_text):
     assert "diverged" in html and 'id="sequence"' not in html
 
 
+def test_a_cross_check_disagreement_is_a_warning_on_the_first_screen(sample_text):
+    report = json.loads(sample_text)
+    n = sum(c["status"] == "warn" for c in report["assumptions"])
+    report["crosscheck"] = {"simulator": "mujoco", "agree": False, "runs": {
+        "naive": {"mode": "naive", "agree": True, "mujoco": {"safe": False}, "mpgspec": {"safe": False}},
+        "graph": {"mode": "graph", "agree": False, "mpgspec": {"safe": True, "first_violation": None},
+                  "mujoco": {"safe": False, "first_violation": {"t": 8.427, "primitive": "Walk", "h": "cone[RR]",
+                                                                 "value": -4.857}}}}}
+    from mpgspec.report.html import _disagreements
+    (w,) = _disagreements(report)
+    assert w["status"] == "warn" and w["href"] == "#crosscheck"
+    assert w["text"] == ("MuJoCo finds the graph run unsafe where mpgspec finds it safe: cone[RR] of Walk at "
+                         "t = 8.427 s, -4.857")
+    report.pop("crosscheck")
+    report["crosscheck"] = {"simulator": "mujoco", "agree": False, "runs": {"graph": {
+        "agree": False, "mpgspec": {"safe": True}, "mujoco": {"safe": False}}}}
+    from mpgspec.report.html import Anchors, _summary
+    summary = _summary(report, Anchors(report))
+    assert summary["label"] == f"PASS with {n + 1} warnings" and summary["problems"][0]["what"] == "cross-check of the graph run"
+
+
 def test_summary_names_every_warning_and_links_it(sample_text):
     report = json.loads(sample_text)
     html = render_html(report)
@@ -175,3 +196,16 @@ def test_no_robust_graph_no_robust_legend(sample_text):
     report["robust"] = None
     html = render_html(report)
     assert 'class="key nominal"' not in html and "robust edges" not in html and 'id="robust"' not in html
+
+
+def test_warnings_are_counted_alike_everywhere(sample_text):
+    from mpgspec.pipeline.results import ProjectResult
+    from mpgspec.progress import summary
+    from mpgspec.report.findings import warning_count
+    report = json.loads(sample_text)
+    n = sum(c["status"] == "warn" for c in report["assumptions"])
+    report["crosscheck"] = {"simulator": "mujoco", "runs": {"graph": {"agree": False, "mpgspec": {"safe": True},
+                                                                      "mujoco": {"safe": False}}}}
+    p = ProjectResult(path=Path("x"), name="x", status="pass", report=report)
+    assert warning_count(report) == p.warnings == n + 1
+    assert f"; {n + 1} warnings;" in summary([p], 1.0) and f"with {n + 1} warnings" in p._repr_html_()

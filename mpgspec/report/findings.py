@@ -1,0 +1,35 @@
+"""The warnings of a report, counted alike by the page, the command line and the API: assumption
+checks that warn, and sequence runs whose replay in an independent simulator reached another verdict
+than mpgspec's (the model mpgspec verified is then not the robot's: a finding that can hurt)."""
+from __future__ import annotations
+
+SIMULATORS = {"mujoco": "MuJoCo"}
+
+
+def _num(v, digits: int = 4) -> str:
+    return "?" if not isinstance(v, (int, float)) else f"{v:.{digits}g}"
+
+
+def disagreements(report: dict) -> list[dict]:
+    """{mode, text} for each cross-checked run whose verdict differs from mpgspec's."""
+    xc = report.get("crosscheck")
+    if not isinstance(xc, dict):
+        return []
+    key = xc.get("simulator")
+    sim = SIMULATORS.get(key, str(key or "the simulator"))
+    out = []
+    for mode, r in (xc.get("runs") or {}).items():
+        if not isinstance(r, dict) or r.get("agree", True):
+            continue
+        theirs, ours = r.get(key) or {}, r.get("mpgspec") or {}
+        v = theirs.get("first_violation") or {}
+        first = f": {v.get('h')} of {v.get('primitive')} at t = {_num(v.get('t'))} s, {_num(v.get('value'))}" if v else ""
+        out.append({"mode": mode, "text": f"{sim} finds the {mode} run {'safe' if theirs.get('safe') else 'unsafe'} "
+                                          f"where mpgspec finds it {'safe' if ours.get('safe') else 'unsafe'}{first}"})
+    return out
+
+
+def warning_count(report: dict | None) -> int:
+    """Assumption checks that warn plus cross-check disagreements."""
+    r = report or {}
+    return sum(c.get("status") == "warn" for c in r.get("assumptions", [])) + len(disagreements(r))
