@@ -25,7 +25,8 @@ def test_plain_lines_name_the_phase_and_the_elapsed_time():
 def test_summary_across_projects():
     def proj(status, calls, warns=0):
         return SimpleNamespace(status=status, report={"timing": {"oracle_calls": calls, "cache_hits": 1},
-                                                      "assumptions": [{"status": "warn"}] * warns})
+                                                      "assumptions": [{"status": "warn"}] * warns},
+                               warnings=warns)  # as ProjectResult.warnings counts them
 
     text = summary([proj("pass", 10, 2), proj("fail", 5), SimpleNamespace(status="error", report=None)], 3.21)
     assert text == ("3 projects: 1 passed, 1 failed, 1 errors; 15 oracle calls (2 from the cache); 2 warnings; "
