@@ -4,6 +4,7 @@ than mpgspec's (the model mpgspec verified is then not the robot's: a finding th
 from __future__ import annotations
 
 SIMULATORS = {"mujoco": "MuJoCo"}
+"""How simulator names are written in the report."""
 
 
 def _num(v, digits: int = 4) -> str:

@@ -9,11 +9,9 @@ from markupsafe import Markup
 from pydantic import Field
 
 from .. import svg
+from ..findings import SIMULATORS
 from ..schema import Num, Violation, _Strict
 from . import ReportSection
-
-SIMULATORS = {"mujoco": "MuJoCo"}
-"""How simulator names are written in the report."""
 
 
 class CrossCheckSwitch(_Strict):
