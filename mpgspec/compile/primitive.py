@@ -18,7 +18,7 @@ from .closed_loop import CompiledPrimitive, function_name, roa_margin_function
 from .contacts import ContactPlan, Events, Fixed, Schedule, clock_phase, plan_jump, wrap_clock
 from .events import event_window
 from .exprs import ExprCompiler
-from .guards import collect
+from .guards import Guards, collect
 from .laws.base import ControlContext
 from .laws.kind import Setup
 from .laws.registry import controller_kind
@@ -179,8 +179,17 @@ def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, cl
         contacts=cm.plan, jump=jump, loop=loop_fn, loop_raw=loop_raw, windows=windows,
         boundaries=_boundaries(windows, cm.plan, clock.period, clock.domain),
         hybrid=sys.events or cm.schedule is not None, sampled=ctx.sampled, loop_u=loop_u,
-        guards=collect(f_cl, labels=_saturation_guards(control, sys)),
+        guards=_guards(f_cl, control, sys, ctx.sampled),
     )
+
+
+def _guards(f_cl: ca.Function, control: ca.Function, sys: CompiledSystem, sampled) -> Guards:
+    """The closed loop's guards; a sampled law has none between its solves (each solve is at a
+    step's start, its input held over the step), so its steps need no location."""
+    if sampled is not None:
+        when = "at every step's start" if sampled.period is None else f"every {sampled.period:g} s, at a step's start"
+        return Guards(why=f"the law is solved {when} and held in between: it switches only where a step starts")
+    return collect(f_cl, labels=_saturation_guards(control, sys))
 
 
 def _safety_functions(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, henv: dict, cm: _Mode,

@@ -122,11 +122,14 @@ def _start_clock(p: CompiledPrimitive) -> float:
 def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiveGraph | None,
                       table: dict | None, seq: Sequence, settings: OracleSettings, mode: str,
                       max_points: int = 1500) -> SequenceRun:
-    """Run the sequence from the start primitive's setpoint; returns what happened.
+    """Run the sequence from the start primitive's setpoint, in steps of seq.dt (else the
+    oracle's); returns what happened.
 
     A run that cannot go on (a state that is no longer finite, a numerical failure) stops there
     and is unsafe, with the reason in `failed`; it never raises.
     """
+    if seq.dt is not None:  # the sequence's own step
+        settings = settings.replace(dt=float(seq.dt))
     run = SequenceRun(mode)
     snaps: list[tuple] = []
     try:

@@ -7,6 +7,8 @@ is compiled once per primitive, with the other large per-primitive parts the chu
 - loop (x, t, s, x_sw) -> (xdot, h, u_raw, u): the closed loop every safety function active
   (integrator._loop), or for a sampled law loop_u (..., u_held) and the law's solve;
 - jump (x, u, t, s) -> x: the discrete update after a step (flow.jump_of);
+- loop_g (x, t, s, x_sw) -> (xdot, h, u_raw, u, g): the loop and its guards (compile/guards.py),
+  for a loop stepped piece by piece (oracle/pieces.py);
 - roa_margin (x, t) when it is large (a setpoint looked up in a gait's table), not a small SX one.
 A large RoA margin is a library of its own (E is sized after the loop is compiled: the loop's
 library then serves both the sizing and the graph). The dependents call them through
@@ -87,9 +89,30 @@ def is_large(prim: CompiledPrimitive) -> bool:
     return not (prim.f_cl.is_a("SXFunction") and prim.f_cl.n_nodes() <= INLINE_NODES)
 
 
+def guarded(prim: CompiledPrimitive) -> bool:
+    """The primitive's steps are taken piece by piece (oracle/pieces.py): its closed loop has guards
+    and its law is evaluated continuously (a sampled law is held between samples, each solved at a
+    step's start: it switches only there)."""
+    return prim.guards.fn is not None and prim.sampled is None
+
+
+def loop_and_guards(prim: CompiledPrimitive) -> ca.Function:
+    """(x, t, s, x_sw) -> (xdot, h, u_raw, u, g): the closed loop (as plain_loop) and its guards in
+    one Function, with common subexpressions eliminated: a large loop stepped piece by piece
+    evaluates it once per point, for the step and its guards alike."""
+    if "loop_and_guards" not in prim.cache:
+        loop = plain_loop(prim)
+        a = loop.sx_in()
+        fn = ca.Function("loop_g", a, [*loop.call(a), prim.guards.fn(*a)], ["x", "t", "s", "x_sw"],
+                         ["xdot", "h", "u_raw", "u", "g"])
+        prim.cache["loop_and_guards"] = with_cse(fn)
+    return prim.cache["loop_and_guards"]
+
+
 def _parts(prim: CompiledPrimitive, kinds: tuple[str, ...]) -> dict[str, ca.Function]:
     make = {"loop": lambda: plain_loop(prim), "loop_u": lambda: plain_loop(prim, True),
-            "solve": lambda: prim.sampled.solve, "jump": lambda: jump_of(prim), "roa_margin": lambda: prim.roa_margin}
+            "solve": lambda: prim.sampled.solve, "jump": lambda: jump_of(prim), "roa_margin": lambda: prim.roa_margin,
+            "loop_g": lambda: loop_and_guards(prim)}
     return {k: make[k]() for k in kinds}
 
 
@@ -113,9 +136,10 @@ def _units(prim: CompiledPrimitive, flags: tuple[str, ...]) -> list[tuple[str, t
     version: a process that finds a library compiled loads it without building its parts."""
     key = ("looplib_units", flags)
     if key not in prim.cache:
-        kinds = (("loop",) if prim.sampled is None else ("loop_u", "solve")) + ("jump",)
+        kinds = (("loop",) if prim.sampled is None else ("loop_u", "solve")) + ("jump",) + \
+            (("loop_g",) if guarded(prim) else ())
         sources = [prim.loop_raw or prim.loop, prim.f_cl, prim.loop_u, jump_of(prim)] + \
-            ([prim.sampled.solve] if prim.sampled is not None else [])
+            ([prim.sampled.solve] if prim.sampled is not None else []) + ([prim.guards.fn] if guarded(prim) else [])
         units = [(_name("loop", sources, kinds, flags), kinds)]
         if not prim.roa_margin.is_a("SXFunction") or prim.roa_margin.n_nodes() > INLINE_NODES:
             units.append((_name("margin", [prim.roa_margin], ("roa_margin",), flags), ("roa_margin",)))
@@ -198,7 +222,7 @@ def attached(prim: CompiledPrimitive) -> LoopLibrary | None:
 
 
 def part(prim: CompiledPrimitive, kind: str) -> ca.Function | None:
-    """The compiled part `kind` (loop, loop_u, solve, jump, roa_margin) of the primitive's attached
+    """The compiled part `kind` (loop, loop_u, solve, jump, roa_margin, loop_g) of the primitive's attached
     loop library, None without one or when it does not hold that part."""
     lib = attached(prim)
     return lib.get(kind) if lib is not None else None

@@ -24,8 +24,13 @@ import casadi as ca
 
 from ..compile.primitive import CompiledPrimitive
 from .flow import active, step_end, step_length, wrap
-from .jit import cse_sx
+from .jit import cse, cse_sx
+from .looplib import guarded, is_large, loop_and_guards, part
 
+__all__ = ["guarded", "guarded_body", "guarded_doubling_body"]
+
+FD = 1e-6
+"""The step of the one-sided differences that give a large loop's h rate (integrator.FD_STEP)."""
 BISECTIONS = 36
 """Bisections of a step where a guard crosses: the piece ends within dt 2^-36 (1.5e-13 s at dt = 0.01)
 of the crossing."""
@@ -35,22 +40,27 @@ as smooth (the branch of its first stage is in doubt): the full step nudges it (
 NUDGE = 1e-9
 """A step's first stage is evaluated NUDGE dt after its start where a guard changes sign in between
 (the step starts on a guard): on the branch the step runs on, at a cost of order NUDGE dt |f'|."""
+CLOCK_BISECTIONS = 44
+"""Bisections of a step where a clock guard crosses: the step ends within dt 2^-44 (6e-17 s at
+dt = 1e-3) after the crossing, closer than the clock's own rounding."""
 MIN_PIECE = 1e-9
 """A located piece shorter than this (seconds) is not resolved: the step gets UNRESOLVED."""
 UNRESOLVED = 1e30
 """The error estimate of a step whose crossing could not be resolved: no safe verdict survives it."""
 
 
-def guarded(prim: CompiledPrimitive) -> bool:
-    """The primitive's steps are taken piece by piece: it has guards, a small SX loop inlined in the
-    step (not a compiled loop library) and a law evaluated continuously (not sampled)."""
-    return prim.guards.fn is not None and prim.sampled is None and prim.loop.is_a("SXFunction")
-
-
 def _with_guards(prim: CompiledPrimitive) -> ca.Function:
-    """(x, t, s, x_sw) -> (xdot, g): the closed loop and its guards sharing their subexpressions."""
+    """(x, t, s, x_sw) -> (xdot, g): a small loop and its guards sharing their subexpressions."""
     a = prim.f_cl.sx_in()
     return ca.Function("f_and_g", a, [prim.f_cl(*a), prim.guards.fn(*a)])
+
+
+def inline(f, *args) -> list:
+    """f's outputs at args, its graph inlined where f is an MX Function (so that common
+    subexpressions, the same loop evaluated at the same point twice, merge in the caller)."""
+    if isinstance(f, ca.Function):
+        return f.call(list(args), f.is_a("MXFunction"), False)
+    return list(f(*args))
 
 
 def _crossed(r, gs: list):
@@ -61,10 +71,13 @@ def _crossed(r, gs: list):
     return ca.mmax(v) if v.shape[0] else ca.DM(0)
 
 
-def _suspect(g0, gs: list):
+def _suspect(g0, gs: list, resting: bool = False):
     """1 when a step from guard values g0 may not be smooth: a guard changes sign at a stage or the
     end (gs), or starts within BAND of its change over the step of zero (where the first stage's
-    branch is in doubt). Such a step is taken by the full, located step instead.
+    branch is in doubt). Such a step is taken by the full, located step instead. With `resting`, a
+    guard that is zero at the start and at every stage is not suspect: every evaluation of the
+    loop in the step sees the same value, so takes the same branch (an event clock parked on its
+    sentinel, `x < 1e6` at x = 1e6).
 
     Both tests on the products p = g0 g of each guard: a sign change (or a zero) is min p <= 0;
     without one, |g - g0| >= |g0| / BAND means g / g0 >= 1 + 1 / BAND, i.e. max p >= (1 + 1 / BAND)
@@ -77,6 +90,11 @@ def _suspect(g0, gs: list):
     for q in ps[1:]:
         lo, hi = ca.fmin(lo, q), ca.fmax(hi, q)
     doubt = ca.logic_or(lo <= 0, hi >= (1 + 1 / BAND) * (g0 * g0))
+    if resting:
+        moved = g0 != 0
+        for g in gs:
+            moved = ca.logic_or(moved, g != 0)
+        doubt = ca.logic_and(doubt, moved)
     return ca.mmax(doubt)
 
 
@@ -102,25 +120,146 @@ class _Parts:
 
     def __init__(self, prim: CompiledPrimitive):
         self.prim, self.nx, self.ng, self.nh = prim, prim.system.nx, len(prim.guards), len(prim.h_names)
-        self.fg, self.G = _with_guards(prim), prim.guards.fn
-        x, k1, xs, r = self.sx("x"), self.sx("k1"), self.sx("x_sw"), ca.SX.sym("r", self.ng)
-        t, s, lohi = ca.SX.sym("t"), ca.SX.sym("s"), ca.SX.sym("lohi", 2)
+        # a large loop (a robot's) is called from MX graphs, the loop and its guards as one compiled
+        # Function (looplib.loop_and_guards, from its library when attached): every point of a step
+        # evaluates it once; h's rates are differences through it (as integrator._ends_differences)
+        self.large = is_large(prim)
+        self.sym = ca.MX.sym if self.large else ca.SX.sym
+        x, k1, xs, r = self.sx("x"), self.sx("k1"), self.sx("x_sw"), self.sym("r", self.ng)
+        t, s, lohi = self.sym("t"), self.sym("s"), self.sym("lohi", 2)
+        e, k = self.sx("e"), self.sx("k")
+        if self.large:
+            self.loop_g = part(prim, "loop_g") or loop_and_guards(prim)
+            self.fg = lambda *a: (lambda o: (o[0], o[4]))(self.loop_g.call(list(a)))
+            self.G = lambda *a: self.loop_g.call(list(a))[4]
+            hv = self.loop_g.call([x, t, s, xs])[1]
+            h_at = (lambda y, tt, ss: self.loop_g.call([y, tt, ss, xs])[1])
+            # |grad h| e for e >= 0 entry by entry: the larger change of h over +e and -e (a difference)
+            self.onto_h = ca.Function("onto_h", [x, t, s, xs, e], [ca.fmax(ca.fabs(h_at(x + e, t, s) - hv),
+                                                                         ca.fabs(h_at(x - e, t, s) - hv))])
+            self.rate = ca.Function("h_rate", [x, t, s, xs, k], [self.h_rate(x, t, s, xs, k, hv)])
+        else:
+            self.fg = _with_guards(prim)
+            self.G = prim.guards.fn
+            a = prim.loop.sx_in()
+            hv = prim.loop(*a)[1]
+            self.onto_h = ca.Function("onto_h", [*a, e], [ca.mtimes(ca.fabs(ca.jacobian(hv, a[0])), e)])
+            self.rate = ca.Function("h_rate", [*a, k], [ca.jtimes(hv, ca.vertcat(*a[:3]), ca.vertcat(k, 1, 1))])
         mid = (lohi[0] + lohi[1]) / 2
         cut = _crossed(r, _trial(self.fg, x, t, s, xs, k1, mid, mid)[2])
         self.bisect = ca.Function("bisect", [lohi, x, t, s, xs, k1, r],
                                   [ca.vertcat(ca.if_else(cut, lohi[0], mid), ca.if_else(cut, mid, lohi[1]))])
-        tau, te = ca.SX.sym("tau"), ca.SX.sym("te")
+        tau, te = self.sym("tau"), self.sym("te")
         xe, k4, gs, spread = _trial(self.fg, x, t, s, xs, k1, tau, te, spread=True)
         self.rk4 = ca.Function("rk4_checked", [x, t, s, xs, k1, tau, te, r], [xe, k4, _crossed(r, gs), spread])
         k1n, rn, _on, _e = self.nudged(x, t, s, xs, tau)
         self.first = ca.Function("first_stage", [x, t, s, xs, tau], [k1n, rn])
-        a = prim.loop.sx_in()
-        hv, e, k = prim.loop(*a)[1], self.sx("e"), self.sx("k")
-        self.onto_h = ca.Function("onto_h", [*a, e], [ca.mtimes(ca.fabs(ca.jacobian(hv, a[0])), e)])
-        self.rate = ca.Function("h_rate", [*a, k], [ca.jtimes(hv, ca.vertcat(*a[:3]), ca.vertcat(k, 1, 1))])
+        self._clock_guards(prim)
 
     def sx(self, name: str):
-        return ca.SX.sym(name, self.nx)
+        return self.sym(name, self.nx)
+
+    def h_rate(self, x, t, s, xs, k, hv):
+        """A large loop's dh/dt along (k, 1, 1) by one-sided differences, the smaller in magnitude
+        of the two (integrator._rate: one may reach across a switch of h)."""
+        fwd = (self.loop_g.call([x + FD * k, t + FD, s + FD, xs])[1] - hv) / FD
+        bwd = (hv - self.loop_g.call([x - FD * k, t - FD, s - FD, xs])[1]) / FD
+        return ca.if_else(ca.fabs(fwd) <= ca.fabs(bwd), fwd, bwd)
+
+    def ends(self):
+        """A large loop's (start, end, at_end, loop) as integrator._ends_differences and _at_end
+        form them, through loop_g as graphs to inline (so that the step's evaluations at the same
+        point merge: its end with the next stage's check, its start with the guards')."""
+        def start(x, t, s, xs):
+            xdot, hv, ur, u, _g = self.loop_g.call([x, t, s, xs])
+            return xdot, hv, self.h_rate(x, t, s, xs, xdot, hv), ur, u
+
+        def end(x, t, s, xs, k4, dt):
+            xdot, hv = self.loop_g.call([x, t, s, xs])[:2]
+            e = dt / 6 * (k4 - xdot)
+            low = self.loop_g.call([x - e, t, s, xs])[1]
+            return xdot, hv, self.h_rate(x, t, s, xs, xdot, hv), ca.fabs(hv - low), e
+
+        def at_end(x, t, s, xs):
+            xdot, hv = self.loop_g.call([x, t, s, xs])[:2]
+            return hv, self.h_rate(x, t, s, xs, xdot, hv)
+
+        return start, end, at_end, lambda x, t, s, xs: self.loop_g.call([x, t, s, xs])[:4]
+
+    def _clock_guards(self, prim: CompiledPrimitive) -> None:
+        """A large loop's guards split into clock guards (functions of t and s alone: a contact
+        schedule's phases, a motion profile's end) and state guards; Gc (t, s) -> the clock guards,
+        cheap enough to evaluate at every step. A small loop keeps them together (clock = [])."""
+        self.clock, self.state, self.Gc = [], list(range(self.ng)), None
+        if not self.large:
+            return
+        a = prim.guards.fn.sx_in()
+        g = prim.guards.fn(*a)
+        live = ca.vertcat(a[0], a[3])
+        self.clock = [i for i in range(self.ng) if not ca.depends_on(g[i], live)]
+        self.state = [i for i in range(self.ng) if i not in self.clock]
+        if self.clock:
+            gc = ca.substitute(ca.vertcat(*[g[i] for i in self.clock]), live, ca.DM.zeros(live.shape[0]))
+            self.Gc = ca.Function("clock_guards", [a[1], a[2]], [gc])
+
+    def clock_cut(self, t, s, h, edge):
+        """(h, edge): a step of h from clock t shortened to end just past the first crossing of a
+        clock guard inside it (located by CLOCK_BISECTIONS bisections of the clock guards alone, no
+        loop evaluation: a swing profile's switch is a step boundary like a contact switch), with its
+        last stage and end sample inside (edge, flow.step_end). A crossing is looked for at the
+        step's middle and end, the times at which its stages check the guards."""
+        if self.Gc is None:
+            return h, edge
+        r = self.Gc(t + NUDGE * h, s + NUDGE * h)
+        half = _crossed(r, [self.Gc(t + h / 2, s + h / 2)])
+        cut = ca.logic_or(half, _crossed(r, [self.Gc(t + h, s + h)]))
+        lo, hi = ca.if_else(half, 0, h / 2), ca.if_else(half, h / 2, h)
+        for _ in range(CLOCK_BISECTIONS):
+            mid = (lo + hi) / 2
+            c = _crossed(r, [self.Gc(t + mid, s + mid)])
+            lo, hi = ca.if_else(c, lo, mid), ca.if_else(c, mid, hi)
+        h_cut = ca.if_else(cut, hi, h)
+        return h_cut, (cut if edge is None else ca.logic_or(edge, cut))
+
+    def clock_start(self, t, s, h):
+        """(shift, r_c, on) at a smooth step's start: a clock guard that changes sign between the
+        start and NUDGE h after it (the step starts on a clock switch, which steps end on) moves the
+        start's evaluation that far on (shift), so its first stage runs on the new branch, as every
+        later stage does; r_c is each clock guard's side just after the start. No clock guards:
+        (0, None, 0)."""
+        if self.Gc is None:
+            return 0, None, 0
+        d = NUDGE * h
+        rc = self.Gc(t + d, s + d)
+        on = _crossed(rc, [self.Gc(t, s)])
+        return ca.if_else(on, d, 0), rc, on
+
+    def smooth_suspect(self, pieces: list, rc):
+        """_suspect over a smooth step's RK4 pieces [(g at the piece's start, [g at its stages and
+        end]), ...], with the clock guards (when split) compared by side with r_c (clock_start)
+        instead, at every stage of every piece: a clock switch at the step's start is met by the
+        shift, not by locating it; one anywhere else in the step is located."""
+        if rc is None:
+            out = [_suspect(g0, gs) for g0, gs in pieces]
+        else:
+            st, cl = self.state, self.clock
+            out = [_suspect(g0[st], [g[st] for g in gs], True) for g0, gs in pieces] if st else []
+            out.append(_crossed(rc, [g[cl] for _g0, gs in pieces for g in [_g0, *gs]][1:]))
+        v = out[0]
+        for o in out[1:]:
+            v = ca.logic_or(v, o)
+        return v
+
+    def clock_nudge(self, on, shift, x, t, s, xs, k1):
+        """(norm, bound on h, e) of starting a step `shift` late on its first stage k1 (clock_start):
+        the state may be off by e = shift (f(x, t, s) - k1). Its loop evaluation runs only where a
+        clock guard switches at the start (a conditional)."""
+        if self.Gc is None:
+            return 0, ca.DM.zeros(self.nh), ca.DM.zeros(self.nx)
+        e = shift * (self.fg(x, t, s, xs)[0] - k1)
+        v = ca.vertcat(ca.norm_2(e), self.onto_h(x, t, s, xs, ca.fabs(e)), e)
+        v = ca.if_else(on, v, ca.MX.zeros(v.shape[0]), True)
+        return v[0], v[1:1 + self.nh], v[1 + self.nh:]
 
     def nudged(self, x, t, s, xs, h):
         """(k1, r, on_guard, e) for a step of h from x: each guard's side r just after the start, the
@@ -128,10 +267,10 @@ class _Parts:
         starts on a guard: on_guard = 1), and the error e of taking that new branch from the start:
         the guard lies within NUDGE dt of it (the last piece ended within the bracket before it), so
         the state may be off by up to NUDGE dt (f(x) - f(x + NUDGE dt f)); 0 off a guard."""
-        k1 = self.fg(x, t, s, xs)[0]
+        k1, g0 = self.fg(x, t, s, xs)
         d = NUDGE * h
         k1n, r = self.fg(x + d * k1, t + d, s + d, xs)
-        on = _crossed(r, [self.G(x, t, s, xs)])
+        on = _crossed(r, [g0])
         return ca.if_else(on, k1n, k1), r, on, ca.if_else(on, d * (k1 - k1n), ca.DM.zeros(self.nx))
 
     def nudge_error(self, x, t, s, xs, e):
@@ -220,11 +359,14 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
     nx = prim.system.nx
     parts = _Parts(prim)
     fg = parts.fg
+    if parts.large:
+        start, end, _at_end, _loop = parts.ends()
     # part 1: the step's start and its whole trial
-    z = ca.SX.sym("z", 2 * nx + 2)
+    z = parts.sym("z", 2 * nx + 2)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2]
     tc = wrap(prim, t)
     h, edge = step_length(prim, dt, tc, x, s, edge=True) if boundaries else (ca.DM(dt), None)
+    h, edge = parts.clock_cut(t, s, h, edge)
     te = step_end(prim, h, edge)
     _k1, h0, _d0, u_raw, u = start(x, t, s, xs)
     k1, r, on, e0 = parts.nudged(x, t, s, xs, h)
@@ -234,11 +376,11 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
     en0, eh0 = parts.nudge_error(x, t, s, xs, e0)
     trial = cse_sx(ca.Function("trial", [z], [h, te, k1, h0, d0, u_raw, u, x_end, k4, cross, r, on, en0, eh0]))
     # part 3: the step's outputs from the piece taken
-    tau, tep, xe, k4p, bad = (ca.SX.sym("tau"), ca.SX.sym("te"), ca.SX.sym("x_end", nx), ca.SX.sym("k4", nx),
-                             ca.SX.sym("unresolved"))
-    en_x, eh_x = ca.SX.sym("extra"), ca.SX.sym("extra_h", parts.nh)
-    h0s, d0s = ca.SX.sym("h0", h0.shape[0]), ca.SX.sym("d0", d0.shape[0])
-    urs, us = ca.SX.sym("u_raw", u_raw.shape[0]), ca.SX.sym("u", u.shape[0])
+    tau, tep, xe, k4p, bad = (parts.sym("tau"), parts.sym("te"), parts.sym("x_end", nx), parts.sym("k4", nx),
+                             parts.sym("unresolved"))
+    en_x, eh_x = parts.sym("extra"), parts.sym("extra_h", parts.nh)
+    h0s, d0s = parts.sym("h0", h0.shape[0]), parts.sym("d0", d0.shape[0])
+    urs, us = parts.sym("u_raw", u_raw.shape[0]), parts.sym("u", u.shape[0])
     _k5, h1, d1, dh, e = end(xe, t + tep, s + tep, xs, k4p, tau)
     x_next = jump(xe, us, t + tau, s + tau)
     act = active(prim, wrap(prim, t + tau / 2), x, s, x_next, tau)
@@ -248,11 +390,13 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
     finish = cse_sx(ca.Function("finish", [z, tau, tep, xe, k4p, bad, en_x, eh_x, h0s, d0s, urs, us],
                                 [ca.vertcat(x_next, t + tau, s + tau, xs), out]))
     # the smooth step (no guard crosses: the step as tried), one SX function
-    k1s_, h0_, d0_, ur_, u_ = start(x, t, s, xs)
+    dl, rc, on_c = parts.clock_start(t, s, h)
+    k1s_, h0_, d0_, ur_, u_ = start(x, t + dl, s + dl, xs)
     xe_, k4_, gs_ = _trial(fg, x, t, s, xs, k1s_, h, te)
-    suspect = _suspect(parts.G(x, t, s, xs), gs_)
-    smooth = cse_sx(ca.Function("smooth", [z], [*finish(z, h, te, xe_, k4_, 0, 0, ca.DM.zeros(parts.nh), h0_, d0_,
-                                                        ur_, u_), suspect]))
+    suspect = parts.smooth_suspect([(parts.G(x, t + dl, s + dl, xs), gs_)], rc)
+    en_c, eh_c, _e = parts.clock_nudge(on_c, dl, x, t, s, xs, k1s_)
+    smooth = cse(ca.Function("smooth", [z], [*inline(finish, z, h, te, xe_, k4_, 0, en_c, eh_c, h0_, d0_, ur_, u_),
+                                              suspect]))
     # the located step: trial, the location, the outputs
     Z = ca.MX.sym("z", 2 * nx + 2)
     (hM, teM, k1M, h0M, d0M, urM, uM, xeM, k4M, crM, rM, onM, en0M, eh0M) = trial(Z)
@@ -288,10 +432,13 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     nx = prim.system.nx
     parts = _Parts(prim)
     fg = parts.fg
-    z = ca.SX.sym("z", 3 * nx + 2)
+    if parts.large:
+        start, _end, at_end, loop = parts.ends()
+    z = parts.sym("z", 3 * nx + 2)
     x, t, s, xs, xc = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2], z[2 * nx + 2:3 * nx + 2]
     tc = wrap(prim, t)
     h, edge = step_length(prim, dt, tc, x, s, edge=True) if boundaries else (ca.DM(dt), None)
+    h, edge = parts.clock_cut(t, s, h, edge)
     te = step_end(prim, h, edge)
     _k1, h0, _d0, u_raw, u = start(x, t, s, xs)
     _kc, h0c, _ucr, uc = loop(xc, t, s, xs)
@@ -334,10 +481,10 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     again = ca.logic_or(crcM, tau < hM)  # the companion crosses, or its step is the shorter piece
     xce, en_c, eh_c = _split(parts)(again, XCm, Tm, Sm, XSm, kc1M, tau, tep, xceM, rcM)
     # the outputs, as the unguarded doubling step forms them
-    T_, te_, xe_, xce_, b_ = ca.SX.sym("tau"), ca.SX.sym("te"), parts.sx("x_end"), parts.sx("xc_end"), ca.SX.sym("bad")
-    h0s, d0s = ca.SX.sym("h0", h0.shape[0]), ca.SX.sym("d0", d0.shape[0])
-    h0cs, urs, us, ucs = ca.SX.sym("h0c", h0.shape[0]), ca.SX.sym("u_raw", u.shape[0]), ca.SX.sym("u", u.shape[0]), \
-        ca.SX.sym("uc", u.shape[0])
+    T_, te_, xe_, xce_, b_ = parts.sym("tau"), parts.sym("te"), parts.sx("x_end"), parts.sx("xc_end"), parts.sym("bad")
+    h0s, d0s = parts.sym("h0", h0.shape[0]), parts.sym("d0", d0.shape[0])
+    h0cs, urs, us, ucs = parts.sym("h0c", h0.shape[0]), parts.sym("u_raw", u.shape[0]), parts.sym("u", u.shape[0]), \
+        parts.sym("uc", u.shape[0])
     h1, d1 = at_end(xe_, t + te_, s + te_, xs)
     h1c = loop(xce_, t + te_, s + te_, xs)[1]
     # the companion also carries the judged rollout's possible error at a guard (nudge_error), pushed
@@ -349,7 +496,7 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     act = active(prim, wrap(prim, t + T_ / 2), x, s, x_next, T_)
     m_f, m_c = margin(x, t), margin(xc, t)
     worse = b_ * UNRESOLVED
-    en_, eh_ = ca.SX.sym("extra"), ca.SX.sym("extra_h", h0.shape[0])
+    en_, eh_ = parts.sym("extra"), parts.sym("extra_h", h0.shape[0])
     out = ca.vertcat(*h_rows(h0s, h1, d0s, d1, T_, act), ca.fabs(h1 - h1c) + eh_ + worse, m_f,
                      ca.fabs(m_f - m_c) + en_ + worse, s, T_, urs, us, *([x] if with_state else []),
                      ca.fabs(h0s - h0cs) + worse)
@@ -358,14 +505,17 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     located = ca.Function("located2", [Z], list(finish(Z, tau, tep, xe, xce, bad, en_j + en_c + en0M,
                                                             eh_j + eh_c + eh0M, e0M, h0M, d0M, h0cM, urM, uM, ucM)))
     # the smooth step (no guard crosses in the judged halves or the companion's step), one SX function
-    k1_, h0_, d0_, ur_, u_ = start(x, t, s, xs)
-    kc_, h0c_, _ucr, uc_ = loop(xc, t, s, xs)
+    dl, rc, on_c = parts.clock_start(t, s, h)
+    k1_, h0_, d0_, ur_, u_ = start(x, t + dl, s + dl, xs)
+    kc_, h0c_, _ucr, uc_ = loop(xc, t + dl, s + dl, xs)
     xm_, _k4, ga_ = _trial(fg, x, t, s, xs, k1_, hh, hh)
     km_, gm_ = fg(xm_, t + hh, s + hh, xs)
     xe_2, _k4, gb_ = _trial(fg, xm_, t + hh, s + hh, xs, km_, hh, te - hh)
     xce_2, _k4, gc_ = _trial(fg, xc, t, s, xs, kc_, h, te)
-    suspect = ca.logic_or(ca.logic_or(_suspect(parts.G(x, t, s, xs), ga_), _suspect(gm_, gb_)),
-                          _suspect(parts.G(xc, t, s, xs), gc_))
-    smooth = cse_sx(ca.Function("smooth2", [z], [*finish(z, h, te, xe_2, xce_2, 0, 0, ca.DM.zeros(parts.nh),
-                                                         ca.DM.zeros(nx), h0_, d0_, h0c_, ur_, u_, uc_), suspect]))
+    suspect = parts.smooth_suspect([(parts.G(x, t + dl, s + dl, xs), ga_), (gm_, gb_),
+                                    (parts.G(xc, t + dl, s + dl, xs), gc_)], rc)
+    en_j, eh_j, e_j = parts.clock_nudge(on_c, dl, x, t, s, xs, k1_)
+    en_c, eh_c, _e = parts.clock_nudge(on_c, dl, xc, t, s, xs, kc_)
+    smooth = cse(ca.Function("smooth2", [z], [*inline(finish, z, h, te, xe_2, xce_2, 0, en_j + en_c, eh_j + eh_c,
+                                                      e_j, h0_, d0_, h0c_, ur_, u_, uc_), suspect]))
     return _smooth_or_located(smooth, located)

@@ -76,7 +76,7 @@ class Guards(_Strict):
 
     exposed: bool = Field(True, description="false when the loop's switching points could not be searched")
     guards: list[str] = Field(default_factory=list, description="each guard: the operation and its expression")
-    why: str = Field("", description="why the loop's switching points are not exposed")
+    why: str = Field("", description="why the loop's switching points are not exposed, or why it has none to locate (a sampled law)")
     crossings: Crossings | None = Field(None, description="guard crossings located along the traced rollouts "
                                                           "of this closed loop (edge and failure traces into it)")
 

@@ -134,6 +134,9 @@ class Sequence(Strict):
     start: Text
     commands: list[GoalCommand] = Field(min_length=1)
     duration: Number = Field(gt=0)
+    dt: Number | None = Field(default=None, gt=0, description="step of the sequence runs (s); default: the "
+                              "oracle's dt. A run judges h at its samples without error bounds, so a run "
+                              "that passes close to a boundary needs a step fine enough to resolve it")
 
     @field_validator("commands")
     @classmethod

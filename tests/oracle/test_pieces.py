@@ -193,3 +193,67 @@ def test_the_scipy_reference_stops_at_every_guard(tmp_path, on):
         e = SafetyOracle(_switching(tmp_path, law, x_T + off), s)(np.array([0.0]), 0.0)
         assert (e.status == "safe") == (off > 0), e
         assert e.lower_bounds["cap"] == pytest.approx(off, abs=1e-8)
+
+
+# ----------------------------------------------------------------------------- large loops (a robot's)
+@pytest.fixture
+def as_large(monkeypatch):
+    """Every loop taken as large: called from MX graphs (with jit, from its loop library), its h
+    rates from differences and its clock guards split off, as a robot's loop is."""
+    from mpgspec.oracle import integrator, looplib
+
+    monkeypatch.setattr(looplib, "INLINE_NODES", 0)
+    monkeypatch.setattr(integrator, "INLINE_NODES", 0)
+
+
+@pytest.mark.parametrize("error", ERRORS)
+@pytest.mark.parametrize("on, ts", [("state", 0.5031), ("clock", 0.5031), ("clock", 0.5)])
+def test_a_large_loop_is_stepped_piece_by_piece(tmp_path, as_large, on, ts, error):
+    """The known answers of test_a_law_that_switches_inside_a_step_is_judged_on_each_branch through
+    the large loop's steps: a switch inside a step (located), and a clock switch on a step's start
+    (t* = 0.5 = 50 dt: met by starting the step there on the new branch), each judged right to the
+    true margin of 3e-5 (the differences of a large loop's h rates are good to about 1e-6)."""
+    from mpgspec.oracle.looplib import is_large
+
+    law = f"if_else(x < {ts!r}, 1, 3)" if on == "state" else f"if_else(t < {ts!r}, 1, 3)"
+    x_T = ts + 3 * (0.6 - ts)
+    s = OracleSettings.with_accuracy("medium", horizon=3.0, dt=0.01, error=error, jit=False)
+    prim = _switching(tmp_path, law, x_T - 3e-5)
+    assert is_large(prim) and guarded(prim)
+    e = SafetyOracle(prim, s)(np.array([0.0]), 0.0)
+    assert e.status != "safe" and e.violated == "cap", e
+    assert e.lower_bounds["cap"] == pytest.approx(-3e-5, abs=2e-6)
+    e = SafetyOracle(_switching(tmp_path, law, x_T + 3e-5), s)(np.array([0.0]), 0.0)
+    assert e.status == "safe", e
+    assert e.lower_bounds["cap"] == pytest.approx(3e-5, abs=2e-6)
+
+
+@pytest.mark.parametrize("error", ERRORS)
+def test_a_large_loop_through_its_library_judges_a_saturation_kink(tmp_path, as_large, error):
+    """The saturation kink's known answer with jit: the large loop's rate and guards come from its
+    compiled loop library (part "loop_g")."""
+    from mpgspec.oracle.looplib import part
+
+    tk = 0.3963
+    x_T = 2 - math.exp(-4 * (0.6 - tk)) / 4
+    s = OracleSettings.with_accuracy("very_high", horizon=3.0, dt=0.01, error=error, jit=True)
+    for c, truth in ((x_T - 1e-6, "unsafe"), (x_T + 1e-6, "safe")):
+        prim = _switching(tmp_path, "clip(-4*(x - 2), -1, 1)", c)
+        e = SafetyOracle(prim, s)(np.array([1.75 - tk]), 0.0)
+        assert part(prim, "loop_g") is not None
+        assert (e.status == "safe") == (truth == "safe"), e
+
+
+@pytest.mark.parametrize("width", [1e-5, 0.3 * MIN_PIECE])
+def test_a_large_loop_ends_its_steps_on_both_edges_of_a_clock_pulse(tmp_path, as_large, width):
+    """A large loop cuts its steps where a clock guard crosses (the guards of t alone, bisected
+    without evaluating the loop): a kick of area 0.2 narrower than MIN_PIECE is then a step of its
+    own and integrated exactly, x(T) = 0.8, judged right on both sides of it."""
+    law = f"1 + {0.2 / width!r}*(if_else(t > 0.2537, 1, 0) - if_else(t > {0.2537 + width!r}, 1, 0))"
+    prim = _switching(tmp_path, law, 0.8)
+    assert len(prim.guards) == 2  # the two edges print alike and are two guards
+    for error in ERRORS:
+        s = OracleSettings.with_accuracy("medium", horizon=3.0, dt=0.01, error=error, jit=False)
+        for c in (0.8 - 1e-3, 0.8 + 1e-3):
+            e = SafetyOracle(_switching(tmp_path, law, c), s)(np.array([0.0]), 0.0)
+            assert (e.status == "safe") == (c > 0.8), (error, c, e)

@@ -76,8 +76,17 @@ def _replayed(shared: tuple, mode: str) -> dict:
     settings, h_tolerance)."""
     robot, prims, runs, duration, settings, h_tolerance = shared
     robot = robot or build_robot(next(iter(prims.values())).system, settings)
-    rep = replay(robot, prims, runs[mode].switches, duration, settings, h_tolerance)
+    rep = replay(robot, prims, runs[mode].switches, _until(runs[mode], duration), settings, h_tolerance)
     return compare(prims, rep, runs[mode], settings.control_rate)
+
+
+def _until(run: SequenceRun, duration: float) -> float:
+    """How long to replay a run: the sequence's duration, or up to where mpgspec's run stopped
+    (a numerical failure): after it there is nothing to compare, and a robot that has fallen
+    only makes the simulator's law fail at every update."""
+    if run.failed and run.t:
+        return min(duration, float(run.t[-1]))
+    return duration
 
 
 def _memo_key(memo, prims, run: SequenceRun, duration, settings, h_tolerance, robot) -> str:
