@@ -43,6 +43,8 @@ NUDGE = 1e-9
 CLOCK_BISECTIONS = 44
 """Bisections of a step where a clock guard crosses: the step ends within dt 2^-44 (6e-17 s at
 dt = 1e-3) after the crossing, closer than the clock's own rounding."""
+SECANTS = 10
+"""Illinois steps a large loop takes before bisecting the rest of a crossing's bracket."""
 MIN_PIECE = 1e-9
 """A located piece shorter than this (seconds) is not resolved: the step gets UNRESOLVED."""
 UNRESOLVED = 1e30
@@ -190,7 +192,7 @@ class _Parts:
         """A large loop's guards split into clock guards (functions of t and s alone: a contact
         schedule's phases, a motion profile's end) and state guards; Gc (t, s) -> the clock guards,
         cheap enough to evaluate at every step. A small loop keeps them together (clock = [])."""
-        self.clock, self.state, self.Gc = [], list(range(self.ng)), None
+        self.clock, self.state, self.Gc, self._clock_fns = [], list(range(self.ng)), None, {}
         if not self.large:
             return
         a = prim.guards.fn.sx_in()
@@ -213,13 +215,22 @@ class _Parts:
         r = self.Gc(t + NUDGE * h, s + NUDGE * h)
         half = _crossed(r, [self.Gc(t + h / 2, s + h / 2)])
         cut = ca.logic_or(half, _crossed(r, [self.Gc(t + h, s + h)]))
-        lo, hi = ca.if_else(half, 0, h / 2), ca.if_else(half, h / 2, h)
-        for _ in range(CLOCK_BISECTIONS):
-            mid = (lo + hi) / 2
-            c = _crossed(r, [self.Gc(t + mid, s + mid)])
-            lo, hi = ca.if_else(c, lo, mid), ca.if_else(c, mid, hi)
-        h_cut = ca.if_else(cut, hi, h)
+        h_cut = ca.if_else(cut, self._clock_bisect(t, s, h, r, half), h, True)  # bisected only where cut
         return h_cut, (cut if edge is None else ca.logic_or(edge, cut))
+
+    def _clock_bisect(self, t, s, h, r, half):
+        """The upper end of the bracket of the first clock guard crossing in (0, h] after
+        CLOCK_BISECTIONS bisections (in the half of the step where it lies)."""
+        if "bisect" not in self._clock_fns:
+            T, S, H, R, HF = (ca.SX.sym(n) for n in ("t", "s", "h", "r_", "half"))
+            R = ca.SX.sym("r", r.shape[0])
+            lo, hi = ca.if_else(HF, 0, H / 2), ca.if_else(HF, H / 2, H)
+            for _ in range(CLOCK_BISECTIONS):
+                mid = (lo + hi) / 2
+                c = _crossed(R, [self.Gc(T + mid, S + mid)])
+                lo, hi = ca.if_else(c, lo, mid), ca.if_else(c, mid, hi)
+            self._clock_fns["bisect"] = ca.Function("clock_bisect", [T, S, H, R, HF], [hi])
+        return self._clock_fns["bisect"](t, s, h, r, half)
 
     def clock_start(self, t, s, h):
         """(shift, r_c, on) at a smooth step's start: a clock guard that changes sign between the
@@ -278,10 +289,61 @@ class _Parts:
         return ca.norm_2(e), self.onto_h(x, t, s, xs, ca.fabs(e))
 
     def located(self, x, t, s, xs, k1, h, r):
-        """MX: (lo, hi, short): the bracket of the first crossing of a step of h from x after
-        BISECTIONS bisections, and 1 when the piece before it is shorter than MIN_PIECE."""
-        b = self.bisect.fold(BISECTIONS)(ca.vertcat(0, h), x, t, s, xs, k1, r)
+        """MX: (lo, hi, short): the bracket of the first crossing of a step of h from x, as narrow
+        as BISECTIONS bisections make it (h 2^-BISECTIONS), and 1 when the piece before it is shorter
+        than MIN_PIECE. A large loop first takes up to SECANTS Illinois steps (each trial evaluates
+        its loop four times), then bisects what is left: the same bracket, in fewer trials."""
+        if not self.large:
+            b = self.bisect.fold(BISECTIONS)(ca.vertcat(0, h), x, t, s, xs, k1, r)
+            return b[0], b[1], b[0] < MIN_PIECE
+        tol = h * 2.0 ** -BISECTIONS
+        q_h = r * _trial(self.fg, x, t, s, xs, k1, h, h)[2][-1]  # each guard's side at the step's end
+        state = ca.vertcat(0, h, r * r, q_h, 0)
+        state = self._secant().fold(SECANTS)(state, x, t, s, xs, k1, r, tol)
+        b = self._narrow().fold(BISECTIONS)(state[:2], x, t, s, xs, k1, r, tol)
         return b[0], b[1], b[0] < MIN_PIECE
+
+    def _secant(self) -> ca.Function:
+        """One Illinois (modified regula falsi) step on the bracket [lo, hi] of the first crossing,
+        skipped (a switch) once it is narrower than tol. state = [lo; hi; q_lo; q_hi; last]: q the
+        guards' end values times their reference sides at a trial of lo and of hi (positive: not
+        crossed), last which end moved last (+1 lo, -1 hi). The next trial is the earliest of the
+        guards' secant roots (a guard crossed at hi's end, not at lo's), or the middle where none is,
+        kept inside the bracket; lo stays uncrossed and hi crossed, as under bisection."""
+        if "secant" not in self._clock_fns:
+            ng = self.ng
+            st, x, k1, xs, r = self.sym("state", 3 + 2 * ng), self.sx("x"), self.sx("k1"), self.sx("x_sw"), \
+                self.sym("r", ng)
+            t, s, tol = self.sym("t"), self.sym("s"), self.sym("tol")
+            lo, hi, qlo, qhi, last = st[0], st[1], st[2:2 + ng], st[2 + ng:2 + 2 * ng], st[2 + 2 * ng]
+            w = hi - lo
+            ok = ca.logic_and(qhi <= 0, qlo > 0)
+            roots = ca.if_else(ok, lo + w * qlo / ca.if_else(ok, qlo - qhi, 1), ca.inf)
+            m = ca.mmin(roots)
+            m = ca.if_else(m < ca.inf, m, lo + w / 2)
+            m = ca.fmin(ca.fmax(m, lo + w * 1e-3), hi - w * 1e-3)
+            _xe, _k4, gs = _trial(self.fg, x, t, s, xs, k1, m, m)
+            cut, qm = _crossed(r, gs), r * gs[-1]
+            moved_hi = ca.vertcat(lo, m, ca.if_else(last < 0, qlo / 2, qlo), qm, -1)
+            moved_lo = ca.vertcat(m, hi, qm, ca.if_else(last > 0, qhi / 2, qhi), 1)
+            step = ca.Function("illinois", [st, x, t, s, xs, k1, r, tol], [ca.if_else(cut, moved_hi, moved_lo)])
+            keep = ca.Function("narrow_enough", [st, x, t, s, xs, k1, r, tol], [st])
+            sw = ca.Function.if_else("secant_step", step, keep)
+            self._clock_fns["secant"] = ca.Function("secant", [st, x, t, s, xs, k1, r, tol],
+                                                    [sw(w > tol, st, x, t, s, xs, k1, r, tol)])
+        return self._clock_fns["secant"]
+
+    def _narrow(self) -> ca.Function:
+        """A bisection of [lo, hi] (self.bisect), skipped once it is narrower than tol."""
+        if "narrow" not in self._clock_fns:
+            lohi, x, k1, xs, r = self.sym("lohi", 2), self.sx("x"), self.sx("k1"), self.sx("x_sw"), self.sym("r", self.ng)
+            t, s, tol = self.sym("t"), self.sym("s"), self.sym("tol")
+            a = [lohi, x, t, s, xs, k1, r, tol]
+            step = ca.Function("halve", a, [self.bisect(lohi, x, t, s, xs, k1, r)])
+            keep = ca.Function("narrow_enough", a, [lohi])
+            self._clock_fns["narrow"] = ca.Function("narrow", a, [ca.Function.if_else("bisect_step", step, keep)(
+                lohi[1] - lohi[0] > tol, *a)])
+        return self._clock_fns["narrow"]
 
     def sliver(self, x, t, s, xs, k1, hi, h, r):
         """MX: a step just across a crossing right after the start, of twice the bracket's end:
@@ -335,17 +397,20 @@ def _split(parts: _Parts) -> ca.Function:
                                                 ("x_sw", (parts.nx, 1)), ("k1", (parts.nx, 1)), ("tau", (1, 1)),
                                                 ("te", (1, 1)), ("x_end", (parts.nx, 1)), ("r", (parts.ng, 1)))]
     mx, mt, ms, mxs, mk1, mtau, mte, mxe, mr = M
-    whole, _k4, cross, spread = parts.rk4(mx, mt, ms, mxs, mk1, mtau, mte, mr)
+    W, SP = ca.MX.sym("whole", parts.nx), ca.MX.sym("spread", parts.nx)
+    # where the companion's own guard crosses in its step: the two pieces (located only then)
     lo, _hi, short = parts.located(mx, mt, ms, mxs, mk1, mtau, mr)
     x1, _k4, _c, _sp = parts.rk4(mx, mt, ms, mxs, mk1, lo, lo, mr)
     rest = mtau - lo
     k1b, rb = parts.first(x1, mt + lo, ms + lo, mxs, rest)
     x2, _k4, again, spread2 = parts.rk4(x1, mt + lo, ms + lo, mxs, k1b, rest, mte - lo, rb)
-    two = ca.logic_and(cross, ca.logic_not(short))
-    extra = ca.if_else(ca.logic_and(cross, short), mtau * spread,
-                       ca.if_else(ca.logic_and(two, again), rest * spread2, ca.MX.zeros(parts.nx)))
-    x_end = ca.if_else(two, x2, whole)
-    split = ca.Function("split", M, [x_end, ca.norm_2(extra), parts.onto_h(x_end, mt + mte, ms + mte, mxs, extra)])
+    extra = ca.if_else(short, mtau * SP, ca.if_else(again, rest * spread2, ca.MX.zeros(parts.nx)))
+    x_end = ca.if_else(short, W, x2)
+    pieces = ca.Function("pieces", M + [W, SP], [x_end, ca.norm_2(extra),
+                                                 parts.onto_h(x_end, mt + mte, ms + mte, mxs, extra)])
+    whole_ = ca.Function("whole", M + [W, SP], [W, ca.MX(0), ca.MX.zeros(parts.nh)])
+    whole, _k4, cross, spread = parts.rk4(mx, mt, ms, mxs, mk1, mtau, mte, mr)
+    split = ca.Function("split", M, ca.Function.if_else("crossed", pieces, whole_)(cross, *M, whole, spread))
     keep = ca.Function("as_tried", M, [mxe, ca.MX(0), ca.MX.zeros(parts.nh)])
     return ca.Function.if_else("split_or_keep", split, keep)
 
@@ -409,14 +474,17 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
 
 def _smooth_or_located(smooth: ca.Function, located: ca.Function) -> tuple[ca.Function, ca.Function]:
     """(body, smooth): body z -> (z after the step, its outputs) is the smooth step, and where a guard
-    crossed in it the located one instead (a conditional: its code runs only then; the values are
-    passed on as they are, signed zeros included); smooth z -> (z after, outputs, crossed) is the
-    smooth step alone, for chunks that run it and redo the columns where a guard crossed."""
+    crossed in it the located one instead (a switch: the located step's code runs only then, and
+    the smooth step's values are passed through, not computed again; signed zeros included); smooth
+    z -> (z after, outputs, crossed) is the smooth step alone, for chunks that run it and redo the
+    columns where a guard crossed."""
     Z = ca.MX.sym("z", smooth.size1_in(0))
     zf, of, cross = smooth(Z)
-    zl, ol = located(Z)
-    v = ca.if_else(cross, ca.vertcat(zl, ol), ca.vertcat(zf, of), True)
-    n = zf.shape[0]
+    n, m = zf.shape[0], of.shape[0]
+    zs, os_ = ca.MX.sym("z_smooth", n), ca.MX.sym("out_smooth", m)
+    take = ca.Function("located_step", [Z, zs, os_], [ca.vertcat(*located(Z))])
+    keep = ca.Function("smooth_step", [Z, zs, os_], [ca.vertcat(zs, os_)])
+    v = ca.Function.if_else("smooth_or_located", take, keep)(cross, Z, zf, of)
     return ca.Function("body", [Z], [v[:n], v[n:]]), smooth
 
 
