@@ -24,6 +24,7 @@ _DIFF = {ca.OP_LT: "<", ca.OP_LE: "<=", ca.OP_EQ: "==", ca.OP_NE: "!=", ca.OP_FM
 _ARG = {ca.OP_SIGN: "sign", ca.OP_FABS: "abs"}
 _PERIODIC = {ca.OP_FLOOR: "floor", ca.OP_CEIL: "ceil"}
 _RATIO = {ca.OP_FMOD: "fmod", ca.OP_REMAINDER: "remainder"}
+_OPS = {*_DIFF, *_ARG, *_PERIODIC, *_RATIO, ca.OP_COPYSIGN}
 _LOGIC = (ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_AND, ca.OP_OR, ca.OP_NOT)
 MAX_NODES = 100_000
 """Loops larger than this many SX nodes are not searched (the search takes about 30 us a node)."""
@@ -65,69 +66,92 @@ def collect(f: ca.Function, inputs: int = 4, labels: tuple[ca.Function, list[str
         return Guards(exposed=False, why=f"a loop of {f.n_nodes()} nodes (more than {MAX_NODES}): its "
                                          "switching points are not searched")
     a = f.sx_in()
-    outs = [o for o in f.call(a) if o.numel()]
-    roots = ca.vertcat(*[ca.vec(o) for o in outs]) if outs else ca.SX(0, 1)
-    found: list[tuple[ca.SX, str]] = []
-    seen: set[int] = set()
-    stack = [roots[i] for i in range(roots.numel())]
-    while stack:
-        e = stack.pop()
-        key = e.element_hash()
-        if key in seen or e.is_leaf():
-            continue
-        seen.add(key)
-        deps = [e.dep(i) for i in range(e.n_dep())]
-        stack.extend(deps)
-        g = _guard(e.op(), deps)
-        if g is not None and not g[0].is_constant():
-            found.append(g)
+    tape = f.instructions_sx()  # every operation of f, in terms of its inputs a
+    found = []
+    for k in range(f.n_instructions()):
+        op = f.instruction_id(k)
+        if op in _OPS:
+            e = tape[k]
+            deps = [e.dep(i) for i in range(e.n_dep())]
+            g = _guard(op, deps)
+            if g is not None and not g.is_constant():
+                found.append((g, op, deps))
     live = ca.vertcat(*a[:inputs])
-    gs = _distinct([(g, name) for g, name in found if ca.depends_on(g, live) and not _is_logic(g)], a[:inputs])
+    gs = _distinct([c for c in found if ca.depends_on(c[0], live) and not _is_logic(c[0])], a[:inputs])
     if len(gs) > MAX_GUARDS:
         return Guards(exposed=False, why=f"{len(gs)} switching points (more than {MAX_GUARDS})")
     if not gs:
         return Guards()
+    known, lexprs, lnames = {}, [], []
     if labels is not None and labels[0].is_a("SXFunction"):
-        known = ca.vertcat(*labels[0].call(a[:inputs]))
-        gs = [(g, next((labels[1][i] for i in range(known.numel()) if ca.is_equal(g, known[i], 64)), name))
-              for g, name in gs]
-    gs.sort(key=lambda p: p[1])
-    fn = ca.Function("guards", a[:inputs], [ca.vertcat(*[g for g, _ in gs])], ["x", "t", "s", "x_sw"][:inputs], ["g"])
-    return Guards(fn, [name for _, name in gs])
+        lv = ca.vertcat(*labels[0].call(a[:inputs]))
+        lexprs, lnames = [lv[i] for i in range(lv.numel())], labels[1]
+        for i, key in enumerate(_probe(lexprs, a[:inputs])):
+            known.setdefault(key, []).append(i)
+    named = [(g, _label(g, key, known, lexprs, lnames) or _name(op, deps)) for (g, op, deps), key in gs]
+    named.sort(key=lambda p: p[1])
+    fn = ca.Function("guards", a[:inputs], [ca.vertcat(*[g for g, _ in named])], ["x", "t", "s", "x_sw"][:inputs],
+                     ["g"])
+    return Guards(fn, [name for _, name in named])
 
 
-def _distinct(gs: list, args: list) -> list:
-    """gs without repeats: the same test written twice is one guard. Two guards are the same when
-    they print alike and take the same value at a fixed pseudo-random point (printing rounds
-    constants: t < 0.2537 and t < 0.2537000003 print alike and are two guards)."""
-    if not gs:
-        return gs
+def _probe(exprs: list, args: list) -> list:
+    """Each expression's values at two fixed pseudo-random points of the arguments: a cheap first
+    test of equality (ca.is_equal then decides)."""
+    if not exprs:
+        return []
     rng = np.random.default_rng(0)
-    point = [rng.uniform(0.1, 0.9, a.shape) for a in args]
     with np.errstate(all="ignore"):
-        values = np.asarray(ca.Function("probe", args, [ca.vertcat(*[g for g, _ in gs])])(*point), float).ravel()
-    out: dict[tuple[str, str], tuple] = {}
-    for (g, name), v in zip(gs, values):
-        out.setdefault((str(g), repr(float(v))), (g, name))
-    return list(out.values())
+        F = ca.Function("probe", args, [ca.vertcat(*[ca.vec(e) for e in exprs])])
+        v = [np.asarray(F(*[rng.uniform(0.1, 0.9, x.shape) for x in args]), float).ravel() for _ in range(2)]
+    return [(repr(float(v[0][i])), repr(float(v[1][i]))) for i in range(len(exprs))]
 
 
-def _guard(op: int, deps: list) -> tuple[ca.SX, str] | None:
-    """(g, name) for a non-smooth operation, else None."""
+def _distinct(found: list, args: list) -> list:
+    """[(guard, its probe key)] without repeats: the same test written twice is one guard (equal
+    at the probe points and as expressions; printing rounds constants: t < 0.2537 and
+    t < 0.2537000003 print alike and are two guards)."""
+    buckets: dict = {}
+    for c, key in zip(found, _probe([g for g, _op, _deps in found], args)):
+        same = buckets.setdefault(key, [])
+        if not any(ca.is_equal(c[0], d[0], 64) for d in same):
+            same.append(c)
+    return [(c, key) for key, cs in buckets.items() for c in cs]
+
+
+def _label(g, key, known: dict, exprs: list, names: list) -> str | None:
+    """The known name of guard g (a label expression equal to it), else None."""
+    return next((names[i] for i in known.get(key, ()) if ca.is_equal(g, exprs[i], 64)), None)
+
+
+def _guard(op: int, deps: list):
+    """g for a non-smooth operation (it changes sign where the operation switches), else None."""
     if op in _DIFF:
         if any(d.is_constant() and not np.isfinite(float(d)) for d in deps):  # a finiteness test: never switches
             return None
-        g = deps[1] - deps[0] if op in (ca.OP_LT, ca.OP_LE) else deps[0] - deps[1]
-        return g, f"{_DIFF[op]}: {_short(deps[0])} vs {_short(deps[1])}"
+        return deps[1] - deps[0] if op in (ca.OP_LT, ca.OP_LE) else deps[0] - deps[1]
     if op in _ARG:
-        return deps[0], f"{_ARG[op]}: {_short(deps[0])}"
+        return deps[0]
     if op == ca.OP_COPYSIGN:
-        return deps[1], f"copysign: {_short(deps[1])}"
+        return deps[1]
     if op in _PERIODIC:
-        return ca.sin(ca.pi * deps[0]), f"{_PERIODIC[op]}: {_short(deps[0])}"
+        return ca.sin(ca.pi * deps[0])
     if op in _RATIO:
-        return ca.sin(ca.pi * deps[0] / deps[1]), f"{_RATIO[op]}: {_short(deps[0])} / {_short(deps[1])}"
+        return ca.sin(ca.pi * deps[0] / deps[1])
     return None
+
+
+def _name(op: int, deps: list) -> str:
+    """What a guard is: its operation and operands, shortened."""
+    if op in _DIFF:
+        return f"{_DIFF[op]}: {_short(deps[0])} vs {_short(deps[1])}"
+    if op in _ARG:
+        return f"{_ARG[op]}: {_short(deps[0])}"
+    if op == ca.OP_COPYSIGN:
+        return f"copysign: {_short(deps[1])}"
+    if op in _PERIODIC:
+        return f"{_PERIODIC[op]}: {_short(deps[0])}"
+    return f"{_RATIO[op]}: {_short(deps[0])} / {_short(deps[1])}"
 
 
 def _is_logic(g: ca.SX) -> bool:
