@@ -1,15 +1,19 @@
 """What stepping piece by piece costs: the oracle on loops with guards, against the same loops without.
 
-    python bench/bench_pieces.py [--repeats 7] [--no-write]
+    python bench/bench_pieces.py [--project pendulum|a1] [--repeats 7] [--no-write]
 
-In one process, on the pendulum example (every primitive's loop has guards: its input saturation,
-SwingUp's switch at t = 1.5, the swings' clock wrap), every oracle call of Algorithm 1 (each
-source's setpoint on its t_A grid, every target on its t_B grid) is made twice per round with
-jit: through the guarded step (oracle/pieces.py) and through the same primitives with their guards
-removed, i.e. the smooth step every loop took before guards. Both error estimates. Prints the
-median per-round ratio guarded / unguarded (target <= 1.3x) and the verdict counts of both, and
-writes the table to bench/RESULTS.md. Large loops (the A1's, called from their loop libraries)
-expose no guards and take the unguarded step unchanged: their ratio is 1 by construction.
+In one process, on an example project, every oracle call of Algorithm 1 (each source's setpoint
+on its t_A grid, every target on its t_B grid) is made twice per round with jit: through the
+guarded step (oracle/pieces.py) and through the same primitives with their guards removed, i.e.
+the smooth step every loop took before guards. Prints the median per-round ratio guarded /
+unguarded (target <= 1.3x) and the verdict counts of both, and writes the table to
+bench/RESULTS.md.
+
+- pendulum (small loops, inlined): every primitive's loop has guards (its input saturation,
+  SwingUp's switch at t = 1.5, the swings' clock wrap); both error estimates.
+- a1 (large loops, called from their loop libraries; E sized as `mpgspec verify` sizes it): the
+  walks' 24 torque limits and their gait's clock guards, Lie's and the transients' likewise;
+  Stand's sampled ID-QP has none. The project's own error estimate (step doubling).
 """
 from __future__ import annotations
 
@@ -33,6 +37,7 @@ from bench_oracle import all_points  # noqa: E402
 
 from mpgspec.compile.guards import Guards  # noqa: E402
 from mpgspec.oracle import SafetyOracle  # noqa: E402
+from mpgspec.pipeline.reuse import compiled  # noqa: E402
 from mpgspec.pipeline.settings import settings_for  # noqa: E402
 from mpgspec.pipeline.stages import compile_project  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402
@@ -42,13 +47,17 @@ HEADING = "## Guards: stepping piece by piece"
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--project", choices=("pendulum", "a1"), default="pendulum")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
     t_all = time.perf_counter()
-    spec = load_project(ROOT / "specs" / "pendulum" / "project.yaml")
-    prims = compile_project(spec)
-    base = settings_for(spec)
+    spec = load_project(ROOT / "specs" / args.project / "project.yaml")
+    if args.project == "a1":  # E sized by the project's verifiers, as verify sizes it
+        cp = compiled(spec)
+        prims, base, errors = cp.prims, cp.settings, (cp.settings.error,)
+    else:
+        prims, base, errors = compile_project(spec), settings_for(spec), ("local", "doubling")
     gA = {n: p.clock_grid(max(p.grid_A, 1), "A") for n, p in prims.items()}
     gB = {n: p.clock_grid(max(p.grid_B, 1), "B") for n, p in prims.items()}
     pts, _src = all_points(prims, gA, gB)
@@ -56,7 +65,7 @@ def main(argv=None) -> int:
     n_calls = sum(len(v[1]) for v in pts.values())
     rows = [("oracle calls per round (Algorithm 1's grids)", f"{n_calls}"),
             ("primitives with guards", ", ".join(f"{n} ({len(p.guards)})" for n, p in prims.items()))]
-    for error in ("local", "doubling"):
+    for error in errors:
         s = base.replace(error=error)
         oracles = {kind: {b: SafetyOracle(src[b], s) for b in pts} for kind, src in (("guarded", prims), ("plain", plain))}
         verdicts = {}
@@ -81,7 +90,7 @@ def main(argv=None) -> int:
                   f"{count['plain']['safe']} / {count['plain']['unsafe']} / {count['plain']['inconclusive']}; "
                   f"{differ} differ")]
     mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
-    common.publish(HEADING, mach, "bench_pieces.py", args.repeats, time.perf_counter() - t_all,
+    common.publish(HEADING + ("" if args.project == "pendulum" else " (A1)"), mach, "bench_pieces.py", args.repeats, time.perf_counter() - t_all,
                    common.markdown_table(rows), not args.no_write)
     return 0
 

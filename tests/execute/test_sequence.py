@@ -156,3 +156,16 @@ def test_the_margin_weight_avoids_thin_edges(world):
     fast, wide = shortest_plan(g, "Home", "Right", "duration"), shortest_plan(g, "Home", "Right", "margin")
     assert fast.path == ["Home", "Ramp", "Right"] and wide.path == ["Home", "Osc", "Right"]
     assert wide.cost == pytest.approx(1 + 1 / m[("Osc", "Right")])
+
+
+def test_a_sequence_runs_in_its_own_step(world):
+    """sequence.dt sets the runs' step (the oracle's by default): the samples lie that far apart
+    and the run goes through the same switches at the same times."""
+    prims, g, table, settings = world
+    cmds = [GoalCommand(t=0.5, goal="Right")]
+    own = simulate_sequence(prims, g, table, Sequence(start="Home", duration=3.0, commands=cmds, dt=DT / 4),
+                            settings, "naive")
+    default = run(world, "naive", "Home", [(0.5, "Right")], 3.0)
+    assert own.t[1] - own.t[0] == pytest.approx(DT / 4) and default.t[1] - default.t[0] == pytest.approx(DT)
+    assert hops(own) == hops(default) and own.switches[1]["t"] == pytest.approx(0.5)
+    assert not own.safe and own.violations[0]["value"] == pytest.approx(-1.0)

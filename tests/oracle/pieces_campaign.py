@@ -20,7 +20,8 @@ Families (x(T) in closed form; every kink at a random place inside a step):
 
 Every case runs at every preset with both error estimates ('local', 'doubling'), batched: one
 oracle call per family, preset and estimate; the first SCIPY_PER_FAMILY cases of each family also
-through the scipy reference backend.
+through the scipy reference backend. With --large every loop is stepped as a robot's large loop is
+(oracle/pieces.py: through MX graphs, clock guards met at step boundaries, Illinois location).
 """
 from __future__ import annotations
 
@@ -160,6 +161,12 @@ if __name__ == "__main__":
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases-per-family", type=int, default=600)
+    ap.add_argument("--large", action="store_true", help="step every loop as a large one (a robot's: called "
+                    "from MX graphs, clock guards split off and met at step boundaries)")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
+        if args.large:
+            from mpgspec.oracle import integrator, looplib
+
+            looplib.INLINE_NODES = integrator.INLINE_NODES = 0
         print(table(run(Path(d), args.cases_per_family)))

@@ -163,6 +163,23 @@ def generated(tmp_path_factory):
     return campaign.run(tmp_path_factory.mktemp("pieces"), per_family=40, jit=False, scipy=SCIPY_CI)
 
 
+@pytest.fixture(scope="module")
+def generated_large(tmp_path_factory):
+    from mpgspec.oracle import integrator, looplib
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(looplib, "INLINE_NODES", 0)
+        mp.setattr(integrator, "INLINE_NODES", 0)
+        return campaign.run(tmp_path_factory.mktemp("pieces_large"), per_family=10, jit=False, scipy=0)
+
+
+def test_no_false_safe_on_generated_loops_stepped_as_large_ones(generated_large):
+    """The same families through a large loop's steps (a robot's): no false safe either."""
+    bad = [(c.family, k, c.x_T - c.c) for c in generated_large for k, s in c.status.items()
+           if c.unsafe and s == "safe"]
+    assert not bad, campaign.table(generated_large)
+
+
 def test_no_false_safe_on_any_generated_non_smooth_loop(generated):
     bad = [(c.family, k, c.x_T - c.c) for c in generated for k, s in c.status.items() if c.unsafe and s == "safe"]
     assert not bad, campaign.table(generated)
