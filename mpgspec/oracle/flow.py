@@ -47,6 +47,21 @@ def _along(x, a, k):
     return tuple(xi + a * ki for xi, ki in zip(x, k)) if isinstance(x, tuple) else x + a * k
 
 
+FD_STEP = 1e-6
+"""Time step of the one-sided differences that give the rates of h along the flow in large loops."""
+
+
+def one_sided_rate(h_at, x, t, s, k, hv):
+    """dh/dt along (k, 1, 1) by one-sided differences of h_at(x, t, s) from its value hv at (x, t, s),
+    the smaller in magnitude of the two: a forward difference at a step's end (or a backward one at
+    its start) can reach across a contact switch or the end of a motion profile, where h jumps; for
+    smooth h the two agree to O(FD_STEP)."""
+    eps = FD_STEP
+    fwd = (h_at(x + eps * k, t + eps, s + eps) - hv) / eps
+    bwd = (hv - h_at(x - eps * k, t - eps, s - eps)) / eps
+    return ca.if_else(ca.fabs(fwd) <= ca.fabs(bwd), fwd, bwd)
+
+
 def step_end(prim: CompiledPrimitive, h, edge=None):
     """Where a step's last stage and end sample sit: seen from inside the step (LEFT before its end)
     under a contact schedule, and for any primitive when the step ends on a switching time of its

@@ -25,7 +25,7 @@ import casadi as ca
 import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
-from .flow import active, jump_of, rk4, solve_or_keep, step_end, step_length, wrap
+from .flow import active, jump_of, one_sided_rate, rk4, solve_or_keep, step_end, step_length, wrap
 from .pieces import guarded, guarded_body, guarded_doubling_body
 from .jit import compile_cached, cse_sx
 from .looplib import (INLINE_NODES, attach, attached, build_all, caller_flags, compile_callers, libs_of, part,
@@ -183,10 +183,6 @@ def build_chunk(prim: CompiledPrimitive, dt: float, K: int, jit: bool = True,
     return prim.cache[key]
 
 
-FD_STEP = 1e-6
-"""Time step of the one-sided differences that give the rates of h along the flow in large loops."""
-
-
 def build_chunks(prims: list[CompiledPrimitive], dt: float, K: int, flags: tuple[str, ...] = ("-O1",),
                  with_state: bool = False, boundaries: bool = True, error: str = "local") -> list[Chunk]:
     """build_chunk with jit for several primitives at once: their C code generated one after the
@@ -271,14 +267,9 @@ def _xdot_of(loop: ca.Function) -> ca.Function:
 
 
 def _rate(loop: ca.Function, a: list, xdot, hv):
-    """dh/dt along the flow by one-sided differences, the smaller in magnitude of the two: a forward
-    difference at a step's end (or a backward one at its start) can reach across a contact switch
-    or the end of a motion profile, where h jumps; for smooth h the two agree to O(FD_STEP)."""
+    """dh/dt along the flow through the compiled loop (flow.one_sided_rate)."""
     x, t, s, xs, *held = a
-    eps = FD_STEP
-    fwd = (loop(x + eps * xdot, t + eps, s + eps, xs, *held)[1] - hv) / eps
-    bwd = (hv - loop(x - eps * xdot, t - eps, s - eps, xs, *held)[1]) / eps
-    return ca.if_else(ca.fabs(fwd) <= ca.fabs(bwd), fwd, bwd)
+    return one_sided_rate(lambda y, tt, ss: loop(y, tt, ss, xs, *held)[1], x, t, s, xdot, hv)
 
 
 def _ends_differences(loop: ca.Function) -> tuple[ca.Function, ca.Function]:

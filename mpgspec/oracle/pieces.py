@@ -23,14 +23,12 @@ from __future__ import annotations
 import casadi as ca
 
 from ..compile.primitive import CompiledPrimitive
-from .flow import active, step_end, step_length, wrap
+from .flow import active, one_sided_rate, step_end, step_length, wrap
 from .jit import cse, cse_sx
 from .looplib import guarded, is_large, loop_and_guards, part
 
 __all__ = ["guarded", "guarded_body", "guarded_doubling_body"]
 
-FD = 1e-6
-"""The step of the one-sided differences that give a large loop's h rate (integrator.FD_STEP)."""
 BISECTIONS = 36
 """Bisections of a step where a guard crosses: the piece ends within dt 2^-36 (1.5e-13 s at dt = 0.01)
 of the crossing."""
@@ -162,11 +160,8 @@ class _Parts:
         return self.sym(name, self.nx)
 
     def h_rate(self, x, t, s, xs, k, hv):
-        """A large loop's dh/dt along (k, 1, 1) by one-sided differences, the smaller in magnitude
-        of the two (integrator._rate: one may reach across a switch of h)."""
-        fwd = (self.loop_g.call([x + FD * k, t + FD, s + FD, xs])[1] - hv) / FD
-        bwd = (hv - self.loop_g.call([x - FD * k, t - FD, s - FD, xs])[1]) / FD
-        return ca.if_else(ca.fabs(fwd) <= ca.fabs(bwd), fwd, bwd)
+        """A large loop's dh/dt along (k, 1, 1) through loop_g (flow.one_sided_rate)."""
+        return one_sided_rate(lambda y, tt, ss: self.loop_g.call([y, tt, ss, xs])[1], x, t, s, k, hv)
 
     def ends(self):
         """A large loop's (start, end, at_end, loop) as integrator._ends_differences and _at_end
@@ -192,7 +187,7 @@ class _Parts:
         """A large loop's guards split into clock guards (functions of t and s alone: a contact
         schedule's phases, a motion profile's end) and state guards; Gc (t, s) -> the clock guards,
         cheap enough to evaluate at every step. A small loop keeps them together (clock = [])."""
-        self.clock, self.state, self.Gc, self._clock_fns = [], list(range(self.ng)), None, {}
+        self.clock, self.state, self.Gc, self._fns = [], list(range(self.ng)), None, {}
         if not self.large:
             return
         a = prim.guards.fn.sx_in()
@@ -221,7 +216,7 @@ class _Parts:
     def _clock_bisect(self, t, s, h, r, half):
         """The upper end of the bracket of the first clock guard crossing in (0, h] after
         CLOCK_BISECTIONS bisections (in the half of the step where it lies)."""
-        if "bisect" not in self._clock_fns:
+        if "bisect" not in self._fns:
             T, S, H, R, HF = (ca.SX.sym(n) for n in ("t", "s", "h", "r_", "half"))
             R = ca.SX.sym("r", r.shape[0])
             lo, hi = ca.if_else(HF, 0, H / 2), ca.if_else(HF, H / 2, H)
@@ -229,8 +224,8 @@ class _Parts:
                 mid = (lo + hi) / 2
                 c = _crossed(R, [self.Gc(T + mid, S + mid)])
                 lo, hi = ca.if_else(c, lo, mid), ca.if_else(c, mid, hi)
-            self._clock_fns["bisect"] = ca.Function("clock_bisect", [T, S, H, R, HF], [hi])
-        return self._clock_fns["bisect"](t, s, h, r, half)
+            self._fns["bisect"] = ca.Function("clock_bisect", [T, S, H, R, HF], [hi])
+        return self._fns["bisect"](t, s, h, r, half)
 
     def clock_start(self, t, s, h):
         """(shift, r_c, on) at a smooth step's start: a clock guard that changes sign between the
@@ -310,7 +305,7 @@ class _Parts:
         crossed), last which end moved last (+1 lo, -1 hi). The next trial is the earliest of the
         guards' secant roots (a guard crossed at hi's end, not at lo's), or the middle where none is,
         kept inside the bracket; lo stays uncrossed and hi crossed, as under bisection."""
-        if "secant" not in self._clock_fns:
+        if "secant" not in self._fns:
             ng = self.ng
             st, x, k1, xs, r = self.sym("state", 3 + 2 * ng), self.sx("x"), self.sx("k1"), self.sx("x_sw"), \
                 self.sym("r", ng)
@@ -329,21 +324,21 @@ class _Parts:
             step = ca.Function("illinois", [st, x, t, s, xs, k1, r, tol], [ca.if_else(cut, moved_hi, moved_lo)])
             keep = ca.Function("narrow_enough", [st, x, t, s, xs, k1, r, tol], [st])
             sw = ca.Function.if_else("secant_step", step, keep)
-            self._clock_fns["secant"] = ca.Function("secant", [st, x, t, s, xs, k1, r, tol],
+            self._fns["secant"] = ca.Function("secant", [st, x, t, s, xs, k1, r, tol],
                                                     [sw(w > tol, st, x, t, s, xs, k1, r, tol)])
-        return self._clock_fns["secant"]
+        return self._fns["secant"]
 
     def _narrow(self) -> ca.Function:
         """A bisection of [lo, hi] (self.bisect), skipped once it is narrower than tol."""
-        if "narrow" not in self._clock_fns:
+        if "narrow" not in self._fns:
             lohi, x, k1, xs, r = self.sym("lohi", 2), self.sx("x"), self.sx("k1"), self.sx("x_sw"), self.sym("r", self.ng)
             t, s, tol = self.sym("t"), self.sym("s"), self.sym("tol")
             a = [lohi, x, t, s, xs, k1, r, tol]
             step = ca.Function("halve", a, [self.bisect(lohi, x, t, s, xs, k1, r)])
             keep = ca.Function("narrow_enough", a, [lohi])
-            self._clock_fns["narrow"] = ca.Function("narrow", a, [ca.Function.if_else("bisect_step", step, keep)(
+            self._fns["narrow"] = ca.Function("narrow", a, [ca.Function.if_else("bisect_step", step, keep)(
                 lohi[1] - lohi[0] > tol, *a)])
-        return self._clock_fns["narrow"]
+        return self._fns["narrow"]
 
     def sliver(self, x, t, s, xs, k1, hi, h, r):
         """MX: a step just across a crossing right after the start, of twice the bracket's end:
