@@ -68,12 +68,14 @@ def main(argv=None) -> int:
     for error in errors:
         s = base.replace(error=error)
         oracles = {kind: {b: SafetyOracle(src[b], s) for b in pts} for kind, src in (("guarded", prims), ("plain", plain))}
-        verdicts = {}
+        verdicts, per = {}, {kind: {b: [] for b in pts} for kind in oracles}
 
-        def run(kind, oracles=oracles, verdicts=verdicts):
+        def run(kind, oracles=oracles, verdicts=verdicts, per=per):
             out = []
             for b, (x0s, t0s) in pts.items():
+                t0 = time.perf_counter()
                 out += [e.status for e in oracles[kind][b].evaluate(x0s, t0s)]
+                per[kind][b].append(time.perf_counter() - t0)
             verdicts[kind] = out
 
         for kind in oracles:  # compile and warm up outside the timed rounds
@@ -88,7 +90,10 @@ def main(argv=None) -> int:
                  (f"{error}: verdicts safe / unsafe / inconclusive, guarded; unguarded",
                   f"{count['guarded']['safe']} / {count['guarded']['unsafe']} / {count['guarded']['inconclusive']}; "
                   f"{count['plain']['safe']} / {count['plain']['unsafe']} / {count['plain']['inconclusive']}; "
-                  f"{differ} differ")]
+                  f"{differ} differ"),
+                 (f"{error}: guarded / unguarded by target (median of its rounds)",
+                  ", ".join(f"{b} {np.median(per['guarded'][b][1:]) / np.median(per['plain'][b][1:]):.2f}x"
+                            for b in pts))]
     mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
     common.publish(HEADING + ("" if args.project == "pendulum" else " (A1)"), mach, "bench_pieces.py", args.repeats, time.perf_counter() - t_all,
                    common.markdown_table(rows), not args.no_write)

@@ -336,18 +336,6 @@ def step_body(prim: CompiledPrimitive, dt: float, with_state: bool = False, boun
     """(z -> (z after one step, that step's outputs in Rows order), nz): one step of the chunk with
     error 'local' (or 'doubling'), remembered on the primitive so that every chunk built from it
     shares it (one body inlining the loop, one calling its library)."""
-    body, nz, _smooth = _bodies(prim, dt, with_state, boundaries, doubling)
-    return body, nz
-
-
-def smooth_step(prim: CompiledPrimitive, dt: float, doubling: bool = False) -> ca.Function | None:
-    """For a loop with guards (pieces.py), its smooth step z -> (z after, outputs, 1 when a guard
-    crossed in it: the step must be taken by step_body instead); None without guards."""
-    return _bodies(prim, dt, False, True, doubling)[2]
-
-
-def _bodies(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool, doubling: bool) -> tuple:
-    """(step, nz, smooth step or None), built once per primitive and settings."""
     key = ("body", dt, with_state, boundaries, doubling, attached(prim) is not None)
     if key not in prim.cache:
         prim.cache[key] = (_doubling_body if doubling else _step_body)(prim, dt, with_state, boundaries)
@@ -376,15 +364,15 @@ def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries:
                      ca.norm_2(e), s, h, u_raw, u, *([x] if with_state else []))
     # small SX loops: cse saves 1-8 % of C; an MX graph around a large loop (itself with cse) gains
     # nothing measurable from it (bench/bench_jit.py)
-    return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out])), nz, None
+    return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, hold_next), out])), nz
 
 
 def _guarded_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple:
     """_step_body for a loop with guards: the step ends where a guard first crosses (pieces.py)."""
     start, end, _f = _ends(prim)
-    body, smooth = guarded_body(prim, dt, start, end, _jump(prim), _margin(prim), with_state, boundaries,
+    body = guarded_body(prim, dt, start, end, _jump(prim), _margin(prim), with_state, boundaries,
                                 _h_rows(len(prim.h_names)))
-    return body, 2 * prim.system.nx + 2, smooth
+    return body, 2 * prim.system.nx + 2
 
 
 def _h_rows(nh: int):
@@ -433,9 +421,9 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     nx, nh = prim.system.nx, len(prim.h_names)
     if guarded(prim):
         start = _ends(prim)[0]
-        body, smooth = guarded_doubling_body(prim, dt, start, _at_end(prim, start), _loop(prim), _jump(prim),
+        body = guarded_doubling_body(prim, dt, start, _at_end(prim, start), _loop(prim), _jump(prim),
                                              _margin(prim), with_state, boundaries, _h_rows(nh))
-        return body, 3 * nx + 2, smooth
+        return body, 3 * nx + 2
     held = prim.sampled is not None
     start, _end, f = _ends(prim, held)
     loop = _loop(prim, held)
@@ -463,7 +451,7 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     m_f, m_c = _margin(prim)(x, t), _margin(prim)(xc, t)
     out = ca.vertcat(*_masked(act, nh, h0, _sample_bound(h0, h1, d0, d1, h)), ca.fabs(h1 - h1c), m_f,
                      ca.fabs(m_f - m_c), s, h, u_raw, u, *([x] if with_state else []), ca.fabs(h0 - h0c))
-    return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out])), nz, None
+    return cse_sx(ca.Function("body", [z], [ca.vertcat(x_next, t + h, s + h, xs, xc_next, hold_next), out])), nz
 
 
 def start_states(prim: CompiledPrimitive, x0s: np.ndarray, t0s: np.ndarray, doubling: bool = False) -> np.ndarray:

@@ -23,9 +23,9 @@ import casadi as ca
 import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
-from .integrator import Rows, smooth_step, step_body
+from .integrator import Rows, step_body
 from .jit import compile_cached, cse_sx
-from .looplib import attach, caller_flags, compile_callers, libs_of
+from .looplib import attach, caller_flags, compile_callers, guarded, libs_of
 from .verdict import LANES, Block, Carry, Decision, evidences, lane_sum
 
 KINDS = ("", "safe", "left_C", "non_finite", "horizon", "doubt", "doubt_E")
@@ -220,55 +220,36 @@ function; larger ones call the body and the judge's steps from an MX graph (each
 
 
 class JudgedChunk:
-    """K compiled judged steps of one primitive: run(Z) advances the columns of [z; J] (nz + J rows).
-
-    For a loop with guards (pieces.py), `smooth` is the chunk of its smooth steps (inlined, as fast as
-    a loop without guards): run() takes it for every column and runs the columns in which a guard
-    crossed again through `fn`, the chunk of full steps, which locates the crossings."""
+    """K compiled judged steps of one primitive: run(Z) advances the columns of [z; J] (nz + J rows)."""
 
     def __init__(self, prim: CompiledPrimitive, dt: float, fn: ca.Function, nz: int, lay: Layout, K: int,
-                 doubling: bool = False, smooth: ca.Function | None = None):
+                 doubling: bool = False):
         self.prim, self.dt, self.fn, self.nz, self.lay, self.K = prim, dt, fn, nz, lay, K
-        self.doubling, self.smooth = doubling, smooth
+        self.doubling = doubling
         self._buffers: dict = {}
 
     def bound(self, n: int) -> tuple:
-        """(evaluate, z_in, z_final, None): the full chunk for a batch of n bound to numpy arrays, as Chunk.bound."""
-        return (*self._bound(n)[1:4], None)
-
-    def _bound(self, n: int, smooth: bool = False) -> tuple:
-        if (n, smooth) not in self._buffers:
-            F = (self.smooth if smooth else self.fn).map(n, "serial")
+        """(evaluate, z_in, z_final, None): the chunk for a batch of n bound to numpy arrays, as Chunk.bound."""
+        if n not in self._buffers:
+            F = self.fn.map(n, "serial")
             buf, ev = F.buffer()
             zin, zf = np.zeros(F.nnz_in(0)), np.zeros(F.nnz_out(0))
             buf.set_arg(0, memoryview(zin))
             buf.set_res(0, memoryview(zf))
-            crossed = np.zeros(n) if smooth else None
-            if smooth:
-                buf.set_res(1, memoryview(crossed))
-            self._buffers[(n, smooth)] = (buf, ev, zin, zf, crossed)  # buf keeps the bindings alive
-        return self._buffers[(n, smooth)]
+            self._buffers[n] = (buf, ev, zin, zf)  # buf keeps the bindings alive
+        return (*self._buffers[n][1:], None)
 
     def run(self, Z: np.ndarray) -> np.ndarray:
         """[z; J] of every column after K steps, as a view of an output buffer for this many columns
         (valid until the next call with as many); a failed evaluation raises."""
-        zf = self._call(Z, self.smooth is not None)
-        if self.smooth is not None:
-            _buf, _ev, zin, _zf, crossed = self._bound(Z.shape[1], True)
-            if crossed.any():  # columns where a guard crossed: the full steps locate it, from the input kept in zin
-                cols = np.flatnonzero(crossed > 0.5)
-                zf[:, cols] = self._call(zin.reshape(Z.shape, order="F")[:, cols], False)
-        return zf
-
-    def _call(self, Z: np.ndarray, smooth: bool) -> np.ndarray:
         n = Z.shape[1]
-        buf, ev, zin, zf, _crossed = self._bound(n, smooth)
+        ev, zin, zf, _ = self.bound(n)
         zin.reshape(Z.shape[0], n, order="F")[:] = Z
         ev()
-        if buf.ret():
+        if self._buffers[n][0].ret():
             zf[:] = np.nan
-            raise RuntimeError(f"the compiled rollout failed (status {buf.ret()}): an evaluation inside it "
-                               "(e.g. an optimisation-based control law) returned an error")
+            raise RuntimeError(f"the compiled rollout failed (status {self._buffers[n][0].ret()}): an evaluation "
+                               "inside it (e.g. an optimisation-based control law) returned an error")
         return zf.reshape(Z.shape[0], n, order="F")
 
 
@@ -282,60 +263,48 @@ def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: 
     if key not in prim.cache:
         if jit:  # a large loop through its compiled library
             attach(prim)
-        fns, nz, lay = _judged_function(prim, dt, K, B, tol, cm, doubling)
-        fns = [compile_cached(fn, caller_flags(prim, fl), libs_of(prim))
-               for fn, fl in zip(fns, _flags(fns, flags))] if jit else fns
-        prim.cache[key] = JudgedChunk(prim, dt, fns[-1], nz, lay, K, doubling, *fns[:-1])
+        fn, nz, lay = _judged_function(prim, dt, K, B, tol, cm, doubling)
+        fn = compile_cached(fn, caller_flags(prim, _flags(prim, flags)), libs_of(prim)) if jit else fn
+        prim.cache[key] = JudgedChunk(prim, dt, fn, nz, lay, K, doubling)
     return prim.cache[key]
 
 
-LOCATED_FLAGS = ("-O1",)
-"""gcc flags (at least) of the full chunk of a loop with guards, which redoes the columns where a
-guard crossed: an MX graph of calls (the smooth step, the location, the judge), 73-101 KB of C on
-the pendulum. At -O0 a column through it cost 4x one through the smooth chunk and the redone
-columns a third of the oracle's time; at -O1 gcc takes about 0.3 s more per primitive and the
-redone columns a third of the time they took (bench/bench_pieces.py)."""
+GUARDED_FLAGS = ("-O1",)
+"""gcc flags (at least) of the chunk of a loop with guards: an MX graph of calls per step (the
+smooth step, the location in a conditional, the judge), 73-101 KB of C on the pendulum, which -O1
+compiles in about 0.3 s more than -O0 and runs 2-4x faster (bench/bench_pieces.py)."""
 
 
-def _flags(fns: list[ca.Function], flags: tuple[str, ...]) -> list[tuple[str, ...]]:
-    """The gcc flags of each of a judged chunk's Functions: `flags`, and for the full chunk that
-    follows a smooth one (a loop with guards) LOCATED_FLAGS where `flags` optimise less."""
-    if len(fns) < 2 or any(f.startswith("-O") and f != "-O0" for f in flags):
-        return [tuple(flags)] * len(fns)
-    located = tuple(f for f in flags if not f.startswith("-O")) + LOCATED_FLAGS
-    return [tuple(flags)] * (len(fns) - 1) + [located]
+def _flags(prim: CompiledPrimitive, flags: tuple[str, ...]) -> tuple[str, ...]:
+    """The gcc flags of a judged chunk: `flags`, with GUARDED_FLAGS for a loop with guards where
+    `flags` optimise less."""
+    if not guarded(prim) or any(f.startswith("-O") and f != "-O0" for f in flags):
+        return tuple(flags)
+    return tuple(f for f in flags if not f.startswith("-O")) + GUARDED_FLAGS
 
 
 def _judged_function(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: float, cm: float,
-                     doubling: bool) -> tuple[list[ca.Function], int, Layout]:
-    """([Z -> [z; J] after K judged steps], nz, the layout of J), uncompiled. For a loop with guards
-    (pieces.py) the list holds first the chunk of smooth steps, Z -> ([z; J], 1 where a guard
-    crossed in some step: that column is to be run again by the second, the full chunk)."""
+                     doubling: bool) -> tuple[ca.Function, int, Layout]:
+    """(Z -> [z; J] after K judged steps, nz, the layout of J), uncompiled."""
     body, nz = step_body(prim, dt, doubling=doubling)
-    smooth = smooth_step(prim, dt, doubling)
     lay = Layout(len(prim.h_names), prim.system.nu, nz)
     n_out = body.size1_out(1)
     rows = Rows(lay.nh, lay.nu, doubling=doubling)
     steps = [judge_step(lay, rows, n_out, K, first, B, tol, cm, prim.system.u_lo, prim.system.u_hi)
              for first in (True, False)]
     name = "judged_" + hashlib.sha1(f"{prim.name}{dt}{K}{B}{tol}{cm}{doubling}".encode()).hexdigest()[:10]
-    fns = [] if smooth is None else [_chunk(smooth, steps, nz, lay, K, name + "_smooth")]
-    return [*fns, _chunk(body, steps, nz, lay, K, name)], nz, lay
+    return _chunk(body, steps, nz, lay, K, name), nz, lay
 
 
 def _chunk(body: ca.Function, steps: list, nz: int, lay: Layout, K: int, name: str) -> ca.Function:
-    """K judged steps of `body`; a body with a third output (a smooth step's `crossed`) gives the
-    chunk a second output, its largest value over the K steps."""
+    """K judged steps of `body`."""
     inline = body.is_a("SXFunction") and body.n_nodes() * K <= INLINE_CHUNK
     Z = (ca.SX.sym if inline else ca.MX.sym)("Z", nz + lay.size)
     z, J = Z[:nz], Z[nz:]
-    crossed = []
     for k in range(K):
-        zn, o, *cr = body(z)
+        zn, o = body(z)
         z, J = zn, steps[k > 0](J, o, zn, float(k == K - 1))
-        crossed += cr
-    outs = [ca.vertcat(z, J)] + ([ca.mmax(ca.vertcat(*crossed))] if crossed else [])
-    fn = ca.Function(name, [Z], outs)
+    fn = ca.Function(name, [Z], [ca.vertcat(z, J)])
     return cse_sx(fn) if inline else fn
 
 
@@ -349,12 +318,9 @@ def prebuild(prims: list[CompiledPrimitive], dt: float, K: int, B: int, tol: flo
     for p in new:
         attach(p)  # attached libraries are found at once; build_all compiled the rest side by side
     built = [_judged_function(p, dt, K, B, tol, margins[p.name], doubling) for p in new]
-    owners = [p for p, b in zip(new, built) for _fn in b[0]]
-    compiled = iter(compile_callers(owners, [fn for b in built for fn in b[0]],
-                                    [fl for b in built for fl in _flags(b[0], flags)]))
-    for p, (fns, nz, lay) in zip(new, built):
-        fns = [next(compiled) for _fn in fns]
-        p.cache[key(p)] = JudgedChunk(p, dt, fns[-1], nz, lay, K, doubling, *fns[:-1])
+    compiled = compile_callers(new, [b[0] for b in built], [_flags(p, flags) for p in new])
+    for p, fn, (_fn, nz, lay) in zip(new, compiled, built):
+        p.cache[key(p)] = JudgedChunk(p, dt, fn, nz, lay, K, doubling)
 
 
 def decided_evidence(ch: JudgedChunk, J: np.ndarray, t0s, cm: float) -> list:

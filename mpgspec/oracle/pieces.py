@@ -13,10 +13,9 @@ its start, on the new branch, as every later stage is. A crossing that cannot be
 shorter than MIN_PIECE: a guard that chatters, a pulse shorter than that) gives the step the error
 estimate UNRESOLVED, so the rollout can never be judged safe.
 
-Each step comes in two forms: the smooth step alone (one SX function, which also says whether a
-guard may have crossed in it) and the full step, an MX graph of the trial, the location (a
-conditional: its code runs only where a guard crosses) and the outputs. The judged chunks run the
-smooth steps and redo the columns in which a guard crossed through the full ones (judged.py).
+A step is an MX graph: the smooth step (one function, which also says whether a guard may have
+crossed in it), and a conditional whose other branch, the trial, the location and the outputs,
+runs only where a guard crosses; elsewhere the smooth step's values pass through.
 """
 from __future__ import annotations
 
@@ -69,6 +68,23 @@ def _crossed(r, gs: list):
     flips = [ca.logic_and(r * g <= 0, r != 0) for g in gs]
     v = ca.vertcat(*flips)
     return ca.mmax(v) if v.shape[0] else ca.DM(0)
+
+
+def _rows(v, sizes: tuple) -> list:
+    """v split into consecutive parts of the given numbers of rows (empty parts as 0 x 1)."""
+    offsets = [0]
+    for n in sizes:
+        offsets.append(offsets[-1] + n)
+    return ca.vertsplit(v, offsets)
+
+
+def _sides(r, gs: list):
+    """Each guard's least value times its reference side r over the values gs (a trial's stages
+    and end): positive where no evaluation crossed it, <= 0 where one did (as _crossed decides)."""
+    q = r * gs[0]
+    for g in gs[1:]:
+        q = ca.fmin(q, r * g)
+    return q
 
 
 def _suspect(g0, gs: list, resting: bool = False):
@@ -279,9 +295,14 @@ class _Parts:
         on = _crossed(r, [g0])
         return ca.if_else(on, k1n, k1), r, on, ca.if_else(on, d * (k1 - k1n), ca.DM.zeros(self.nx))
 
-    def nudge_error(self, x, t, s, xs, e):
-        """(norm, bound on h) of a nudged start's error e (nudged)."""
-        return ca.norm_2(e), self.onto_h(x, t, s, xs, ca.fabs(e))
+    def nudge_error(self, x, t, s, xs, e, on):
+        """(norm, bound on h) of a nudged start's error e (nudged; zero unless `on`). A large loop
+        maps it onto h only where the step starts on a guard (a conditional: 0 elsewhere, as the
+        map of e = 0 is)."""
+        v = ca.vertcat(ca.norm_2(e), self.onto_h(x, t, s, xs, ca.fabs(e)))
+        if self.large:
+            v = ca.if_else(on, v, ca.MX.zeros(v.shape[0]), True)
+        return _rows(v, (1, self.nh))
 
     def located(self, x, t, s, xs, k1, h, r):
         """MX: (lo, hi, short): the bracket of the first crossing of a step of h from x, as narrow
@@ -291,20 +312,36 @@ class _Parts:
         if not self.large:
             b = self.bisect.fold(BISECTIONS)(ca.vertcat(0, h), x, t, s, xs, k1, r)
             return b[0], b[1], b[0] < MIN_PIECE
-        tol = h * 2.0 ** -BISECTIONS
-        q_h = r * _trial(self.fg, x, t, s, xs, k1, h, h)[2][-1]  # each guard's side at the step's end
-        state = ca.vertcat(0, h, r * r, q_h, 0)
-        state = self._secant().fold(SECANTS)(state, x, t, s, xs, k1, r, tol)
-        b = self._narrow().fold(BISECTIONS)(state[:2], x, t, s, xs, k1, r, tol)
+        near = ca.fmin(MIN_PIECE, h)  # a crossing this close after the start needs no search
+        b = self._search()(_crossed(r, _trial(self.fg, x, t, s, xs, k1, near, near)[2]), x, t, s, xs, k1, h, r, near)
         return b[0], b[1], b[0] < MIN_PIECE
+
+    def _search(self) -> ca.Function:
+        """(near, x, t, s, x_sw, k1, h, r, p) -> [lo; hi]: [0; p] where a trial of p already crosses
+        (`near`: the step is stepped across by a sliver, or unresolved), else the bracket from
+        SECANTS Illinois steps and the bisection of what is left (its code runs only then)."""
+        if "search" not in self._fns:
+            x, k1, xs, r = self.sx("x"), self.sx("k1"), self.sx("x_sw"), self.sym("r", self.ng)
+            t, s, h, p = self.sym("t"), self.sym("s"), self.sym("h"), self.sym("p")
+            a = [x, t, s, xs, k1, h, r, p]
+            tol = h * 2.0 ** -BISECTIONS
+            q_h = _sides(r, _trial(self.fg, x, t, s, xs, k1, h, h)[2])
+            state = ca.vertcat(0, h, r * self.G(x, t, s, xs), q_h, 0)
+            state = self._secant().fold(SECANTS)(state, x, t, s, xs, k1, r, tol)
+            far = ca.Function("bracket", a, [self._narrow().fold(BISECTIONS)(state[:2], x, t, s, xs, k1, r, tol)])
+            at_once = ca.Function("at_once", a, [ca.vertcat(0, p)])
+            self._fns["search"] = ca.Function.if_else("search", at_once, far)
+        return self._fns["search"]
 
     def _secant(self) -> ca.Function:
         """One Illinois (modified regula falsi) step on the bracket [lo, hi] of the first crossing,
         skipped (a switch) once it is narrower than tol. state = [lo; hi; q_lo; q_hi; last]: q the
-        guards' end values times their reference sides at a trial of lo and of hi (positive: not
+        guards' values times their reference sides at a trial of lo and of hi (positive: not
         crossed), last which end moved last (+1 lo, -1 hi). The next trial is the earliest of the
         guards' secant roots (a guard crossed at hi's end, not at lo's), or the middle where none is,
-        kept inside the bracket; lo stays uncrossed and hi crossed, as under bisection."""
+        kept inside the bracket; lo stays uncrossed and hi crossed, as under bisection. q is the
+        least of a guard's sides at the trial's stages and end (_sides), the quantity whose sign
+        decides a crossing, so its roots are where the trials first cross."""
         if "secant" not in self._fns:
             ng = self.ng
             st, x, k1, xs, r = self.sym("state", 3 + 2 * ng), self.sx("x"), self.sx("k1"), self.sx("x_sw"), \
@@ -318,7 +355,7 @@ class _Parts:
             m = ca.if_else(m < ca.inf, m, lo + w / 2)
             m = ca.fmin(ca.fmax(m, lo + w * 1e-3), hi - w * 1e-3)
             _xe, _k4, gs = _trial(self.fg, x, t, s, xs, k1, m, m)
-            cut, qm = _crossed(r, gs), r * gs[-1]
+            cut, qm = _crossed(r, gs), _sides(r, gs)
             moved_hi = ca.vertcat(lo, m, ca.if_else(last < 0, qlo / 2, qlo), qm, -1)
             moved_lo = ca.vertcat(m, hi, qm, ca.if_else(last > 0, qhi / 2, qhi), 1)
             step = ca.Function("illinois", [st, x, t, s, xs, k1, r, tol], [ca.if_else(cut, moved_hi, moved_lo)])
@@ -340,14 +377,15 @@ class _Parts:
                 lohi[1] - lohi[0] > tol, *a)])
         return self._fns["narrow"]
 
-    def sliver(self, x, t, s, xs, k1, hi, h, r):
+    def sliver(self, x, t, s, xs, k1, hi, h, r, taken):
         """MX: a step just across a crossing right after the start, of twice the bracket's end:
         (its length, x after it, its k4, the bound tau * (range of its rates) of its error, that
-        error mapped onto h)."""
+        error mapped onto h), evaluated only where `taken` (zeros elsewhere, where it is not used)."""
         tau = ca.fmin(2 * hi, h)
         xe, k4, _c, spread = self.rk4(x, t, s, xs, k1, tau, tau, r)
         extra = tau * spread
-        return tau, xe, k4, ca.norm_2(extra), self.onto_h(xe, t + tau, s + tau, xs, extra)
+        v = ca.vertcat(tau, xe, k4, ca.norm_2(extra), self.onto_h(xe, t + tau, s + tau, xs, extra))
+        return _rows(ca.if_else(taken, v, ca.MX.zeros(v.shape[0]), True), (1, self.nx, self.nx, 1, self.nh))
 
 
 def _choice(short, on_guard):
@@ -372,8 +410,8 @@ def _locate(parts: _Parts) -> ca.Function:
     mx, mt, ms, mxs, mk1, mh, mte, mxe, mk4, mr, mon = M
     lo, hi, short = parts.located(mx, mt, ms, mxs, mk1, mh, mr)
     xe_p, k4_p, _c, _sp = parts.rk4(mx, mt, ms, mxs, mk1, lo, lo, mr)
-    ts, xs_s, k4_s, en_s, eh_s = parts.sliver(mx, mt, ms, mxs, mk1, hi, mh, mr)
     bad, sl, pick = _choice(short, mon)
+    ts, xs_s, k4_s, en_s, eh_s = parts.sliver(mx, mt, ms, mxs, mk1, hi, mh, mr, sl)
     nh = parts.nh
     out = [pick(mh, ts, lo), pick(mte, ts, lo), pick(mxe, xs_s, xe_p), pick(mk4, k4_s, k4_p), bad,
            ca.if_else(sl, en_s, 0), ca.if_else(sl, eh_s, ca.MX.zeros(nh))]
@@ -411,9 +449,9 @@ def _split(parts: _Parts) -> ca.Function:
 
 
 def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca.Function, jump: ca.Function,
-                 margin: ca.Function, with_state: bool, boundaries: bool, h_rows) -> tuple[ca.Function, ca.Function]:
-    """integrator.step_body's step for a loop with guards (see the module's docstring) and its smooth
-    part (_smooth_or_located): z -> (z after the step, its outputs in Rows order). h_rows(h0, h1, d0,
+                 margin: ca.Function, with_state: bool, boundaries: bool, h_rows) -> ca.Function:
+    """integrator.step_body's step for a loop with guards (see the module's docstring): z -> (z after
+    the step, its outputs in Rows order). h_rows(h0, h1, d0,
     d1, step, act) gives the h and lower bound rows; the error rows of an unresolved step are
     UNRESOLVED."""
     nx = prim.system.nx
@@ -433,7 +471,7 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
     d0 = parts.rate(x, t, s, xs, k1)  # h's rate along the branch the step runs on
     x_end, k4, gs = _trial(fg, x, t, s, xs, k1, h, te)
     cross = _crossed(r, gs)
-    en0, eh0 = parts.nudge_error(x, t, s, xs, e0)
+    en0, eh0 = parts.nudge_error(x, t, s, xs, e0, on)
     trial = cse_sx(ca.Function("trial", [z], [h, te, k1, h0, d0, u_raw, u, x_end, k4, cross, r, on, en0, eh0]))
     # part 3: the step's outputs from the piece taken
     tau, tep, xe, k4p, bad = (parts.sym("tau"), parts.sym("te"), parts.sym("x_end", nx), parts.sym("k4", nx),
@@ -467,12 +505,10 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
     return _smooth_or_located(smooth, located)
 
 
-def _smooth_or_located(smooth: ca.Function, located: ca.Function) -> tuple[ca.Function, ca.Function]:
-    """(body, smooth): body z -> (z after the step, its outputs) is the smooth step, and where a guard
-    crossed in it the located one instead (a switch: the located step's code runs only then, and
-    the smooth step's values are passed through, not computed again; signed zeros included); smooth
-    z -> (z after, outputs, crossed) is the smooth step alone, for chunks that run it and redo the
-    columns where a guard crossed."""
+def _smooth_or_located(smooth: ca.Function, located: ca.Function) -> ca.Function:
+    """z -> (z after the step, its outputs): the smooth step (z -> (z after, outputs, crossed)), and
+    where a guard crossed in it the located one instead (a switch: the located step's code runs
+    only then, and the smooth step's values are passed through, not computed again)."""
     Z = ca.MX.sym("z", smooth.size1_in(0))
     zf, of, cross = smooth(Z)
     n, m = zf.shape[0], of.shape[0]
@@ -480,13 +516,13 @@ def _smooth_or_located(smooth: ca.Function, located: ca.Function) -> tuple[ca.Fu
     take = ca.Function("located_step", [Z, zs, os_], [ca.vertcat(*located(Z))])
     keep = ca.Function("smooth_step", [Z, zs, os_], [ca.vertcat(zs, os_)])
     v = ca.Function.if_else("smooth_or_located", take, keep)(cross, Z, zf, of)
-    return ca.Function("body", [Z], [v[:n], v[n:]]), smooth
+    return ca.Function("body", [Z], [v[:n], v[n:]])
 
 
 def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function, at_end: ca.Function,
                           loop: ca.Function, jump: ca.Function, margin: ca.Function, with_state: bool,
-                          boundaries: bool, h_rows) -> tuple[ca.Function, ca.Function]:
-    """integrator.step_body's step-doubling step for a loop with guards (and its smooth part): the judged rollout's two
+                          boundaries: bool, h_rows) -> ca.Function:
+    """integrator.step_body's step-doubling step for a loop with guards: the judged rollout's two
     half steps are tried; where a guard crosses, the step ends just before the first crossing of its
     single-step trial and both halves are taken again over that piece. The companion advances by the
     same length, split in two RK4 pieces where one of its own guards crosses (its state differs from
@@ -507,15 +543,15 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     _kc, h0c, _ucr, uc = loop(xc, t, s, xs)
     k1, r, on, e0 = parts.nudged(x, t, s, xs, h)
     d0 = parts.rate(x, t, s, xs, k1)  # h's rate along the branch the step runs on
-    kc1, rc, _on, e0c = parts.nudged(xc, t, s, xs, h)
+    kc1, rc, onc, e0c = parts.nudged(xc, t, s, xs, h)
     hh = h / 2
     x_mid, _k4, ga = _trial(fg, x, t, s, xs, k1, hh, hh)
     km, rm, _on, _e = parts.nudged(x_mid, t + hh, s + hh, xs, hh)
     x_end, _k4, gb = _trial(fg, x_mid, t + hh, s + hh, xs, km, hh, te - hh)
     cross = ca.logic_or(_crossed(r, ga), _crossed(rm, gb))
     xc_end, _k4, cross_c, _sp = parts.rk4(xc, t, s, xs, kc1, h, te, rc)
-    en0, eh0 = parts.nudge_error(x, t, s, xs, e0)
-    en0c, eh0c = parts.nudge_error(xc, t, s, xs, e0c)
+    en0, eh0 = parts.nudge_error(x, t, s, xs, e0, on)
+    en0c, eh0c = parts.nudge_error(xc, t, s, xs, e0c, onc)
     trial = cse_sx(ca.Function("trial2", [z], [h, te, k1, h0, d0, u_raw, u, x_end, cross, h0c, uc, kc1, rc,
                                                xc_end, cross_c, r, on, en0 + en0c, eh0 + eh0c, e0]))
     # the judged rollout (where a guard crosses in its halves or the companion's step): the piece before its
@@ -529,8 +565,8 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     x2, _k4, _c, _sp = parts.rk4(mx, mt, ms, mxs, mk1, lo / 2, lo / 2, mr)
     km2, rm2 = parts.first(x2, mt + lo / 2, ms + lo / 2, mxs, lo / 2)
     x4, _k4, _c, _sp = parts.rk4(x2, mt + lo / 2, ms + lo / 2, mxs, km2, lo / 2, lo / 2, rm2)
-    ts, xs_s, _k4s, en_s, eh_s = parts.sliver(mx, mt, ms, mxs, mk1, hi, mh, mr)
     bad, sl, pick = _choice(short, mon)
+    ts, xs_s, _k4s, en_s, eh_s = parts.sliver(mx, mt, ms, mxs, mk1, hi, mh, mr, sl)
     nh = parts.nh
     located = ca.Function("halves", M, [pick(mh, ts, lo), pick(mte, ts, lo), pick(mxe, xs_s, x4), bad,
                                         ca.if_else(sl, en_s, 0), ca.if_else(sl, eh_s, ca.MX.zeros(nh))])
