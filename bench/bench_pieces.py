@@ -10,7 +10,9 @@ unguarded (target <= 1.3x) and the verdict counts of both, and writes the table 
 bench/RESULTS.md.
 
 - pendulum (small loops, inlined): every primitive's loop has guards (its input saturation,
-  SwingUp's switch at t = 1.5, the swings' clock wrap); both error estimates.
+  SwingUp's switch at t = 1.5, the swings' clock wrap); both error estimates. A guarded chunk is
+  compiled at judged.GUARDED_FLAGS (-O1), an unguarded one at the project's flags (-O0): the table
+  also gives the ratio with the unguarded chunks at -O1, the cost of the guards alone.
 - a1 (large loops, called from their loop libraries; E sized as `mpgspec verify` sizes it): the
   walks' 24 torque limits and their gait's clock guards, Lie's and the transients' likewise;
   Stand's sampled ID-QP has none. The project's own error estimate (step doubling).
@@ -37,6 +39,7 @@ from bench_oracle import all_points  # noqa: E402
 
 from mpgspec.compile.guards import Guards  # noqa: E402
 from mpgspec.oracle import SafetyOracle  # noqa: E402
+from mpgspec.oracle.judged import GUARDED_FLAGS  # noqa: E402
 from mpgspec.pipeline.reuse import compiled  # noqa: E402
 from mpgspec.pipeline.settings import settings_for  # noqa: E402
 from mpgspec.pipeline.stages import compile_project  # noqa: E402
@@ -67,7 +70,11 @@ def main(argv=None) -> int:
             ("primitives with guards", ", ".join(f"{n} ({len(p.guards)})" for n, p in prims.items()))]
     for error in errors:
         s = base.replace(error=error)
-        oracles = {kind: {b: SafetyOracle(src[b], s) for b in pts} for kind, src in (("guarded", prims), ("plain", plain))}
+        kinds = [("guarded", prims, s), ("plain", plain, s)]
+        if args.project == "pendulum":  # its guarded chunks are compiled at GUARDED_FLAGS: the unguarded ones so too
+            plain_o1 = {n: dataclasses.replace(p, guards=Guards(), cache={}) for n, p in prims.items()}
+            kinds.append(("plain_O1", plain_o1, s.replace(jit_flags=GUARDED_FLAGS)))
+        oracles = {kind: {b: SafetyOracle(src[b], st) for b in pts} for kind, src, st in kinds}
         verdicts, per = {}, {kind: {b: [] for b in pts} for kind in oracles}
 
         def run(kind, oracles=oracles, verdicts=verdicts, per=per):
@@ -91,6 +98,11 @@ def main(argv=None) -> int:
                   f"{count['guarded']['safe']} / {count['guarded']['unsafe']} / {count['guarded']['inconclusive']}; "
                   f"{count['plain']['safe']} / {count['plain']['unsafe']} / {count['plain']['inconclusive']}; "
                   f"{differ} differ"),
+                 *([(f"{error}: guarded / unguarded, both at gcc {' '.join(GUARDED_FLAGS)}",
+                     f"{common.med_ratio(times['guarded'], times['plain_O1']):.2f}x "
+                     f"({med['plain_O1'] * 1e3:.0f} ms per round unguarded; verdicts differ from -O0's: "
+                     f"{sum(a != b for a, b in zip(verdicts['plain_O1'], verdicts['plain']))})")]
+                   if "plain_O1" in times else []),
                  (f"{error}: guarded / unguarded by target (median of its rounds)",
                   ", ".join(f"{b} {np.median(per['guarded'][b][1:]) / np.median(per['plain'][b][1:]):.2f}x"
                             for b in pts))]

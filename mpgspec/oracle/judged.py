@@ -270,9 +270,11 @@ def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: 
 
 
 GUARDED_FLAGS = ("-O1",)
-"""gcc flags (at least) of the chunk of a loop with guards: an MX graph of calls per step (the
-smooth step, the location in a conditional, the judge), 73-101 KB of C on the pendulum, which -O1
-compiles in about 0.3 s more than -O0 and runs 2-4x faster (bench/bench_pieces.py)."""
+"""gcc flags (at least) of the chunk of a small loop with guards: an MX graph of calls per step
+(the smooth step, the location in a conditional, the judge), 73-101 KB of C on the pendulum; at -O1
+gcc takes about 0.3 s more per primitive than at -O0 and the chunk runs in about a third of the
+time, faster than the unguarded loop's inlined chunk at -O0 (bench/bench_pieces.py). A chunk that
+calls a loop library is compiled at looplib.CALLER_FLAGS: its loop evaluations dominate."""
 
 
 def _flags(prim: CompiledPrimitive, flags: tuple[str, ...]) -> tuple[str, ...]:

@@ -224,12 +224,15 @@ def as_large(monkeypatch):
 
 
 @pytest.mark.parametrize("error", ERRORS)
-@pytest.mark.parametrize("on, ts", [("state", 0.5031), ("clock", 0.5031), ("clock", 0.5)])
+@pytest.mark.parametrize("on, ts", [("state", 0.5031), ("state", 0.5 + 0.3 * MIN_PIECE), ("clock", 0.5031),
+                                    ("clock", 0.5)])
 def test_a_large_loop_is_stepped_piece_by_piece(tmp_path, as_large, on, ts, error):
     """The known answers of test_a_law_that_switches_inside_a_step_is_judged_on_each_branch through
-    the large loop's steps: a switch inside a step (located), and a clock switch on a step's start
-    (t* = 0.5 = 50 dt: met by starting the step there on the new branch), each judged right to the
-    true margin of 3e-5 (the differences of a large loop's h rates are good to about 1e-6)."""
+    the large loop's steps: a switch inside a step (located), one closer than MIN_PIECE after a
+    step's start (stepped over by a sliver, found by one short trial), and a clock switch on a
+    step's start (t* = 0.5 = 50 dt: met by starting the step there on the new branch), each judged
+    right to the true margin of 3e-5 (the differences of a large loop's h rates are good to about
+    1e-6)."""
     from mpgspec.oracle.looplib import is_large
 
     law = f"if_else(x < {ts!r}, 1, 3)" if on == "state" else f"if_else(t < {ts!r}, 1, 3)"
