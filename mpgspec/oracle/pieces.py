@@ -256,17 +256,20 @@ class _Parts:
         on = _crossed(rc, [self.Gc(t, s)])
         return ca.if_else(on, d, 0), rc, on
 
-    def smooth_suspect(self, pieces: list, rc):
+    def smooth_suspect(self, pieces: list, rc, clocks: list = ()):
         """_suspect over a smooth step's RK4 pieces [(g at the piece's start, [g at its stages and
         end]), ...], with the clock guards (when split) compared by side with r_c (clock_start)
-        instead, at every stage of every piece: a clock switch at the step's start is met by the
-        shift, not by locating it; one anywhere else in the step is located."""
+        instead, at the clocks [(t, s), ...] of the pieces' stages and ends (Gc there, formed as the
+        stages form them: the same values as theirs, without taking them apart from the state
+        guards' at every stage): a clock switch
+        at the step's start is met by the shift, not by locating it; one anywhere else in the step
+        is located."""
         if rc is None:
             out = [_suspect(g0, gs) for g0, gs in pieces]
         else:
-            st, cl = self.state, self.clock
+            st = self.state
             out = [_suspect(g0[st], [g[st] for g in gs], True) for g0, gs in pieces] if st else []
-            out.append(_crossed(rc, [g[cl] for _g0, gs in pieces for g in [_g0, *gs]][1:]))
+            out.append(_crossed(rc, [self.Gc(tt, ss) for tt, ss in clocks]))
         v = out[0]
         for o in out[1:]:
             v = ca.logic_or(v, o)
@@ -491,7 +494,8 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
     dl, rc, on_c = parts.clock_start(t, s, h)
     k1s_, h0_, d0_, ur_, u_ = start(x, t + dl, s + dl, xs)
     xe_, k4_, gs_ = _trial(fg, x, t, s, xs, k1s_, h, te)
-    suspect = parts.smooth_suspect([(parts.G(x, t + dl, s + dl, xs), gs_)], rc)
+    suspect = parts.smooth_suspect([(parts.G(x, t + dl, s + dl, xs), gs_)], rc,
+                                   [(t + h / 2, s + h / 2), (t + te, s + te)])
     en_c, eh_c, _e = parts.clock_nudge(on_c, dl, x, t, s, xs, k1s_)
     smooth = cse(ca.Function("smooth", [z], [*inline(finish, z, h, te, xe_, k4_, 0, en_c, eh_c, h0_, d0_, ur_, u_),
                                               suspect]))
@@ -611,8 +615,11 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     km_, gm_ = fg(xm_, t + hh, s + hh, xs)
     xe_2, _k4, gb_ = _trial(fg, xm_, t + hh, s + hh, xs, km_, hh, te - hh)
     xce_2, _k4, gc_ = _trial(fg, xc, t, s, xs, kc_, h, te)
+    th, sh = t + hh, s + hh
+    clocks = [(t + hh / 2, s + hh / 2), (th, sh), (th + hh / 2, sh + hh / 2), (th + (te - hh), sh + (te - hh)),
+              (t + h / 2, s + h / 2), (t + te, s + te)]  # the stages' and ends' clocks: halves, companion
     suspect = parts.smooth_suspect([(parts.G(x, t + dl, s + dl, xs), ga_), (gm_, gb_),
-                                    (parts.G(xc, t + dl, s + dl, xs), gc_)], rc)
+                                    (parts.G(xc, t + dl, s + dl, xs), gc_)], rc, clocks)
     en_j, eh_j, e_j = parts.clock_nudge(on_c, dl, x, t, s, xs, k1_)
     en_c, eh_c, _e = parts.clock_nudge(on_c, dl, xc, t, s, xs, kc_)
     smooth = cse(ca.Function("smooth2", [z], [*inline(finish, z, h, te, xe_2, xce_2, 0, en_j + en_c, eh_j + eh_c,
