@@ -371,7 +371,7 @@ def _guarded_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundari
     """_step_body for a loop with guards: the step ends where a guard first crosses (pieces.py)."""
     start, end, _f = _ends(prim)
     body = guarded_body(prim, dt, start, end, _jump(prim), _margin(prim), with_state, boundaries,
-                                _h_rows(len(prim.h_names)))
+                        _h_rows(len(prim.h_names)))
     return body, 2 * prim.system.nx + 2
 
 
@@ -422,7 +422,7 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     if guarded(prim):
         start = _ends(prim)[0]
         body = guarded_doubling_body(prim, dt, start, _at_end(prim, start), _loop(prim), _jump(prim),
-                                             _margin(prim), with_state, boundaries, _h_rows(nh))
+                                     _margin(prim), with_state, boundaries, _h_rows(nh))
         return body, 3 * nx + 2
     held = prim.sampled is not None
     start, _end, f = _ends(prim, held)

@@ -230,6 +230,9 @@ class JudgedChunk:
 
     def bound(self, n: int) -> tuple:
         """(evaluate, z_in, z_final, None): the chunk for a batch of n bound to numpy arrays, as Chunk.bound."""
+        return (*self._bound(n)[1:], None)
+
+    def _bound(self, n: int) -> tuple:
         if n not in self._buffers:
             F = self.fn.map(n, "serial")
             buf, ev = F.buffer()
@@ -237,19 +240,19 @@ class JudgedChunk:
             buf.set_arg(0, memoryview(zin))
             buf.set_res(0, memoryview(zf))
             self._buffers[n] = (buf, ev, zin, zf)  # buf keeps the bindings alive
-        return (*self._buffers[n][1:], None)
+        return self._buffers[n]
 
     def run(self, Z: np.ndarray) -> np.ndarray:
         """[z; J] of every column after K steps, as a view of an output buffer for this many columns
         (valid until the next call with as many); a failed evaluation raises."""
         n = Z.shape[1]
-        ev, zin, zf, _ = self.bound(n)
+        buf, ev, zin, zf = self._bound(n)
         zin.reshape(Z.shape[0], n, order="F")[:] = Z
         ev()
-        if self._buffers[n][0].ret():
+        if buf.ret():
             zf[:] = np.nan
-            raise RuntimeError(f"the compiled rollout failed (status {self._buffers[n][0].ret()}): an evaluation "
-                               "inside it (e.g. an optimisation-based control law) returned an error")
+            raise RuntimeError(f"the compiled rollout failed (status {buf.ret()}): an evaluation inside it "
+                               "(e.g. an optimisation-based control law) returned an error")
         return zf.reshape(Z.shape[0], n, order="F")
 
 

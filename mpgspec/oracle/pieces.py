@@ -78,6 +78,12 @@ def _rows(v, sizes: tuple) -> list:
     return ca.vertsplit(v, offsets)
 
 
+def _only_where(flag, v, sizes: tuple) -> list:
+    """The parts (_rows) of the MX column v, evaluated only where `flag` (a conditional: its code
+    runs only then), zeros elsewhere."""
+    return _rows(ca.if_else(flag, v, ca.MX.zeros(v.shape[0]), True), sizes)
+
+
 def _sides(r, gs: list):
     """Each guard's least value times its reference side r over the values gs (a trial's stages
     and end): positive where no evaluation crossed it, <= 0 where one did (as _crossed decides)."""
@@ -256,14 +262,13 @@ class _Parts:
         on = _crossed(rc, [self.Gc(t, s)])
         return ca.if_else(on, d, 0), rc, on
 
-    def smooth_suspect(self, pieces: list, rc, clocks: list = ()):
+    def smooth_suspect(self, pieces: list, rc, clocks: list):
         """_suspect over a smooth step's RK4 pieces [(g at the piece's start, [g at its stages and
         end]), ...], with the clock guards (when split) compared by side with r_c (clock_start)
         instead, at the clocks [(t, s), ...] of the pieces' stages and ends (Gc there, formed as the
         stages form them: the same values as theirs, without taking them apart from the state
-        guards' at every stage): a clock switch
-        at the step's start is met by the shift, not by locating it; one anywhere else in the step
-        is located."""
+        guards' at every stage): a clock switch at the step's start is met by the shift, not by
+        locating it; one anywhere else in the step is located."""
         if rc is None:
             out = [_suspect(g0, gs) for g0, gs in pieces]
         else:
@@ -282,9 +287,7 @@ class _Parts:
         if self.Gc is None:
             return 0, ca.DM.zeros(self.nh), ca.DM.zeros(self.nx)
         e = shift * (self.fg(x, t, s, xs)[0] - k1)
-        v = ca.vertcat(ca.norm_2(e), self.onto_h(x, t, s, xs, ca.fabs(e)), e)
-        v = ca.if_else(on, v, ca.MX.zeros(v.shape[0]), True)
-        return v[0], v[1:1 + self.nh], v[1 + self.nh:]
+        return _only_where(on, ca.vertcat(ca.norm_2(e), self.onto_h(x, t, s, xs, ca.fabs(e)), e), (1, self.nh, self.nx))
 
     def nudged(self, x, t, s, xs, h):
         """(k1, r, on_guard, e) for a step of h from x: each guard's side r just after the start, the
@@ -303,9 +306,7 @@ class _Parts:
         maps it onto h only where the step starts on a guard (a conditional: 0 elsewhere, as the
         map of e = 0 is)."""
         v = ca.vertcat(ca.norm_2(e), self.onto_h(x, t, s, xs, ca.fabs(e)))
-        if self.large:
-            v = ca.if_else(on, v, ca.MX.zeros(v.shape[0]), True)
-        return _rows(v, (1, self.nh))
+        return _only_where(on, v, (1, self.nh)) if self.large else _rows(v, (1, self.nh))
 
     def located(self, x, t, s, xs, k1, h, r):
         """MX: (lo, hi, short): the bracket of the first crossing of a step of h from x, as narrow
@@ -388,7 +389,7 @@ class _Parts:
         xe, k4, _c, spread = self.rk4(x, t, s, xs, k1, tau, tau, r)
         extra = tau * spread
         v = ca.vertcat(tau, xe, k4, ca.norm_2(extra), self.onto_h(xe, t + tau, s + tau, xs, extra))
-        return _rows(ca.if_else(taken, v, ca.MX.zeros(v.shape[0]), True), (1, self.nx, self.nx, 1, self.nh))
+        return _only_where(taken, v, (1, self.nx, self.nx, 1, self.nh))
 
 
 def _choice(short, on_guard):
