@@ -112,7 +112,7 @@ def step_length(prim: CompiledPrimitive, dt: float, tc, x=None, s=None, edge: bo
     """dt, shortened so that the step ends on the next switching time of the clock and, once a
     contact event has happened, on the next edge of a window anchored on it (T_E + eps): x is the
     state at the step's start (its event clocks), s the time since switch-in. With `edge`, the pair
-    (step, 1 when the step ends on such a time) for step_end."""
+    (step, 1 when the step ends on such a time, up to SNAP) for step_end."""
     anchored = [w for w in prim.windows if isinstance(w, EventWindow) and w.edges]
     if anchored and x is None:
         raise ValueError("windows anchored on contact events need the state to place the step's end")
@@ -123,7 +123,7 @@ def step_length(prim: CompiledPrimitive, dt: float, tc, x=None, s=None, edge: bo
     if B:
         gap = ca.fmin(gap, _clock_gap(prim, tc))
     step = ca.fmin(ca.DM(dt), gap)
-    return (step, gap <= dt) if edge else step
+    return (step, gap <= dt + SNAP) if edge else step  # within SNAP before a switching time is at it
 
 
 def _clock_gap(prim: CompiledPrimitive, tc):

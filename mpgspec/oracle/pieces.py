@@ -22,7 +22,7 @@ from __future__ import annotations
 import casadi as ca
 
 from ..compile.primitive import CompiledPrimitive
-from .flow import active, one_sided_rate, step_end, step_length, wrap
+from .flow import LEFT, active, one_sided_rate, step_end, step_length, wrap
 from .jit import cse, cse_sx
 from .looplib import guarded, is_large, loop_and_guards, part
 
@@ -226,28 +226,32 @@ class _Parts:
         clock guard inside it (located by CLOCK_BISECTIONS bisections of the clock guards alone, no
         loop evaluation: a swing profile's switch is a step boundary like a contact switch), with its
         last stage and end sample inside (edge, flow.step_end). A crossing is looked for at the
-        step's middle and end, the times at which its stages check the guards."""
+        step's middle and at its last stage: at the end, or LEFT before it where the step ends on a
+        switching time (`edge`: a guard of that switch, such as a contact schedule's, which reads the
+        clock SNAP ahead, crosses between the last stage and the end; the switch is the step's end,
+        which steps already meet, not a crossing to locate one step early)."""
         if self.Gc is None:
             return h, edge
         r = self.Gc(t + NUDGE * h, s + NUDGE * h)
+        last = h if edge is None else ca.if_else(edge, h - ca.fmin(LEFT, h / 2), h)
         half = _crossed(r, [self.Gc(t + h / 2, s + h / 2)])
-        cut = ca.logic_or(half, _crossed(r, [self.Gc(t + h, s + h)]))
-        h_cut = ca.if_else(cut, self._clock_bisect(t, s, h, r, half), h, True)  # bisected only where cut
+        cut = ca.logic_or(half, _crossed(r, [self.Gc(t + last, s + last)]))
+        h_cut = ca.if_else(cut, self._clock_bisect(t, s, h, last, r, half), h, True)  # bisected only where cut
         return h_cut, (cut if edge is None else ca.logic_or(edge, cut))
 
-    def _clock_bisect(self, t, s, h, r, half):
-        """The upper end of the bracket of the first clock guard crossing in (0, h] after
+    def _clock_bisect(self, t, s, h, last, r, half):
+        """The upper end of the bracket of the first clock guard crossing in (0, last] after
         CLOCK_BISECTIONS bisections (in the half of the step where it lies)."""
         if "bisect" not in self._fns:
-            T, S, H, R, HF = (ca.SX.sym(n) for n in ("t", "s", "h", "r_", "half"))
+            T, S, H, L, HF = (ca.SX.sym(n) for n in ("t", "s", "h", "last", "half"))
             R = ca.SX.sym("r", r.shape[0])
-            lo, hi = ca.if_else(HF, 0, H / 2), ca.if_else(HF, H / 2, H)
+            lo, hi = ca.if_else(HF, 0, H / 2), ca.if_else(HF, H / 2, L)
             for _ in range(CLOCK_BISECTIONS):
                 mid = (lo + hi) / 2
                 c = _crossed(R, [self.Gc(T + mid, S + mid)])
                 lo, hi = ca.if_else(c, lo, mid), ca.if_else(c, mid, hi)
-            self._fns["bisect"] = ca.Function("clock_bisect", [T, S, H, R, HF], [hi])
-        return self._fns["bisect"](t, s, h, r, half)
+            self._fns["bisect"] = ca.Function("clock_bisect", [T, S, H, L, R, HF], [hi])
+        return self._fns["bisect"](t, s, h, last, r, half)
 
     def clock_start(self, t, s, h):
         """(shift, r_c, on) at a smooth step's start: a clock guard that changes sign between the

@@ -277,3 +277,25 @@ def test_a_large_loop_ends_its_steps_on_both_edges_of_a_clock_pulse(tmp_path, as
         for c in (0.8 - 1e-3, 0.8 + 1e-3):
             e = SafetyOracle(_switching(tmp_path, law, c), s)(np.array([0.0]), 0.0)
             assert (e.status == "safe") == (c > 0.8), (error, c, e)
+
+
+@pytest.mark.parametrize("error", ERRORS)
+@pytest.mark.parametrize("T", [0.6, 0.7])
+def test_a_large_loop_takes_a_switch_read_snap_early_at_the_step_that_ends_on_it(tmp_path, as_large, error, T):
+    """A law that reads the clock SNAP (1e-9 s) ahead, as a contact schedule's mode does, switches
+    at C's window edge T, where steps end (a clock summed from steps of 0.01 ends within rounding
+    of T): the step ending there takes its last stage inside and is not cut 1e-9 s early (which
+    cost a piece of 1e-9 s after it and dropped that much of the flow), so the rollout is the one
+    of the law switching on the edge itself: the same steps and margins, judged right to 3e-5
+    (x(T) = T)."""
+    from mpgspec.compile.contacts import SNAP
+
+    s = OracleSettings.with_accuracy("medium", horizon=3.0, dt=0.01, error=error, jit=False)
+    seen = {}
+    for law in (f"if_else(t + {SNAP!r} < {T!r}, 1, 3)", f"if_else(t < {T!r}, 1, 3)"):
+        for off in (-3e-5, 3e-5):
+            e = SafetyOracle(_switching(tmp_path, law, T + off, T=T), s)(np.array([0.0]), 0.0)
+            assert (e.status == "safe") == (off > 0), (law, e)
+            seen.setdefault(off, []).append((e.steps, e.lower_bounds["cap"]))
+    for off, ((n1, m1), (n2, m2)) in seen.items():
+        assert n1 == n2 and m1 == pytest.approx(m2, abs=1e-12) and m1 == pytest.approx(off, abs=2e-6), seen
