@@ -123,3 +123,30 @@ def test_a_backend_without_jump_maps_refuses_the_hybrid_drop(drop, drop_spec):
         build(drop_spec, settings.replace(method="scipy"))
     assert err.value.code == "MPG120" and "oracle.method" in err.value.format()
 
+
+
+def test_the_static_torque_on_two_feet_carries_no_rounding_noise(drop):
+    """With one or two feet in contact the base's rows of static_torque's normal equations are
+    rank-deficient (no turn about the line through two point contacts is resisted): a 1e-9 ridge
+    amplified rounding into about 4e-5 N m of torque noise under a state change of 1e-16, enough
+    for an input-saturation guard at its bound to chatter. With three or more feet the solve is
+    well posed and keeps its ridge of 1e-9."""
+    from mpgspec.compile.rigidbody import system as rs
+
+    prim, _s = drop
+    sys_ = prim.system
+    names = sys_.state_names
+    feet = tuple(sys_.model.contact_frames)
+    u = ca.Function("u", [sys_.x], [sys_.static_torque(feet)])
+    x = np.asarray(prim.x_star(0.0), float).ravel().copy()
+    rng = np.random.default_rng(3)
+    for held, ridge in ((feet[2:], rs.FEW_FEET_RIDGE), (feet, rs.RIDGE)):
+        for f in feet:
+            x[names.index(f"contact_{f}")] = float(f in held)
+        u0 = np.asarray(u(x)).ravel()
+        bump = np.zeros_like(x)
+        bump[:sys_.model.nq] = 1e-16 * rng.standard_normal(sys_.model.nq)
+        noise = max(np.abs(np.asarray(u(x + k * bump)).ravel() - u0).max() for k in (1, 2, 3))
+        assert np.isfinite(u0).all() and np.abs(u0).max() > 1.0, (held, u0)
+        assert noise < 1e-6, (held, noise)
+    assert rs.RIDGE == 1e-9 and rs.FEW_FEET_RIDGE > rs.RIDGE

@@ -33,6 +33,17 @@ BASE_Q = ["base_x", "base_y", "base_z", "base_qx", "base_qy", "base_qz", "base_q
 BASE_V = ["base_vx", "base_vy", "base_vz", "base_wx", "base_wy", "base_wz"]
 
 
+RIDGE = 1e-9
+"""Ridge of static_torque's normal equations where the feet in contact hold the base (three or more)."""
+FEW_FEET_RIDGE = 1e-6
+"""Ridge of static_torque's normal equations with one or two feet in contact: the base's rows are
+then rank-deficient (two point contacts cannot resist a turn about the line through them), so the
+matrix is singular and a ridge of 1e-9 divides its rounding by 1e-9: the torque came out with
+about 4e-5 N m of noise (A1, two feet), enough for an input-saturation guard sitting at its bound
+to change sign under a state change of 1e-16 (a guard that chatters, never resolved). With 1e-6
+the noise is about 3e-8 N m and the torque moves by about 7e-5 N m."""
+
+
 @dataclass
 class RigidBodyCompiledSystem(CompiledSystem):
     """CompiledSystem of a floating-base robot; xdot depends on the primitive's contact set."""
@@ -114,19 +125,21 @@ class RigidBodyCompiledSystem(CompiledSystem):
         xq = self.x[:nq]
         g = ca.substitute(self.dyn.nle_expr, ca.vertcat(self.dyn.q, self.dyn.v), ca.vertcat(xq, ca.DM.zeros(m.nv)))
         B = ca.DM(m.actuation_matrix)
+        ridge = RIDGE if len(contacts) > 2 else FEW_FEET_RIDGE
         if contacts:
             J = ca.substitute(self.dyn.contact_jacobian_expr(contacts), self.dyn.q, xq)
             if self.events:
                 flags = [self.contact_flag(f) for f in contacts]
                 J = ca.mtimes(ca.diag(ca.vertcat(*[fl for fl in flags for _ in range(3)])), J)
                 g = g * ca.if_else(sum(flags) > 0.5, 1, 0)
+                ridge = ca.if_else(sum(flags) > 2.5, RIDGE, FEW_FEET_RIDGE)
             A = ca.horzcat(B, J.T)
             w = [1.0] * m.nu + [100.0, 100.0, 0.01] * len(contacts)
         else:
             A, w = B, [1.0] * m.nu
         Winv = ca.DM(np.diag(1.0 / np.asarray(w)))
         AW = ca.mtimes(A, Winv)
-        y = dense_ldl_solve(ca.mtimes(AW, A.T) + 1e-9 * ca.DM.eye(A.shape[0]), g)
+        y = dense_ldl_solve(ca.mtimes(AW, A.T) + ridge * ca.DM.eye(A.shape[0]), g)
         return ca.mtimes(AW.T, y)[: m.nu]
 
     def project(self, x: ca.SX, u: ca.SX | None = None, s=ca.inf, k=None, w=None) -> ca.SX:
