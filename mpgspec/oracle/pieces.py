@@ -515,49 +515,17 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
 
 
 def _smooth_or_located(smooth: ca.Function, located: ca.Function) -> ca.Function:
-    """z -> (z after the step, its outputs): the smooth step (z -> (z after, outputs, crossed[, the
-    values its trial saw])), and where a guard crossed in it the located one instead (z[, seen] ->
-    its (z after, outputs); a switch: the located step's code runs only then, and the smooth step's
-    values are passed through, not computed again)."""
+    """z -> (z after the step, its outputs): the smooth step (z -> (z after, outputs, crossed)), and
+    where a guard crossed in it the located one instead (a switch: the located step's code runs
+    only then, and the smooth step's values are passed through, not computed again)."""
     Z = ca.MX.sym("z", smooth.size1_in(0))
-    zf, of, cross, *seen = smooth(Z)
+    zf, of, cross = smooth(Z)
     n, m = zf.shape[0], of.shape[0]
     zs, os_ = ca.MX.sym("z_smooth", n), ca.MX.sym("out_smooth", m)
-    S = [ca.MX.sym("seen", v.shape[0]) for v in seen]
-    take = ca.Function("located_step", [Z, zs, os_, *S], [ca.vertcat(*located(Z, *S))])
-    keep = ca.Function("smooth_step", [Z, zs, os_, *S], [ca.vertcat(zs, os_)])
-    v = ca.Function.if_else("smooth_or_located", take, keep)(cross, Z, zf, of, *seen)
+    take = ca.Function("located_step", [Z, zs, os_], [ca.vertcat(*located(Z))])
+    keep = ca.Function("smooth_step", [Z, zs, os_], [ca.vertcat(zs, os_)])
+    v = ca.Function.if_else("smooth_or_located", take, keep)(cross, Z, zf, of)
     return ca.Function("body", [Z], [v[:n], v[n:]])
-
-
-def _seen_or_again(parts: _Parts, z, sizes: tuple, h, te, trial: ca.Function) -> ca.Function:
-    """(z, seen) -> the doubling step's trial outputs (trial2's): the smooth step's own values
-    `seen` (its first stages, halves, companion step and guard values) where it nudged nothing, i.e.
-    no guard changes sign just after the step's start, its middle or the companion's start and no
-    clock guard at the start (checked here: one loop evaluation each), for then the trial is the
-    same evaluations at the same points; else `trial` taken again. A step after a located piece
-    that ended before a stage's crossing (the trajectory's crossing still ahead) reuses them."""
-    nx = parts.nx
-    S = parts.sym("seen", sum(sizes))
-    (k1, h0, d0, ur, u, h0c, uc, kc, xm, km, xe, xce, g0, g0c, gm, *rest) = _rows(S, sizes)
-    ga, gb, gc, on_c = rest[0:4], rest[4:8], rest[8:12], rest[12]
-    x, t, s, xs, xc = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2], z[2 * nx + 2:3 * nx + 2]
-    hh = h / 2
-    d, dm = NUDGE * h, NUDGE * hh  # as _Parts.nudged takes them
-    r = parts.fg(x + d * k1, t + d, s + d, xs)[1]
-    rm = parts.fg(xm + dm * km, t + hh + dm, s + hh + dm, xs)[1]
-    rc = parts.fg(xc + d * kc, t + d, s + d, xs)[1]
-    nudged = ca.logic_or(ca.logic_or(_crossed(r, [g0]), _crossed(rm, [gm])), ca.logic_or(_crossed(rc, [g0c]), on_c))
-    R = [parts.sym(n, parts.ng) for n in ("r", "rm", "rc")]
-    cross = ca.logic_or(_crossed(R[0], ga), _crossed(R[1], gb))
-    outs = [h, te, k1, h0, d0, ur, u, xe, cross, h0c, uc, kc, R[2], xce, _crossed(R[2], gc), R[0], ca.DM(0), ca.DM(0),
-            ca.DM.zeros(h0.shape[0]), ca.DM.zeros(nx)]
-    take = ca.Function("seen_trial", [z, S, *R], outs)
-    again = ca.Function("trial_again", [z, S, *R], list(trial(z)))
-    Zs, Ss = ca.MX.sym("z", z.shape[0]), ca.MX.sym("seen", S.shape[0])
-    rs = ca.Function("sides", [z, S], [r, rm, rc, nudged])(Zs, Ss)
-    return ca.Function("seen_or_again", [Zs, Ss], ca.Function.if_else("seen_or_trial", again, take)(rs[3], Zs, Ss, *rs[:3]))
-
 
 
 def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function, at_end: ca.Function,
@@ -595,8 +563,6 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     en0c, eh0c = parts.nudge_error(xc, t, s, xs, e0c, onc)
     trial = cse_sx(ca.Function("trial2", [z], [h, te, k1, h0, d0, u_raw, u, x_end, cross, h0c, uc, kc1, rc,
                                                xc_end, cross_c, r, on, en0 + en0c, eh0 + eh0c, e0]))
-    ng, nu = parts.ng, u.shape[0]
-    seen_sizes = (nx, parts.nh, parts.nh, nu, nu, parts.nh, nu, nx, nx, nx, nx, nx, ng, ng, ng, *[ng] * 12, 1)
     # the judged rollout (where a guard crosses in its halves or the companion's step): the piece before its
     # first crossing, both halves again over it (or a sliver across a crossing right after the start, or
     # the whole step unresolved when it starts on a guard)
@@ -616,9 +582,8 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     whole = ca.Function("whole2", M, [mh, mte, mxe, ca.MX(0), ca.MX(0), ca.MX.zeros(nh)])
     halves = ca.Function.if_else("halves_or_whole", located, whole)
     # the located step: trial, the judged piece, the companion over it, the outputs
-    Z, S = ca.MX.sym("z", 3 * nx + 2), ca.MX.sym("seen", sum(seen_sizes))
-    (hM, teM, k1M, h0M, d0M, urM, uM, xeM, crM, h0cM, ucM, kc1M, rcM, xceM, crcM, rM, onM, en0M, eh0M,
-     e0M) = _seen_or_again(parts, z, seen_sizes, h, te, trial)(Z, S) if parts.large else trial(Z)
+    Z = ca.MX.sym("z", 3 * nx + 2)
+    (hM, teM, k1M, h0M, d0M, urM, uM, xeM, crM, h0cM, ucM, kc1M, rcM, xceM, crcM, rM, onM, en0M, eh0M, e0M) = trial(Z)
     Xm, Tm, Sm, XSm, XCm = Z[:nx], Z[nx], Z[nx + 1], Z[nx + 2:2 * nx + 2], Z[2 * nx + 2:3 * nx + 2]
     tau, tep, xe, bad, en_j, eh_j = halves(crM, Xm, Tm, Sm, XSm, k1M, hM, teM, xeM, rM, onM)
     again = ca.logic_or(crcM, tau < hM)  # the companion crosses, or its step is the shorter piece
@@ -645,8 +610,8 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
                      ca.fabs(h0s - h0cs) + worse)
     finish = cse_sx(ca.Function("finish2", [z, T_, te_, xe_, xce_, b_, en_, eh_, off_, h0s, d0s, h0cs, urs, us, ucs],
                                 [ca.vertcat(x_next, t + T_, s + T_, xs, xc_next), out]))
-    located = ca.Function("located2", [Z, S] if parts.large else [Z], list(finish(Z, tau, tep, xe, xce, bad, en_j + en_c + en0M,
-                                                               eh_j + eh_c + eh0M, e0M, h0M, d0M, h0cM, urM, uM, ucM)))
+    located = ca.Function("located2", [Z], list(finish(Z, tau, tep, xe, xce, bad, en_j + en_c + en0M,
+                                                            eh_j + eh_c + eh0M, e0M, h0M, d0M, h0cM, urM, uM, ucM)))
     # the smooth step (no guard crosses in the judged halves or the companion's step), one SX function
     dl, rc, on_c = parts.clock_start(t, s, h)
     k1_, h0_, d0_, ur_, u_ = start(x, t + dl, s + dl, xs)
@@ -658,14 +623,10 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     th, sh = t + hh, s + hh
     clocks = [(t + hh / 2, s + hh / 2), (th, sh), (th + hh / 2, sh + hh / 2), (th + (te - hh), sh + (te - hh)),
               (t + h / 2, s + h / 2), (t + te, s + te)]  # the stages' and ends' clocks: halves, companion
-    g0_, g0c_ = parts.G(x, t + dl, s + dl, xs), parts.G(xc, t + dl, s + dl, xs)
-    suspect = parts.smooth_suspect([(g0_, ga_), (gm_, gb_), (g0c_, gc_)], rc, clocks)
+    suspect = parts.smooth_suspect([(parts.G(x, t + dl, s + dl, xs), ga_), (gm_, gb_),
+                                    (parts.G(xc, t + dl, s + dl, xs), gc_)], rc, clocks)
     en_j, eh_j, e_j = parts.clock_nudge(on_c, dl, x, t, s, xs, k1_)
     en_c, eh_c, _e = parts.clock_nudge(on_c, dl, xc, t, s, xs, kc_)
-    # a large loop's located step reuses what this trial saw (_seen_or_again)
-    seen = ca.vertcat(k1_, h0_, d0_, ur_, u_, h0c_, uc_, kc_, xm_, km_, xe_2, xce_2, g0_, g0c_, gm_, *ga_, *gb_, *gc_,
-                      on_c)
     smooth = cse(ca.Function("smooth2", [z], [*inline(finish, z, h, te, xe_2, xce_2, 0, en_j + en_c, eh_j + eh_c,
-                                                      e_j, h0_, d0_, h0c_, ur_, u_, uc_), suspect,
-                                              *([seen] if parts.large else [])]))
+                                                      e_j, h0_, d0_, h0c_, ur_, u_, uc_), suspect]))
     return _smooth_or_located(smooth, located)
