@@ -67,10 +67,20 @@ def step_end(prim: CompiledPrimitive, h, edge=None):
     under a contact schedule, and for any primitive when the step ends on a switching time of its
     clock or an edge of a window (`edge`, from step_length), so a mode, a law or a safety function
     switching there is not yet on; elsewhere at the end."""
-    inside = h - ca.fmin(LEFT, h / 2)
     if isinstance(prim.contacts, Schedule):
-        return inside
-    return h if edge is None else ca.if_else(edge, inside, h)
+        return inside(h)
+    return edge_end(h, edge)
+
+
+def inside(h):
+    """A step of h's last stage seen from inside it: LEFT before its end (at most half the step)."""
+    return h - ca.fmin(LEFT, h / 2)
+
+
+def edge_end(h, edge=None):
+    """A step's last stage: inside it where it ends on a switching time (`edge`, from step_length),
+    else at its end."""
+    return h if edge is None else ca.if_else(edge, inside(h), h)
 
 
 def jump_of(prim: CompiledPrimitive) -> ca.Function:

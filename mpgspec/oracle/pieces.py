@@ -22,7 +22,7 @@ from __future__ import annotations
 import casadi as ca
 
 from ..compile.primitive import CompiledPrimitive
-from .flow import LEFT, active, one_sided_rate, step_end, step_length, wrap
+from .flow import active, edge_end, one_sided_rate, step_end, step_length, wrap
 from .jit import cse, cse_sx
 from .looplib import guarded, is_large, loop_and_guards, part
 
@@ -233,7 +233,7 @@ class _Parts:
         if self.Gc is None:
             return h, edge
         r = self.Gc(t + NUDGE * h, s + NUDGE * h)
-        last = h if edge is None else ca.if_else(edge, h - ca.fmin(LEFT, h / 2), h)
+        last = edge_end(h, edge)
         half = _crossed(r, [self.Gc(t + h / 2, s + h / 2)])
         cut = ca.logic_or(half, _crossed(r, [self.Gc(t + last, s + last)]))
         h_cut = ca.if_else(cut, self._clock_bisect(t, s, h, last, r, half), h, True)  # bisected only where cut

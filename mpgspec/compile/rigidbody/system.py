@@ -125,14 +125,15 @@ class RigidBodyCompiledSystem(CompiledSystem):
         xq = self.x[:nq]
         g = ca.substitute(self.dyn.nle_expr, ca.vertcat(self.dyn.q, self.dyn.v), ca.vertcat(xq, ca.DM.zeros(m.nv)))
         B = ca.DM(m.actuation_matrix)
-        ridge = RIDGE if len(contacts) > 2 else FEW_FEET_RIDGE
+        ridge = FEW_FEET_RIDGE if 0 < len(contacts) <= 2 else RIDGE
         if contacts:
             J = ca.substitute(self.dyn.contact_jacobian_expr(contacts), self.dyn.q, xq)
             if self.events:
                 flags = [self.contact_flag(f) for f in contacts]
+                held = sum(flags)
                 J = ca.mtimes(ca.diag(ca.vertcat(*[fl for fl in flags for _ in range(3)])), J)
-                g = g * ca.if_else(sum(flags) > 0.5, 1, 0)
-                ridge = ca.if_else(sum(flags) > 2.5, RIDGE, FEW_FEET_RIDGE)
+                g = g * ca.if_else(held > 0.5, 1, 0)
+                ridge = ca.if_else(held > 2.5, RIDGE, FEW_FEET_RIDGE)  # none held: g = 0, the torque 0
             A = ca.horzcat(B, J.T)
             w = [1.0] * m.nu + [100.0, 100.0, 0.01] * len(contacts)
         else:
