@@ -120,14 +120,16 @@ def _suspect(g0, gs: list, resting: bool = False):
     return ca.mmax(doubt)
 
 
-def _trial(fg: ca.Function, x, t, s, xs, k1, tau, te, spread: bool = False):
+def _trial(fg: ca.Function, x, t, s, xs, k1, tau, te, spread: bool = False, end=None):
     """(x_end, k4, guard values at the three inner stages and the end) of one RK4 step of tau; with
-    `spread`, also the range (max - min, entry by entry) of the rates at the stages and the end."""
+    `spread`, also the range (max - min, entry by entry) of the rates at the stages and the end.
+    `end`: the clocks (t, s) at which the end is evaluated, formed as the caller's end sample forms
+    them (so that the two evaluations, equal, are one); (t + te, s + te) by default."""
     k2, g2 = fg(x + tau / 2 * k1, t + tau / 2, s + tau / 2, xs)
     k3, g3 = fg(x + tau / 2 * k2, t + tau / 2, s + tau / 2, xs)
     k4, g4 = fg(x + tau * k3, t + te, s + te, xs)
     x_end = x + tau / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    k5, g5 = fg(x_end, t + te, s + te, xs)
+    k5, g5 = fg(x_end, *(end or (t + te, s + te)), xs)
     if not spread:
         return x_end, k4, [g2, g3, g4, g5]
     hi, lo = k1, k1
@@ -556,7 +558,7 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     hh = h / 2
     x_mid, _k4, ga = _trial(fg, x, t, s, xs, k1, hh, hh)
     km, rm, _on, _e = parts.nudged(x_mid, t + hh, s + hh, xs, hh)
-    x_end, _k4, gb = _trial(fg, x_mid, t + hh, s + hh, xs, km, hh, te - hh)
+    x_end, _k4, gb = _trial(fg, x_mid, t + hh, s + hh, xs, km, hh, te - hh, end=(t + te, s + te))
     cross = ca.logic_or(_crossed(r, ga), _crossed(rm, gb))
     xc_end, _k4, cross_c, _sp = parts.rk4(xc, t, s, xs, kc1, h, te, rc)
     en0, eh0 = parts.nudge_error(x, t, s, xs, e0, on)
@@ -618,7 +620,7 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
     kc_, h0c_, _ucr, uc_ = loop(xc, t + dl, s + dl, xs)
     xm_, _k4, ga_ = _trial(fg, x, t, s, xs, k1_, hh, hh)
     km_, gm_ = fg(xm_, t + hh, s + hh, xs)
-    xe_2, _k4, gb_ = _trial(fg, xm_, t + hh, s + hh, xs, km_, hh, te - hh)
+    xe_2, _k4, gb_ = _trial(fg, xm_, t + hh, s + hh, xs, km_, hh, te - hh, end=(t + te, s + te))
     xce_2, _k4, gc_ = _trial(fg, xc, t, s, xs, kc_, h, te)
     th, sh = t + hh, s + hh
     clocks = [(t + hh / 2, s + hh / 2), (th, sh), (th + hh / 2, sh + hh / 2), (th + (te - hh), sh + (te - hh)),
