@@ -3,6 +3,7 @@
     mpgspec verify PATH [--out reports] [--format human|json|github]
     mpgspec plan PROJECT --from A --to B [--weight duration|peak_input|hops]
     mpgspec simulate PROJECT [--mode naive|graph|both] [--uncertain --runs N --seed S]
+    mpgspec diff OLD NEW [--format human|json|markdown|github]
     mpgspec schema [--kind project|primitive|system|report]
 
 plan and simulate reuse what verify wrote (reports/<project>/report.json) while it matches the

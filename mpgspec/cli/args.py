@@ -5,6 +5,7 @@ import argparse
 
 from .. import __version__
 from ..cores import usable_cores
+from .diff import cmd_diff
 from .plan import cmd_plan
 from .simulate import cmd_simulate
 from .tools import cmd_cache, cmd_gait, cmd_schema
@@ -129,6 +130,21 @@ def _gait_args(sub) -> None:
     g.set_defaults(fn=cmd_gait)
 
 
+def _diff_args(sub) -> None:
+    """`mpgspec diff OLD NEW`."""
+    d = _sub(sub, "diff", "what changed between two verified reports: edges, classes, windows, robust edges, "
+                          "inconclusive cells, assertions; exit 1 on a regression",
+             "  mpgspec diff baseline/pendulum reports/pendulum\n"
+             "  mpgspec diff old/report.json new/report.json --format markdown >> $GITHUB_STEP_SUMMARY\n"
+             "  mpgspec diff baseline/a1 reports/a1 --format github")
+    d.add_argument("old", metavar="OLD", help="the earlier report: a report.json or the folder holding it")
+    d.add_argument("new", metavar="NEW", help="the later report: a report.json or the folder holding it")
+    d.add_argument("--format", choices=("human", "json", "markdown", "github"), default="human",
+                   help="human: one line per change (default); json: one compact object; markdown: a table; "
+                        "github: workflow annotations, and the table in $GITHUB_STEP_SUMMARY when it is set")
+    d.set_defaults(fn=cmd_diff)
+
+
 def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="mpgspec", description="Verify safe transitions between motion primitives.",
@@ -137,6 +153,6 @@ def parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--version", action="version", version=f"mpgspec {__version__}")
     sub = ap.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
-    for add in (_verify_args, _plan_args, _simulate_args, _tool_args, _gait_args):
+    for add in (_verify_args, _plan_args, _simulate_args, _diff_args, _tool_args, _gait_args):
         add(sub)
     return ap

@@ -1,0 +1,108 @@
+"""`mpgspec diff OLD NEW`: two verifies that differ by one edited gain report exactly the edges and
+assertions that changed; a regression exits 1, none 0, an unusable report 2; a report edited or
+written elsewhere is compared with a note."""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from mpgspec.cli import main
+
+TINY_DIR = Path(__file__).resolve().parent.parent / "fixtures" / "cli_tiny"
+
+
+def run(capsys, *argv) -> tuple[int, str, str]:
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+@pytest.fixture(scope="module")
+def two_reports(tmp_path_factory) -> tuple[Path, Path]:
+    """The tiny project verified as it is and with Mid's gain kp edited from 2 to 0.3."""
+    base = tmp_path_factory.mktemp("diff")
+    folders = []
+    for tag, kp in (("old", "2"), ("new", "0.3")):
+        proj = base / tag / "tiny"
+        shutil.copytree(TINY_DIR, proj)
+        spec = proj / "project.yaml"
+        text = spec.read_text()
+        assert text.count("kp: [2]") == 1
+        spec.write_text(text.replace("kp: [2]", f"kp: [{kp}]"))
+        out = base / tag / "reports"
+        main(["verify", str(proj), "--out", str(out), "-q", "-j", "1"])
+        folders.append(out / "tiny")
+    return folders[0], folders[1]
+
+
+def _edges(folder: Path) -> dict:
+    report = json.loads((folder / "report.json").read_text())
+    return {(e["from"], e["to"]): e["class"] for e in report["edges"]}
+
+
+def test_an_edited_gain_reports_exactly_the_edges_that_changed(capsys, two_reports):
+    old, new = two_reports
+    eo, en = _edges(old), _edges(new)
+    assert eo != en  # the edit changes the graph, else the test proves nothing
+    rc, out, _ = run(capsys, "diff", old, new, "--format", "json")
+    d = json.loads(out)
+    assert {(e["from"], e["to"]) for e in d["edges_lost"]} == set(eo) - set(en)
+    assert {(e["from"], e["to"]) for e in d["edges_gained"]} == set(en) - set(eo)
+    assert {(e["from"], e["to"]) for e in d["class_changed"]} == {p for p in set(eo) & set(en) if eo[p] != en[p]}
+    assert d["regression"] is (bool(set(eo) - set(en)) or any(eo[p] != en[p] for p in set(eo) & set(en)))
+    assert rc == (1 if d["regression"] else 0)
+    failed = [a["description"] for a in d["assertions_changed"] if a["old"] == "pass" and a["new"] == "fail"]
+    assert "edge Left -> Mid of class 1" in failed
+    # the other way round: the same edges gained, nothing lost
+    rc, out, _ = run(capsys, "diff", new, old, "--format", "json")
+    back = json.loads(out)
+    assert {(e["from"], e["to"]) for e in back["edges_gained"]} == set(eo) - set(en)
+    assert not back["edges_lost"] and not back["regression"] and rc == 0
+
+
+def test_human_markdown_and_github_name_each_change(capsys, two_reports, tmp_path, monkeypatch):
+    old, new = two_reports
+    lost = sorted(set(_edges(old)) - set(_edges(new)))
+    rc, out, _ = run(capsys, "diff", old, new)
+    assert rc == 1 and "REGRESSION" in out.splitlines()[0]
+    for a, b in lost:
+        assert f"edge lost: {a} -> {b}" in out
+    summary = tmp_path / "summary.md"
+    monkeypatch.setenv("GITHUB_STEP_SUMMARY", str(summary))
+    rc, out, _ = run(capsys, "diff", old, new, "--format", "github")
+    assert rc == 1
+    for a, b in lost:
+        assert f"::error title=mpgspec diff: edge lost::{a} -> {b}" in out
+    md = summary.read_text()
+    assert "| level | change | what |" in md and "edge lost" in md
+
+
+def test_the_same_report_has_no_changes(capsys, two_reports):
+    old, _ = two_reports
+    rc, out, _ = run(capsys, "diff", old, old / "report.json")
+    assert rc == 0 and "no changes" in out and "no regression" in out
+
+
+def test_an_edited_report_is_compared_with_a_note(capsys, two_reports, tmp_path):
+    old, new = two_reports
+    edited = json.loads((new / "report.json").read_text())
+    edited["edges"] = [e for e in edited["edges"] if (e["from"], e["to"]) != ("Mid", "Right")]
+    p = tmp_path / "report.json"
+    p.write_text(json.dumps(edited))
+    rc, out, _ = run(capsys, "diff", old, p)
+    assert "note:" in out and "edited" in out
+    assert "edge lost: Mid -> Right" in out and rc == 1
+
+
+@pytest.mark.parametrize("content, expected", [(None, "no report.json here"), ("[1]", "a JSON object"),
+                                               ("{not json", "not a readable report.json")])
+def test_an_unusable_report_exits_2_naming_the_file(capsys, two_reports, tmp_path, content, expected):
+    old, _ = two_reports
+    p = tmp_path / "report.json"
+    if content is not None:
+        p.write_text(content)
+    rc, out, err = run(capsys, "diff", old, p)
+    assert rc == 2 and str(p) in err and expected in err and "Traceback" not in err
