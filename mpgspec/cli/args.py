@@ -30,7 +30,8 @@ def _verify_args(sub) -> None:
              "  mpgspec verify specs/                      every project below specs/\n"
              "  mpgspec verify specs/pendulum -j 1         everything in this process\n"
              "  mpgspec verify specs/ --format github      annotations and a step summary in GitHub Actions\n"
-             "  mpgspec verify specs/cart --format json --no-write > result.json")
+             "  mpgspec verify specs/cart --format json --no-write > result.json\n"
+             "  mpgspec verify specs/ --baseline main-reports/  exit 1 when an edge main had is lost")
     v.add_argument("paths", nargs="+", metavar="PATH", help="a project.yaml, a project folder, or a folder of projects")
     v.add_argument("--out", default="reports", metavar="DIR",
                    help="report folder; each project gets DIR/<project>/ (default: reports)")
@@ -53,6 +54,9 @@ def _verify_args(sub) -> None:
     v.add_argument("--verify-cache", type=float, default=None, metavar="F",
                    help="also run a fraction F (0-1) of the stored oracle results again, and every stored call of "
                         "the edges assertions name, and fail (exit 1) when one disagrees with what was stored")
+    v.add_argument("--baseline", metavar="DIR",
+                   help="reports of an earlier verify (e.g. the main branch's, a CI artifact): exit 1 when an edge "
+                        "DIR/<project>/report.json had is lost, unless the project's baseline.may_lose names it")
     v.add_argument("-q", "--quiet", action="store_true", help="no progress display")
     v.set_defaults(fn=cmd_verify)
 

@@ -123,6 +123,42 @@ def _human(res: VerifyResult, fmt: str):
         _print_errors(p.errors, fmt)
 
 
+def _against_baseline(res: VerifyResult, folder: str, fmt: str) -> int:
+    """--baseline DIR: each verified project against DIR/<project>/report.json (mpgspec diff); an
+    edge the baseline had and this run lost fails (exit 1) unless the project's baseline.may_lose
+    names it. A project without a baseline report is noted, not failed."""
+    from ..report.diff import diff_reports, load_for_diff
+    from ..spec.loader import load_project
+
+    failed = 0
+    for p in res.projects:
+        if p.report is None:
+            continue
+        path = Path(folder) / p.name / "report.json"
+        if not path.is_file():
+            print(_line(f"  NOTE  baseline: no {path}; {p.name} not compared", fmt))
+            continue
+        old, note = load_for_diff(path)
+        if note:
+            print(_line(f"  NOTE  baseline: {note}", fmt))
+        spec = load_project(p.path)
+        base = spec.project.baseline
+        allowed = {(e.from_, e.to) for e in (base.may_lose if base else [])}
+        where = spec.locate(("baseline", "may_lose")) if base else None
+        for e in diff_reports(old, p.report)["edges_lost"]:
+            text = f"baseline: edge {e['from']} -> {e['to']} (class {e['class']}) of {path} is lost"
+            if (e["from"], e["to"]) in allowed:
+                print(_line(f"  INFO  {text}, as baseline.may_lose allows", fmt))
+                continue
+            failed += 1
+            if fmt == "github":
+                at = {"file": where.file, "line": where.line, "column": where.column} if where else None
+                print(_annotation("error", text, at, "mpgspec baseline", file=p.path))
+            else:
+                print(_line(f"  FAIL  {text} (name it in baseline.may_lose if that is intended)", fmt))
+    return failed
+
+
 def _check_jobs(jobs: int) -> None:
     cores = os.cpu_count() or 1
     if not 1 <= jobs <= JOBS_PER_CORE * cores:
@@ -205,9 +241,10 @@ def cmd_verify(args) -> int:
             print(_line(summary(res.projects, time.perf_counter() - t0), args.format))
     if args.format == "github":
         _step_summary(res)
+    lost = _against_baseline(res, args.baseline, args.format) if getattr(args, "baseline", None) else 0
     mismatch = sum(int(((p.report or {}).get("timing") or {}).get("cache_mismatch", 0)) for p in res.projects)
     if mismatch:
         print(f"mpgspec: {mismatch} stored oracle results disagreed with a fresh run (--verify-cache): the result "
               "cache cannot be trusted; clear it with `mpgspec cache clear`", file=sys.stderr)
         return max(res.exit_code, 1)
-    return res.exit_code
+    return max(res.exit_code, 1) if lost else res.exit_code

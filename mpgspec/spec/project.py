@@ -152,6 +152,13 @@ class Uncertainty(UncertaintyModel):
     assertions: list[Assertion] = Field(default_factory=list)
 
 
+class Baseline(Strict):
+    """What `mpgspec verify --baseline DIR` accepts against an earlier report of the project."""
+
+    may_lose: list[EdgeRef] = Field(default_factory=list, description="edges the baseline had that may be "
+                                    "lost (an intended change); any other lost edge fails the run")
+
+
 class Project(Strict):
     """A system, its primitives, oracle settings and the CI assertions over the resulting graph."""
 
@@ -169,5 +176,7 @@ class Project(Strict):
     sequence: Sequence | None = None
     uncertainty: Uncertainty | None = Field(default=None, description="parameter ranges, disturbances and "
                                             "initial-state error the robust graph is checked against")
+    baseline: Baseline | None = Field(default=None, description="what `verify --baseline DIR` accepts against "
+                                      "an earlier report")
     crosscheck: CrossCheck | None = Field(default=None, description="replay the sequence's runs in an "
                                           "independent simulator (MuJoCo) and compare verdicts and trajectories")

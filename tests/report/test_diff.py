@@ -106,3 +106,40 @@ def test_an_unusable_report_exits_2_naming_the_file(capsys, two_reports, tmp_pat
         p.write_text(content)
     rc, out, err = run(capsys, "diff", old, p)
     assert rc == 2 and str(p) in err and expected in err and "Traceback" not in err
+
+
+def _without_assertions(tmp_path: Path, kp: str, extra: str = "") -> Path:
+    """The tiny project with Mid's gain kp and no assertions (its own run passes), plus `extra`."""
+    proj = tmp_path / "tiny"
+    shutil.copytree(TINY_DIR, proj)
+    spec = proj / "project.yaml"
+    text = spec.read_text().replace("kp: [2]", f"kp: [{kp}]")
+    spec.write_text(text[:text.index("assertions:")] + text[text.index("sequence:"):] + extra)
+    return proj
+
+
+def test_verify_baseline_fails_on_a_lost_edge_unless_the_spec_allows_it(capsys, two_reports, tmp_path, monkeypatch):
+    old, _ = two_reports
+    lost = sorted(set(_edges(old)) - set(_edges(two_reports[1])))
+    assert lost
+    proj = _without_assertions(tmp_path / "a", "0.3")
+    rc, out, _ = run(capsys, "verify", proj, "--out", tmp_path / "a" / "out", "-q", "-j", "1",
+                     "--baseline", old.parent)
+    assert rc == 1
+    for a, b in lost:
+        assert f"FAIL  baseline: edge {a} -> {b}" in out
+    monkeypatch.delenv("GITHUB_STEP_SUMMARY", raising=False)
+    rc, out, _ = run(capsys, "verify", proj, "--out", tmp_path / "a" / "out", "-q", "-j", "1",
+                     "--baseline", old.parent, "--format", "github")
+    assert rc == 1 and "::error file=" in out and "title=mpgspec baseline::baseline: edge" in out
+    allow = "baseline:\n  may_lose:\n" + "".join(f"    - {{from: {a}, to: {b}}}\n" for a, b in lost)
+    proj = _without_assertions(tmp_path / "b", "0.3", allow)
+    rc, out, _ = run(capsys, "verify", proj, "--out", tmp_path / "b" / "out", "-q", "-j", "1",
+                     "--baseline", old.parent)
+    assert rc == 0, out
+    for a, b in lost:
+        assert f"INFO  baseline: edge {a} -> {b}" in out and "may_lose allows" in out
+    # a project the baseline folder does not hold is noted, not failed
+    rc, out, _ = run(capsys, "verify", proj, "--out", tmp_path / "b" / "out", "-q", "-j", "1",
+                     "--baseline", tmp_path / "empty")
+    assert rc == 0 and "NOTE  baseline: no " in out
