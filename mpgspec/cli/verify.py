@@ -128,13 +128,18 @@ def _against_baseline(res: VerifyResult, folder: str, fmt: str) -> int:
     edge the baseline had and this run lost fails (exit 1) unless the project's baseline.may_lose
     names it. A project without a baseline report is noted, not failed."""
     from ..report.diff import diff_reports, load_for_diff
+    from ..report.files import ReportWriteError, project_folder
     from ..spec.loader import load_project
 
     failed = 0
     for p in res.projects:
         if p.report is None:
             continue
-        path = Path(folder) / p.name / "report.json"
+        try:
+            path = project_folder(folder, p.name)[1] / "report.json"
+        except ReportWriteError as e:  # a name that is not a folder inside DIR
+            print(_line(f"  NOTE  baseline: {e}; {p.name} not compared", fmt))
+            continue
         if not path.is_file():
             print(_line(f"  NOTE  baseline: no {path}; {p.name} not compared", fmt))
             continue
