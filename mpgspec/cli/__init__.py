@@ -4,6 +4,7 @@
     mpgspec plan PROJECT --from A --to B [--weight duration|peak_input|hops]
     mpgspec simulate PROJECT [--mode naive|graph|both] [--uncertain --runs N --seed S]
     mpgspec diff OLD NEW [--format human|json|markdown|github]
+    mpgspec explain [CODE]
     mpgspec schema [--kind project|primitive|system|report]
 
 plan and simulate reuse what verify wrote (reports/<project>/report.json) while it matches the

@@ -6,6 +6,7 @@ import argparse
 from .. import __version__
 from ..cores import usable_cores
 from .diff import cmd_diff
+from .explain import cmd_explain
 from .plan import cmd_plan
 from .simulate import cmd_simulate
 from .tools import cmd_cache, cmd_gait, cmd_schema
@@ -149,6 +150,14 @@ def _diff_args(sub) -> None:
     d.set_defaults(fn=cmd_diff)
 
 
+def _explain_args(sub) -> None:
+    """`mpgspec explain [CODE]`."""
+    e = _sub(sub, "explain", "what an error code (MPGnnn) means and how to fix it; without a code, all codes",
+             "  mpgspec explain MPG204\n  mpgspec explain 104\n  mpgspec explain")
+    e.add_argument("code", nargs="?", metavar="CODE", help="an error code such as MPG204 (or 204)")
+    e.set_defaults(fn=cmd_explain)
+
+
 def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="mpgspec", description="Verify safe transitions between motion primitives.",
@@ -157,6 +166,6 @@ def parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--version", action="version", version=f"mpgspec {__version__}")
     sub = ap.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
-    for add in (_verify_args, _plan_args, _simulate_args, _diff_args, _tool_args, _gait_args):
+    for add in (_verify_args, _plan_args, _simulate_args, _diff_args, _tool_args, _gait_args, _explain_args):
         add(sub)
     return ap
