@@ -43,7 +43,8 @@ PLACEHOLDER_POSITION = 9.0  # rad: beyond about 1.4 turns either way (URDFs writ
 
 @dataclass
 class AssumptionCheck:
-    """One check of one primitive: status pass, warn or fail, with the numbers behind it."""
+    """One check of one primitive: status pass, info (an expected note, e.g. a transient has no
+    stability test), warn (a finding that can hurt) or fail, with the numbers behind it."""
 
     primitive: str
     name: str
@@ -235,7 +236,7 @@ def local_stability(p: CompiledPrimitive, rel_tol: float = 1e-6) -> AssumptionCh
     if p.cls is PrimitiveClass.PERIODIC:
         return floquet_stability(p)
     if p.cls is not PrimitiveClass.FIXED:
-        return AssumptionCheck(p.name, "local_stability", "warn", "none",
+        return AssumptionCheck(p.name, "local_stability", "info", "none",
                                "no stability test for transient primitives (finite domain)", {})
     xs = p.x_star(0.0)
     nx = xs.size

@@ -55,6 +55,9 @@ def _verify_args(sub) -> None:
     v.add_argument("--verify-cache", type=float, default=None, metavar="F",
                    help="also run a fraction F (0-1) of the stored oracle results again, and every stored call of "
                         "the edges assertions name, and fail (exit 1) when one disagrees with what was stored")
+    v.add_argument("--strict", action="store_true",
+                   help="exit 1 on a warning too (a WARN assumption check, a cross-check disagreement); INFO notes "
+                        "(expected, such as a transient's missing stability test) never fail")
     v.add_argument("--baseline", metavar="DIR",
                    help="reports of an earlier verify (e.g. the main branch's, a CI artifact): exit 1 when an edge "
                         "DIR/<project>/report.json had is lost, unless the project's baseline.may_lose names it")

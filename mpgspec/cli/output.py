@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 from ..errors import EXIT_USAGE, gh_command, gh_plain
 from ..spec.yamlpos import format_context
 
-MARK = {"pass": "PASS", "fail": "FAIL", "error": "ERROR", "warn": "WARN"}
+MARK = {"pass": "PASS", "fail": "FAIL", "error": "ERROR", "warn": "WARN", "info": "INFO"}
 
 if TYPE_CHECKING:
     from ..pipeline.results import VerifyResult

@@ -108,7 +108,8 @@ def _human(res: VerifyResult, fmt: str):
                 continue
             text = f"assumption {c['name']} of {c['primitive']}: {c['message']}"
             if fmt == "github":
-                print(_annotation("warning" if c["status"] == "warn" else "error", text, c.get("location"),
+                kind = {"warn": "warning", "info": "notice"}.get(c["status"], "error")
+                print(_annotation(kind, text, c.get("location"),
                                   "mpgspec assumption", file=p.path))
             else:
                 out(f"  {c['status'].upper():5} {text}")
@@ -247,6 +248,10 @@ def cmd_verify(args) -> int:
     if args.format == "github":
         _step_summary(res)
     lost = _against_baseline(res, args.baseline, args.format) if getattr(args, "baseline", None) else 0
+    warned = sum(warning_count(p.report) for p in res.projects if p.report is not None)
+    if getattr(args, "strict", False) and warned:
+        print(_line(f"FAIL --strict: {warned} warning{'s' if warned != 1 else ''}", args.format))
+        lost += warned
     mismatch = sum(int(((p.report or {}).get("timing") or {}).get("cache_mismatch", 0)) for p in res.projects)
     if mismatch:
         print(f"mpgspec: {mismatch} stored oracle results disagreed with a fresh run (--verify-cache): the result "

@@ -123,6 +123,8 @@ def _summary(report: dict, ids: Anchors) -> dict:
                              "text": f"{c['name']}: {c['message']}", "href": "#" + ids.prim(c["primitive"]),
                              "row": f"#assumption-{k}"})
     problems[:0] = _disagreements(report)
+    order = {"error": 0, "fail": 1, "warn": 2, "info": 3}
+    problems.sort(key=lambda p: order.get(p["status"], 1))  # stable: FAIL, then WARN, then INFO last
     runs = ((report.get("sequence") or {}).get("runs") or {})
     warns = sum(p["status"] == "warn" for p in problems)
     status = report["status"]

@@ -297,7 +297,7 @@ class AssumptionCheck(_Strict):
 
     primitive: str
     name: str
-    status: Literal["pass", "warn", "fail"]
+    status: Literal["pass", "info", "warn", "fail"]
     level: Literal["certified", "computed", "empirical", "none"]
     message: str
     numbers: dict[str, Any]
