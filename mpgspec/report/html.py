@@ -186,7 +186,7 @@ def _sections(report: dict, v: dict) -> dict[str, list[dict]]:
 
 def _counts(items) -> str:
     c = Counter(x["status"] for x in items)
-    return ", ".join(f"{c[k]} {k}" for k in ("pass", "warn", "fail", "error") if c.get(k))
+    return ", ".join(f"{c[k]} {k}" for k in ("pass", "info", "warn", "fail", "error") if c.get(k))
 
 
 def _floquet(p: dict) -> dict | None:
