@@ -12,7 +12,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .trust import ReportError, _all_finite, _check_classes, _refuse, check_graph, check_integrity
+from .trust import (ReportError, _all_finite, _check_classes, _check_project, _check_robust, _refuse, check_graph,
+                    check_integrity)
 
 __all__ = ["diff_reports", "load_for_diff", "format_diff"]
 
@@ -38,8 +39,10 @@ def load_for_diff(path) -> tuple[dict, str]:
         raise _refused(p, "the report is malformed", "a JSON object", type(report).__name__)
     try:
         _all_finite(report, p)
-        _names, edges, transitions = check_graph(report, p)
+        _check_project(report.get("project"), p)
+        names, edges, transitions = check_graph(report, p)
         _check_classes(edges, transitions, p)
+        _check_robust(report.get("robust"), names, p)
     except ReportError as e:
         e.hint = HINT
         raise
@@ -55,6 +58,19 @@ def _refused(p, message: str, expected: str, found: str) -> ReportError:
     e = _refuse(p, "", message, expected, found)
     e.hint = HINT
     return e
+
+
+def _count(t: dict, key: str) -> float:
+    """A transition's count `key` (0 where the report has none or not a number)."""
+    c = t.get("counts")
+    v = c.get(key, 0) if isinstance(c, dict) else 0
+    return v if isinstance(v, (int, float)) and not isinstance(v, bool) else 0
+
+
+def _statuses(report: dict) -> dict:
+    items = report.get("assertions")
+    return {str(a.get("description")): a.get("status") for a in (items if isinstance(items, list) else [])
+            if isinstance(a, dict)}
 
 
 def _pairs(items) -> dict:
@@ -86,18 +102,17 @@ def diff_reports(old: dict, new: dict) -> dict:
     narrowed, widened, inconclusive = [], [], []
     for p in sorted(set(to) & set(tn) & set(eo) & set(en)):  # an edge in both: its windows and cells
         wo, wn = _width(to[p].get("windows")), _width(tn[p].get("windows"))
-        so, sn = (to[p].get("counts") or {}).get("safe", 0), (tn[p].get("counts") or {}).get("safe", 0)
+        so, sn = _count(to[p], "safe"), _count(tn[p], "safe")
         row = _edge(p) | {"old_width": wo, "new_width": wn, "old_safe_cells": so, "new_safe_cells": sn}
         if wn < wo - WIDTH_TOL or sn < so:
             narrowed.append(row)
         elif wn > wo + WIDTH_TOL or sn > so:
             widened.append(row)
-        io, in_ = (to[p].get("counts") or {}).get("inconclusive", 0), (tn[p].get("counts") or {}).get("inconclusive", 0)
+        io, in_ = _count(to[p], "inconclusive"), _count(tn[p], "inconclusive")
         if in_ > io:
             inconclusive.append(_edge(p) | {"old": io, "new": in_})
     ro, rn = _robust(old), _robust(new)
-    ao = {a.get("description"): a.get("status") for a in old.get("assertions") or []}
-    an = {a.get("description"): a.get("status") for a in new.get("assertions") or []}
+    ao, an = _statuses(old), _statuses(new)
     assertions = [{"description": d, "old": ao.get(d), "new": an.get(d)}
                   for d in sorted(set(ao) | set(an), key=str) if ao.get(d) != an.get(d)]
     out = {"old": _summary(old), "new": _summary(new), "edges_gained": gained, "edges_lost": lost,

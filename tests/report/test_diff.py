@@ -143,3 +143,19 @@ def test_verify_baseline_fails_on_a_lost_edge_unless_the_spec_allows_it(capsys, 
     rc, out, _ = run(capsys, "verify", proj, "--out", tmp_path / "b" / "out", "-q", "-j", "1",
                      "--baseline", tmp_path / "empty")
     assert rc == 0 and "NOTE  baseline: no " in out
+
+
+def test_odd_counts_and_assertions_do_not_break_the_comparison(capsys, two_reports, tmp_path):
+    old, new = two_reports
+    odd = json.loads((new / "report.json").read_text())
+    for t in odd["transitions"]:
+        t["counts"] = ["not", "an", "object"]
+    odd["assertions"] = 5
+    p = tmp_path / "report.json"
+    p.write_text(json.dumps(odd))
+    rc, out, err = run(capsys, "diff", old, p)
+    assert rc == 1 and "edge lost" in out and "internal error" not in err
+    odd["project"] = [1]
+    p.write_text(json.dumps(odd))
+    rc, out, err = run(capsys, "diff", old, p)
+    assert rc == 2 and "project" in err and "internal error" not in err
