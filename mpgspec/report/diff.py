@@ -129,30 +129,33 @@ def _summary(report: dict) -> dict:
             "edges": len(report.get("edges") or []), "generated_at": report.get("generated_at")}
 
 
+def _pair_text(e: dict) -> str:
+    return f"{e['from']} -> {e['to']}"
+
+
+def _assertion_level(a: dict) -> str:
+    return "error" if a["old"] == "pass" and a["new"] != "pass" else "notice"
+
+
+_CHANGES = (  # (key, level or a function of the row, kind, text of the row), in the order shown
+    ("edges_lost", "error", "edge lost", lambda e: f"{_pair_text(e)} (class {e['class']})"),
+    ("class_changed", "error", "class changed", lambda e: f"{_pair_text(e)}: class {e['old']} -> {e['new']}"),
+    ("robust_lost", "error", "robust edge lost", _pair_text),
+    ("assertions_changed", _assertion_level, "assertion",
+     lambda a: f"{a['description']}: {a['old'] or 'absent'} -> {a['new'] or 'absent'}"),
+    ("windows_narrowed", "warning", "window narrowed", lambda e: _window_text(e)),
+    ("inconclusive_more", "warning", "more inconclusive cells", lambda e: f"{_pair_text(e)}: {e['old']} -> {e['new']}"),
+    ("edges_gained", "notice", "edge gained", lambda e: f"{_pair_text(e)} (class {e['class']})"),
+    ("robust_gained", "notice", "robust edge gained", _pair_text),
+    ("windows_widened", "notice", "window widened", lambda e: _window_text(e)),
+)
+
+
 def _lines(d: dict) -> list[tuple[str, str, str]]:
     """(level, kind, text) for every change: level error for regressions, warning for narrowed
     windows and new inconclusive cells, notice for gains."""
-    out = []
-    for e in d["edges_lost"]:
-        out.append(("error", "edge lost", f"{e['from']} -> {e['to']} (class {e['class']})"))
-    for e in d["class_changed"]:
-        out.append(("error", "class changed", f"{e['from']} -> {e['to']}: class {e['old']} -> {e['new']}"))
-    for e in d["robust_lost"]:
-        out.append(("error", "robust edge lost", f"{e['from']} -> {e['to']}"))
-    for a in d["assertions_changed"]:
-        lvl = "error" if a["old"] == "pass" and a["new"] != "pass" else "notice"
-        out.append((lvl, "assertion", f"{a['description']}: {a['old'] or 'absent'} -> {a['new'] or 'absent'}"))
-    for e in d["windows_narrowed"]:
-        out.append(("warning", "window narrowed", _window_text(e)))
-    for e in d["inconclusive_more"]:
-        out.append(("warning", "more inconclusive cells", f"{e['from']} -> {e['to']}: {e['old']} -> {e['new']}"))
-    for e in d["edges_gained"]:
-        out.append(("notice", "edge gained", f"{e['from']} -> {e['to']} (class {e['class']})"))
-    for e in d["robust_gained"]:
-        out.append(("notice", "robust edge gained", f"{e['from']} -> {e['to']}"))
-    for e in d["windows_widened"]:
-        out.append(("notice", "window widened", _window_text(e)))
-    return out
+    return [(level(row) if callable(level) else level, kind, text(row))
+            for key, level, kind, text in _CHANGES for row in d[key]]
 
 
 def _window_text(e: dict) -> str:
