@@ -60,6 +60,19 @@ def _annotation(kind: str, message, where: dict | None, title: str | None = None
                       col=(where.get("column") or None) if line else None, title=title)
 
 
+def append_step_summary(text: str) -> None:
+    """text appended to $GITHUB_STEP_SUMMARY when it is set; a file that cannot be written is said
+    on stderr, not an error of the command."""
+    path = os.environ.get("GITHUB_STEP_SUMMARY")
+    if not path:
+        return
+    try:
+        with open(path, "a", encoding="utf-8") as f:
+            f.write(text)
+    except OSError as e:
+        print(f"mpgspec: cannot write the step summary {path}: {e}", file=sys.stderr)
+
+
 def _num(v, spec: str = ".3g") -> str:
     try:
         return format(float(v), spec)

@@ -15,7 +15,7 @@ from ..errors import UsageError
 from ..oracle.cache import VERIFY_ENV
 from ..report.findings import disagreements, warning_count
 from ..streams import stdout_to_stderr
-from .output import MARK, _annotation, _json_doc, _line, _num, _print_errors, _progress
+from .output import MARK, _annotation, _json_doc, _line, _num, _print_errors, _progress, append_step_summary
 
 JOBS_PER_CORE = 4
 
@@ -25,8 +25,7 @@ if TYPE_CHECKING:
 
 def _step_summary(res) -> None:
     """A Markdown table of the run appended to $GITHUB_STEP_SUMMARY (when set)."""
-    path = os.environ.get("GITHUB_STEP_SUMMARY")
-    if not path:
+    if not os.environ.get("GITHUB_STEP_SUMMARY"):
         return
 
     def cell(v) -> str:
@@ -50,11 +49,7 @@ def _step_summary(res) -> None:
                                                         if failed else ""), warns)) + " |")
         for e in p.errors:  # e.g. the reports could not be written
             rows.append(f"| {cell(p.name or p.path)} | ERROR | {cell(e.get('message', ''))} | | | | |")
-    try:
-        with open(path, "a", encoding="utf-8") as f:
-            f.write("### mpgspec verify\n\n" + "\n".join(rows) + "\n\n")
-    except OSError as e:
-        print(f"mpgspec: cannot write the step summary {path}: {e}", file=sys.stderr)
+    append_step_summary("### mpgspec verify\n\n" + "\n".join(rows) + "\n\n")
 
 
 def _inconclusive(r: dict) -> str:
@@ -124,10 +119,11 @@ def _human(res: VerifyResult, fmt: str):
         _print_errors(p.errors, fmt)
 
 
-def _against_baseline(res: VerifyResult, folder: str, fmt: str) -> int:
+def _against_baseline(res: VerifyResult, folder: str, fmt: str, allow_paths) -> int:
     """--baseline DIR: each verified project against DIR/<project>/report.json (mpgspec diff); an
     edge the baseline had and this run lost fails (exit 1) unless the project's baseline.may_lose
-    names it. A project without a baseline report is noted, not failed."""
+    names it. A project without a baseline report is noted, not failed. The spec is the one the run
+    compiled, or (a project verified in another process) read again with the run's allow_paths."""
     from ..report.diff import diff_reports, load_for_diff
     from ..report.files import ReportWriteError, project_folder
     from ..spec.loader import load_project
@@ -147,7 +143,7 @@ def _against_baseline(res: VerifyResult, folder: str, fmt: str) -> int:
         old, note = load_for_diff(path)
         if note:
             print(_line(f"  NOTE  baseline: {note}", fmt))
-        spec = load_project(p.path)
+        spec = p.compiled.spec if p.compiled is not None else load_project(p.path, allow_paths)
         base = spec.project.baseline
         allowed = {(e.from_, e.to) for e in (base.may_lose if base else [])}
         where = spec.locate(("baseline", "may_lose")) if base else None
@@ -247,14 +243,15 @@ def cmd_verify(args) -> int:
             print(_line(summary(res.projects, time.perf_counter() - t0), args.format))
     if args.format == "github":
         _step_summary(res)
-    lost = _against_baseline(res, args.baseline, args.format) if getattr(args, "baseline", None) else 0
+    lost = _against_baseline(res, args.baseline, args.format, args.allow_path or None) \
+        if getattr(args, "baseline", None) else 0
     warned = sum(warning_count(p.report) for p in res.projects if p.report is not None)
-    if getattr(args, "strict", False) and warned:
+    strict_failed = getattr(args, "strict", False) and warned > 0
+    if strict_failed:
         print(_line(f"FAIL --strict: {warned} warning{'s' if warned != 1 else ''}", args.format))
-        lost += warned
     mismatch = sum(int(((p.report or {}).get("timing") or {}).get("cache_mismatch", 0)) for p in res.projects)
     if mismatch:
         print(f"mpgspec: {mismatch} stored oracle results disagreed with a fresh run (--verify-cache): the result "
               "cache cannot be trusted; clear it with `mpgspec cache clear`", file=sys.stderr)
         return max(res.exit_code, 1)
-    return max(res.exit_code, 1) if lost else res.exit_code
+    return max(res.exit_code, 1) if lost or strict_failed else res.exit_code

@@ -159,3 +159,35 @@ def test_odd_counts_and_assertions_do_not_break_the_comparison(capsys, two_repor
     p.write_text(json.dumps(odd))
     rc, out, err = run(capsys, "diff", old, p)
     assert rc == 2 and "project" in err and "internal error" not in err
+
+
+def test_verify_baseline_reads_a_spec_with_files_in_an_allowed_folder(capsys, two_reports, tmp_path):
+    """The baseline check takes the spec as the run did: a primitive file in an --allow-path folder
+    is no error, in this process (-j 1) and with projects verified side by side in other processes."""
+    old, _ = two_reports
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    (shared / "mid.yaml").write_text("name: Mid\nclass: fixed\nsetpoint: {expr: [0.6]}\n"
+                                     "controller: {type: pd, outputs: [x], kp: [2], kd: [0]}\nroa: {radius: 0.05}\n")
+    projects = []
+    for tag in ("a", "b"):
+        proj = _without_assertions(tmp_path / tag, "2")
+        spec = proj / "project.yaml"
+        text = spec.read_text()
+        block = text[text.index("  - name: Mid"):text.index("  - name: Right")]
+        text = text.replace(block, f"  - {shared / 'mid.yaml'}\n")
+        spec.write_text(text if tag == "a" else text.replace("project: tiny", "project: tiny_b", 1))
+        projects.append(proj)
+    for jobs, paths in (("1", projects[:1]), ("2", projects)):
+        rc, out, err = run(capsys, "verify", *paths, "--out", tmp_path / "out", "-q", "-j", jobs,
+                           "--allow-path", shared, "--baseline", old.parent)
+        assert rc == 0 and "MPG305" not in out + err, out + err
+    assert "NOTE  baseline: no " in out  # tiny_b has no baseline report: noted only
+
+
+def test_an_unwritable_step_summary_is_said_not_an_internal_error(capsys, two_reports, tmp_path, monkeypatch):
+    old, new = two_reports
+    monkeypatch.setenv("GITHUB_STEP_SUMMARY", str(tmp_path / "no_such_folder" / "summary.md"))
+    rc, out, err = run(capsys, "diff", old, new, "--format", "github")
+    assert rc == 1 and "::error title=mpgspec diff: edge lost::" in out
+    assert "cannot write the step summary" in err and "internal error" not in err
