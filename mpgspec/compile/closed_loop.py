@@ -59,6 +59,7 @@ class CompiledPrimitive:
     loop_u: ca.Function | None = None  # (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): the open loop under a
     # given input, every safety function active (as loop_raw); set with `sampled`
     guards: Guards = field(default_factory=Guards)  # where f_cl switches or kinks (compile/guards.py)
+    grid_phase: float = 0.0  # clock of a periodic primitive's first grid sample (spec: grid.phase)
     cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
 
     def __reduce__(self):
@@ -109,7 +110,7 @@ class CompiledPrimitive:
         return (0.0, 0.0)
 
     def clock_grid(self, n: int, role: str = "B") -> np.ndarray:
-        """Grid over the clock: one point (fixed), n over one period, n over the domain.
+        """Grid over the clock: one point (fixed), n over one period (from grid_phase on), n over the domain.
 
         As a source (role 'A') a transient's grid ends at t_f, where it hands over to `next`;
         as a target (role 'B') it stops short of t_f, where no time would be left to converge.
@@ -118,7 +119,7 @@ class CompiledPrimitive:
         if self.cls is PrimitiveClass.FIXED:
             return np.zeros(1)
         if self.cls is PrimitiveClass.PERIODIC:
-            return a + (b - a) * np.arange(n) / n
+            return a + np.sort(np.mod(self.grid_phase + (b - a) * np.arange(n) / n, b - a))
         if n == 1:
             return np.array([b if role == "A" else a])
         return np.linspace(a, b, n) if role == "A" else np.linspace(a, b, n + 1)[:-1]

@@ -190,6 +190,9 @@ class Grid(Strict):
 
     t_A: int = Field(default=12, ge=1)
     t_B: int = Field(default=12, ge=1)
+    phase: Number = Field(default=0.0, ge=0, description="clock of the first sample of a periodic primitive (s): "
+                          "the samples are phase + k T / n modulo the period T, so that they can fall where a "
+                          "switch is meant to happen (a walk's double support rather than its touchdown instants)")
 
 
 class Primitive(Strict):

@@ -309,13 +309,20 @@ class RigidBodyCompiledSystem(CompiledSystem):
         elif name == "touchdown_gap":  # a scheduled touchdown finds the foot on the ground
             out += touchdown_gaps(plan, env)
         elif name == "aerial":  # C_aerial: no foot below the ground
-            for f in m.contact_frames:  # a foot resting on the ground sits at 0 up to the contact drift
-                out.append((f"above_ground[{f}]", env[f"{f}_z"] + tol))
+            for f in m.contact_frames:  # a held foot sits at 0 up to the contact drift (tol); a free one must not sink
+                held = mode[f] if mode is not None else self.contact_flag(f)
+                allow = tol if f in contacts and held is None else \
+                    (AIRBORNE_TOLERANCE if held is None else ca.if_else(held > 0.5, tol, AIRBORNE_TOLERANCE))
+                out.append((f"above_ground[{f}]", env[f"{f}_z"] + allow))
         else:
             raise KeyError(name)
         return out
 
 
+AIRBORNE_TOLERANCE = 1e-5
+"""How far (m) a foot that is not held may be below the ground in `aerial`: 10 um, the depth a soft
+contact (MuJoCo's) still holds a foot at the instant it is released, and far above the rounding of a
+located touchdown; a held foot gets the contact drift's tolerance (1 mm)."""
 TOUCHDOWN_GAP = 0.003
 """Largest height (m) a foot may have over the last step before its scheduled touchdown."""
 TOUCHDOWN_WIDTH = 0.001

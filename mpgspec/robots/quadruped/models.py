@@ -34,6 +34,9 @@ class TrotController(Strict):
                                   "of the nominal stance (pose) with the feet on the ground")
     apex: Number = Field(default=0.07, gt=0, description="swing foot apex (m)")
     touchdown_speed: Number = Field(default=0.3, ge=0, description="downward foot speed at touchdown (m/s)")
+    touchdown_height: Number = Field(default=0.0, ge=0, le=0.003, description="swing foot height asked at the "
+                                     "scheduled touchdown (m): a foot that tracks its descent a little early "
+                                     "still arrives above the ground (`aerial` allows no swing foot below it)")
     kv: Number = Field(default=10.0, ge=0, description="CoM velocity gain (1/s)")
     raibert: Number = Field(default=0.08, ge=0, description="foot placement gain on the velocity error (s)")
     kp_swing: Number = Field(default=12000.0, gt=0, description="swing foot stiffness (N/m)")
@@ -56,6 +59,13 @@ class TrotController(Strict):
                                   "stance feet's wrench split")
     regularization: Number = Field(default=1e-4, gt=0, description="force regularization of the wrench split (the "
                                    "least-squares weight on ||f||^2)")
+    accel_limit: Number | None = Field(default=None, gt=0, description="largest horizontal CoM acceleration "
+                                       "(m/s^2) the stance wrench asks: the velocity error saturates at "
+                                       "accel_limit / kv, so a step in the speed command (a switch between walks) "
+                                       "is a ramp; default: no limit")
+    lift_fraction: Number = Field(default=0.0, ge=0, lt=1, description="share of the swing over which the swing "
+                                  "foot's horizontal pull ramps in from 0: the foot lifts before it moves over; "
+                                  "0: the path's pull from lift-off")
 
 
 class JumpController(Strict):

@@ -73,7 +73,8 @@ def gait_header(path) -> dict[str, str]:
 
 
 LEGACY = {"kz": 100.0, "dz": 20.0, "d_yaw": 10.0, "f_min": 10.0, "regularization": 1e-4, "moment_weight": 10.0,
-          "cone_fraction": 0.9, "placement_fraction": 0.8}
+          "cone_fraction": 0.9, "placement_fraction": 0.8, "lift_fraction": 0.0,
+          "touchdown_height": 0.0}
 """Settings the trot's law had as fixed numbers before they were spec fields: the hash of the inputs
 holds them only when they differ, so that tables generated before stay valid."""
 
@@ -82,10 +83,12 @@ def trot_inputs(c, sys, speed: float) -> str:
     """Hash of what a gait table depends on: the robot model and limits, the trot's settings (as the
     law resolves them: h_d, f_min) and the speed."""
     m = sys.model
-    ctrl = c.model_dump(mode="json", exclude={"gait", "speed", "pairs", "f_min_fraction", *LEGACY})
+    ctrl = c.model_dump(mode="json", exclude={"gait", "speed", "pairs", "f_min_fraction", "accel_limit", *LEGACY})
     ctrl["height"] = float(c.height) if c.height is not None else stance_height(sys, dict(c.pose))
     resolved = {**{k: float(getattr(c, k)) for k in LEGACY if k != "f_min"}, "f_min": min_normal_force(c, sys)}
     ctrl.update({k: v for k, v in resolved.items() if v != LEGACY[k]})
+    if c.accel_limit is not None:
+        ctrl["accel_limit"] = float(c.accel_limit)
     if c.pairs is not None:
         ctrl["pairs"] = [list(p) for p in c.pairs]
     robot = {"mass": round(float(m.total_mass), 9), "nq": m.nq, "feet": list(m.contact_frames),

@@ -13,7 +13,14 @@ as symbols of the clock) and uses the Jacobians of exactly those feet.
 - Swing feet follow a Cartesian PD (tau = h_leg + J_leg^T (Kp (p_d - p) + Kd (v_d - v))) on a
   path from the lift-off point to the Raibert target c + cdot (T_sw - tau) + cdot T_st / 2 +
   k_v (cdot - v_cmd) (a smoothstep done at placement_fraction of the swing) and a height profile up to the apex
-  and down to the ground at the scheduled touchdown with a set downward speed.
+  and down to touchdown_height at the scheduled touchdown with a set downward speed (a foot that
+  arrives early stays above the ground: no swing foot may be below it). With lift_fraction, the
+  horizontal pull ramps in over that share of the swing (the target starts at the foot itself): the foot
+  lifts before it moves over, so a leg whose torque saturates does not drag a lifting foot along or into
+  the ground.
+- With accel_limit, the CoM velocity error the stance wrench acts on saturates at accel_limit / k_v
+  (direction kept): a step in the speed command (a switch between walks) becomes a ramp, and the
+  horizontal force the feet must carry stays bounded.
 
 Step-to-step correction comes from where the next pair lands: with two point feet on a diagonal,
 no torque changes the angular momentum about the line through them, so a clock-driven joint PD
@@ -44,6 +51,7 @@ class TrotGains:
     height: float = float("nan")  # CoM height h_d (gains_of: the spec's, else the stance's)
     apex: float = 0.07  # swing foot apex
     touchdown_speed: float = 0.3  # downward foot speed at the scheduled touchdown
+    touchdown_height: float = 0.0  # swing foot height asked at the scheduled touchdown
     kv: float = 10.0  # CoM velocity gain (1/s)
     kz: float = 100.0  # height stiffness (1/s^2)
     dz: float = 20.0  # height damping (1/s)
@@ -58,6 +66,8 @@ class TrotGains:
     moment_weight: float = 10.0
     cone_fraction: float = 0.9  # share of the friction cone a stance force may use
     placement_fraction: float = 0.8  # share of the swing after which the foot is over its target
+    accel_limit: float = float("inf")  # largest horizontal CoM acceleration the stance wrench asks (m/s^2)
+    lift_fraction: float = 0.0  # share of the swing over which the swing foot's horizontal pull ramps in
     pair_a: tuple[str, ...] = ()  # feet that stand during the first swing
     pair_b: tuple[str, ...] = ()  # feet that swing first
 
@@ -84,6 +94,14 @@ def _smoothstep(sig):
     return 3 * s**2 - 2 * s**3, ca.if_else(ca.logic_and(sig > 0, sig < 1), 6 * s * (1 - s), 0)
 
 
+def _limited(e, bound: float):
+    """e scaled down to norm `bound` where it is longer (a saturation that keeps its direction);
+    e itself for an infinite bound."""
+    if not np.isfinite(bound):
+        return e
+    return e * ca.fmin(1, bound / ca.sqrt(ca.sumsqr(e) + 1e-12))
+
+
 def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np.ndarray,
                 offsets: dict[str, np.ndarray]) -> ca.SX:
     """u(x, t) of the trot on a RigidBodyCompiledSystem; mode[f] is 1 while foot f is held.
@@ -99,7 +117,7 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
     pos, vel, H, sub = tk.pos, tk.vel, tk.H, tk.sub
     v_cmd = ca.mtimes(Ryaw[:2, :2], ca.vertcat(g.speed, 0.0))  # g.speed may be a symbol (gait calibration)
     # trunk wrench about the CoM
-    force = tk.mass * ca.vertcat(g.kv * (v_cmd - cdot[:2]),
+    force = tk.mass * ca.vertcat(g.kv * _limited(v_cmd - cdot[:2], g.accel_limit / g.kv),
                                  tk.grav + g.kz * (g.height - com[2]) - g.dz * cdot[2])
     wrench = ca.vertcat(force, level_trunk_moment(tk, inertia, g.k_tilt, g.d_tilt, g.d_yaw))
     f_all = split_wrench(tk, flags, feet, wrench, g.moment_weight, g.regularization)
@@ -109,7 +127,8 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
     tc = wrap_clock(t, period)
     tau_swing = {g.pair_b: tc - g.double_support, g.pair_a: tc - half - g.double_support}
     z_up = lambda s: cubic_profile(s, g.swing / 2, ca.DM(0), ca.DM(0), ca.DM(g.apex), ca.DM(0))  # noqa: E731
-    z_dn = lambda s: cubic_profile(s, g.swing / 2, ca.DM(g.apex), ca.DM(0), ca.DM(0), ca.DM(-g.touchdown_speed))  # noqa: E731
+    z_dn = lambda s: cubic_profile(s, g.swing / 2, ca.DM(g.apex), ca.DM(0), ca.DM(g.touchdown_height),
+                                    ca.DM(-g.touchdown_speed))  # noqa: E731
     legs = {leg.foot: leg for leg in sys.legs}
     u = [None] * m.nu
     for i, f in enumerate(feet):
@@ -133,6 +152,9 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
         s, ds = _smoothstep(tau / (g.placement_fraction * g.swing))
         p_xy = p_lo + s * (p_td - p_lo)
         v_xy = ds / (g.placement_fraction * g.swing) * (p_td - p_lo)
+        if g.lift_fraction > 0:  # lift first: the horizontal pull towards the path ramps in from 0
+            w, _dw = _smoothstep(tau / (g.lift_fraction * g.swing))
+            p_xy, v_xy = pos[f][:2] + w * (p_xy - pos[f][:2]), w * v_xy
         zu, vu = z_up(tau)
         zd, vd = z_dn(tau - g.swing / 2)
         up = tau < g.swing / 2
@@ -188,9 +210,12 @@ def gains_of(c, speed: float, sys, ec=None) -> TrotGains:
     height = stance_height(sys, dict(c.pose)) if c.height is None else float(c.height)
     return TrotGains(speed=speed, swing=float(c.swing), double_support=float(c.double_support),
                      height=height, apex=float(c.apex), touchdown_speed=float(c.touchdown_speed),
+                     touchdown_height=float(c.touchdown_height),
                      kv=float(c.kv), raibert=float(c.raibert), kp_swing=float(c.kp_swing),
                      kd_swing=float(c.kd_swing), k_tilt=float(c.k_tilt), d_tilt=float(c.d_tilt),
                      kz=float(c.kz), dz=float(c.dz), d_yaw=float(c.d_yaw), f_min=min_normal_force(c, sys),
                      regularization=float(c.regularization), moment_weight=float(c.moment_weight),
                      cone_fraction=float(c.cone_fraction), placement_fraction=float(c.placement_fraction),
+                     accel_limit=float("inf") if c.accel_limit is None else float(c.accel_limit),
+                     lift_fraction=float(c.lift_fraction),
                      pair_a=pair_a, pair_b=pair_b)

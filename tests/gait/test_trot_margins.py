@@ -1,0 +1,101 @@
+"""The A1 trot's margins by design: swing feet stay above the ground on every walk's orbit, `aerial`
+allows no swing foot below it, a switch between speeds asks a bounded horizontal force, and a swing
+foot lifts before it is pulled over."""
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from mpgspec.compile.rigidbody.system import AIRBORNE_TOLERANCE
+
+WALKS = ["Walk(in_place)", "Walk(slow)", "Walk(medium)", "Walk(fast)"]
+
+
+@pytest.fixture(scope="module")
+def prims(a1_project):
+    return a1_project[1]
+
+
+def _feet_z(p):
+    sys = p.system
+    feet = sys.model.contact_frames
+    return feet, ca.Function("feet_z", [sys.x], [ca.vertcat(*[sys.extra_env[f"{f}_z"] for f in feet])])
+
+
+@pytest.mark.parametrize("name", WALKS)
+def test_swing_feet_stay_above_the_ground_on_the_orbit(prims, name):
+    """Every swing foot of x*(t) is above the ground, and half a millisecond before its scheduled
+    touchdown still at least 0.2 mm above it (the descent aims above the ground, so a foot that
+    runs ahead of its profile does not land early)."""
+    p = prims[name]
+    feet, fz = _feet_z(p)
+    ts = np.arange(0.0, p.period, 5e-4)
+    z = np.array([np.asarray(fz(p.x_star(t))).ravel() for t in ts])
+    for k, f in enumerate(feet):
+        swing = np.array([f not in p.contacts.held(t) for t in ts])
+        assert swing.any()
+        assert z[swing, k].min() > 0, (f, z[swing, k].min())
+        last = np.flatnonzero(swing)  # the sample before each touchdown: the end of each run of swing samples
+        ends = last[np.r_[np.diff(last) > 1, True]]
+        assert z[ends, k].min() > 2e-4, (f, z[ends, k])
+
+
+def test_aerial_allows_no_swing_foot_below_the_ground(prims):
+    """above_ground of a foot the schedule does not hold is z + 10 um; of a held foot z + 1 mm."""
+    p = prims["Walk(slow)"]
+    feet, fz = _feet_z(p)
+    t = 0.1  # pair B (FR, RL) swings, pair A (FL, RR) stands
+    x = np.asarray(p.x_star(t), float).ravel()
+    hv = np.asarray(p.h(x, t, 0.0, x), float).ravel()
+    z = np.asarray(fz(x)).ravel()
+    for k, f in enumerate(feet):
+        h = hv[p.h_names.index(f"above_ground[{f}]")]
+        allow = 1e-3 if f in p.contacts.held(t) else AIRBORNE_TOLERANCE
+        assert h == pytest.approx(z[k] + allow, abs=1e-12)
+    assert AIRBORNE_TOLERANCE <= 1e-5
+
+
+def _ground_force(p, x, t):
+    """Total external force on the robot but gravity (N): m a_com - m g, from the closed loop's
+    accelerations through pinocchio's centroidal momentum."""
+    m = p.system.model
+    pm = m.pin_model
+    data = pm.createData()
+    xdot = np.asarray(p.f_cl(x, t, 0.0, x), float).ravel()
+    q, v, a = x[:m.nq], x[m.nq:m.nq + m.nv], xdot[m.nq:m.nq + m.nv]
+    dh = pin.computeCentroidalMomentumTimeVariation(pm, data, q, v, a)
+    return np.asarray(dh.linear) - pin.computeTotalMass(pm) * pm.gravity.linear
+
+
+def test_a_switch_between_speeds_asks_a_bounded_horizontal_force(prims):
+    """Walk(in_place)'s law from Walk(fast)'s orbit (0.6 m/s too fast, all four feet down) asks the
+    ground for m * accel_limit of braking force (2 m/s^2: 27.5 N), not m * kv * 0.6 (82 N)."""
+    fast, slow = prims["Walk(fast)"], prims["Walk(in_place)"]
+    x = np.asarray(fast.x_star(0.005), float).ravel()
+    mass = pin.computeTotalMass(slow.system.model.pin_model)
+    F = _ground_force(slow, x, 0.005)
+    assert np.hypot(F[0], F[1]) == pytest.approx(mass * 2.0, rel=0.1)
+    assert F[0] < 0  # braking
+    # on its own orbit the limit does not bind: the force is the orbit's, far below the limit
+    y = np.asarray(slow.x_star(0.005), float).ravel()
+    assert np.hypot(*_ground_force(slow, y, 0.005)[:2]) < 0.5 * mass * 2.0
+
+
+def test_a_swing_foot_lifts_before_it_is_pulled_over(prims):
+    """Right after lift-off (clock 0.02 + 1 ms) a swing foot of Walk(in_place), started from
+    Walk(fast)'s state, is pulled up, not along: its horizontal acceleration is small against its
+    vertical one (lift_fraction ramps the horizontal pull in)."""
+    fast, walk = prims["Walk(fast)"], prims["Walk(in_place)"]
+    t = 0.021
+    x = np.asarray(fast.x_star(t), float).ravel()
+    m = walk.system.model
+    pm = m.pin_model
+    data = pm.createData()
+    xdot = np.asarray(walk.f_cl(x, t, 0.0, x), float).ravel()
+    q, v, a = x[:m.nq], x[m.nq:m.nq + m.nv], xdot[m.nq:m.nq + m.nv]
+    pin.forwardKinematics(pm, data, q, v, a)
+    pin.updateFramePlacements(pm, data)
+    for f in ("FR_foot", "RL_foot"):  # pair B swings first
+        fid = pm.getFrameId(f)
+        acc = pin.getFrameClassicalAcceleration(pm, data, fid, pin.LOCAL_WORLD_ALIGNED).linear
+        assert abs(acc[2]) > 2 * np.hypot(acc[0], acc[1]), (f, acc)
