@@ -53,6 +53,9 @@ class TrotController(Strict):
                                    "a foot's share in four-foot support)")
     cone_fraction: Number = Field(default=0.9, gt=0, le=1, description="share of the friction cone mu f_z a "
                                   "stance foot's tangential force may use")
+    friction: Number | None = Field(default=None, gt=0, description="friction coefficient mu the stance forces are "
+                                    "designed for: below the lowest the ground may have (the uncertainty range), "
+                                    "so the feet keep a margin there; default: the system's friction")
     placement_fraction: Number = Field(default=0.8, gt=0, le=1, description="share of the swing after which the "
                                        "foot is over its Raibert target")
     moment_weight: Number = Field(default=10.0, gt=0, description="weight of the moment against the force in the "

@@ -83,12 +83,13 @@ def trot_inputs(c, sys, speed: float) -> str:
     """Hash of what a gait table depends on: the robot model and limits, the trot's settings (as the
     law resolves them: h_d, f_min) and the speed."""
     m = sys.model
-    ctrl = c.model_dump(mode="json", exclude={"gait", "speed", "pairs", "f_min_fraction", "accel_limit", *LEGACY})
+    ctrl = c.model_dump(mode="json", exclude={"gait", "speed", "pairs", "f_min_fraction", "accel_limit", "friction", *LEGACY})
     ctrl["height"] = float(c.height) if c.height is not None else stance_height(sys, dict(c.pose))
     resolved = {**{k: float(getattr(c, k)) for k in LEGACY if k != "f_min"}, "f_min": min_normal_force(c, sys)}
     ctrl.update({k: v for k, v in resolved.items() if v != LEGACY[k]})
-    if c.accel_limit is not None:
-        ctrl["accel_limit"] = float(c.accel_limit)
+    for key in ("accel_limit", "friction"):  # spec fields added later: in the hash only when given
+        if getattr(c, key) is not None:
+            ctrl[key] = float(getattr(c, key))
     if c.pairs is not None:
         ctrl["pairs"] = [list(p) for p in c.pairs]
     robot = {"mass": round(float(m.total_mass), 9), "nq": m.nq, "feet": list(m.contact_frames),

@@ -9,7 +9,8 @@ as symbols of the clock) and uses the Jacobians of exactly those feet.
   to h_d and the trunk level (roll and pitch), with the yaw rate damped; x, y and yaw are not
   tracked, so the orbit can be moved and turned on flat ground (three neutral Floquet directions).
   Forces f = argmin ||A f - w||_S^2 + reg ||f||^2 in closed form, then f_z >= f_min and
-  |f_xy| <= cone_fraction mu f_z per foot; leg torques tau = h_leg - J_leg^T f.
+  |f_xy| <= cone_fraction mu f_z per foot (mu: the controller's design `friction`, which may sit below
+  the range the ground may have, else the system's); leg torques tau = h_leg - J_leg^T f.
 - Swing feet follow a Cartesian PD (tau = h_leg + J_leg^T (Kp (p_d - p) + Kd (v_d - v))) on a
   path from the lift-off point to the Raibert target c + cdot (T_sw - tau) + cdot T_st / 2 +
   k_v (cdot - v_cmd) (a smoothstep done at placement_fraction of the swing) and a height profile up to the apex
@@ -68,6 +69,7 @@ class TrotGains:
     placement_fraction: float = 0.8  # share of the swing after which the foot is over its target
     accel_limit: float = float("inf")  # largest horizontal CoM acceleration the stance wrench asks (m/s^2)
     lift_fraction: float = 0.0  # share of the swing over which the swing foot's horizontal pull ramps in
+    friction: float = float("nan")  # friction coefficient the stance forces are designed for (nan: the system's)
     pair_a: tuple[str, ...] = ()  # feet that stand during the first swing
     pair_b: tuple[str, ...] = ()  # feet that swing first
 
@@ -122,7 +124,7 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
     wrench = ca.vertcat(force, level_trunk_moment(tk, inertia, g.k_tilt, g.d_tilt, g.d_yaw))
     f_all = split_wrench(tk, flags, feet, wrench, g.moment_weight, g.regularization)
     dyn = sys.dyn
-    mu = float(sys.friction)
+    mu = float(sys.friction) if np.isnan(g.friction) else g.friction
     half, period = g.half, g.period
     tc = wrap_clock(t, period)
     tau_swing = {g.pair_b: tc - g.double_support, g.pair_a: tc - half - g.double_support}
@@ -218,4 +220,5 @@ def gains_of(c, speed: float, sys, ec=None) -> TrotGains:
                      cone_fraction=float(c.cone_fraction), placement_fraction=float(c.placement_fraction),
                      accel_limit=float("inf") if c.accel_limit is None else float(c.accel_limit),
                      lift_fraction=float(c.lift_fraction),
+                     friction=float("nan") if c.friction is None else float(c.friction),
                      pair_a=pair_a, pair_b=pair_b)
