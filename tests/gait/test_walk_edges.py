@@ -32,8 +32,13 @@ def test_stand_to_walk_in_place_is_safe_at_double_support_only(setup):
     ev = _call(prims, s, "Stand", "Walk(in_place)", 0.0, 0.0)
     assert ev.status == "safe" and 0.3 < ev.t_enter < 1.0
     assert ev.entry_margin > ev.entry_error > 0
-    mid = _call(prims, s, "Stand", "Walk(in_place)", 0.0, 0.09)  # a pair is lifted from standing at once
-    assert mid.status == "unsafe" and mid.violated.startswith("qdot_max")
+    # a pair is lifted from standing at once: never safe. The oracle's first sample already finds a
+    # swing foot 10 um inside `aerial` against an error of 2.7e-4 (inconclusive); eight times finer,
+    # the flow breaks a calf's speed limit
+    mid = _call(prims, s, "Stand", "Walk(in_place)", 0.0, 0.09)
+    assert mid.status in ("unsafe", "inconclusive")
+    fine = _call(prims, s, "Stand", "Walk(in_place)", 0.0, 0.09, dt=s.dt / 8)
+    assert fine.status == "unsafe" and fine.violated.startswith("qdot_max")
 
 
 def test_summed_local_estimates_cannot_resolve_the_walks_tube(setup):
@@ -50,6 +55,8 @@ def test_walks_are_left_for_stand_only_in_place_and_at_double_support(setup):
     assert _call(prims, s, "Walk(in_place)", "Stand", 0.09, 0.0).status == "unsafe"  # a foot in the air
 
 
+@pytest.mark.xfail(strict=True, reason="step doubling's estimate is not a bound: 10 ms after the trot's lift ramp "
+                   "ends, E's margin is off by 7.4e-8 where the estimate reads 3.8e-8 (README: What it does not bound)")
 def test_doubling_error_estimate_covers_the_true_error(setup):
     """E's margin along Stand -> Walk(in_place) at the oracle's step, against the same closed loop
     integrated at dt/8: the true error of the judged rollout stays below the doubling estimate."""
