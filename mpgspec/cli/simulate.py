@@ -68,7 +68,7 @@ def _simulate_uncertain(args) -> int:
                                         + (f" (unverified hand-over to {first['unverified_hand_over']})"
                                            if first.get("unverified_hand_over") else ""))
         print(f"  {m.replace('_', ' '):13} {r['safe_runs']:>5} / {r['runs']} safe ({100 * r['safe_fraction']:.1f} %), "
-              f"{r.get('reached_goal', 0)} safe in the last goal{why}")
+              f"{r.get('reached_goal', 0)} safe and in every goal{why}")
     return args.exit_code
 
 

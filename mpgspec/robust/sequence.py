@@ -152,10 +152,12 @@ class DisturbedSequences:
             runs.step(t, self.dist[min(int(k * dt / HOLD), len(self.dist) - 1)])
             new_goal = runs.commands(t - dt)
             runs.switch(t, new_goal)
+            runs.arrive()
         cur, safe = runs.cur, runs.safe
-        last = seq.commands[-1].goal if seq.commands else seq.start
+        every = safe & runs.arrived.all(axis=0)
         return {"safe_fraction": float(safe.mean()), "safe_runs": int(safe.sum()), "runs": self.n,
-                "reached_goal": int(sum(1 for r in range(self.n) if safe[r] and cur[r] == last)),
+                "reached_goal": int(every.sum()), "goals": list(runs.goals),
+                "goals_reached": [int((safe & a).sum()) for a in runs.arrived],
                 "first_violation": [f for f in runs.first if f is not None][:5], "final": cur,
                 "switches": [{"from": a, "to": b, "count": c} for (a, b), c in sorted(runs.taken.items())]}
 
@@ -174,6 +176,8 @@ class _Runs:
         self.safe, self.conv = np.ones(n, bool), np.zeros(n, bool)
         self.first = [None] * n
         self.goal, self.cmd = [seq.start] * n, 0
+        self.goals = [c.goal for c in seq.commands]
+        self.arrived = np.zeros((len(self.goals), n), bool)  # run r was in goal i while it was commanded
         self.taken: dict[tuple[str, str], int] = {}  # switches per edge over all runs
         self.trans = {name: p.cls is PrimitiveClass.TRANSIENT for name, p in prims.items()}
         c0 = _start_clock(prims[seq.start])
@@ -235,6 +239,13 @@ class _Runs:
         if new_goal is not None:
             self.goal = [new_goal] * self.ds.n
         return new_goal
+
+    def arrive(self) -> None:
+        """Marks the safe runs that are in the goal commanded now (a goal counts as reached only
+        when the run got there while it was the goal, not by never leaving it)."""
+        if self.cmd:
+            i = self.cmd - 1
+            self.arrived[i] |= self.safe & (self.cur_a == self.goals[i])
 
     def switch(self, t: float, new_goal: str | None) -> None:
         """Move every safe run that switches at t to its next primitive and switch those in."""

@@ -206,13 +206,16 @@ def test_simulate_uncertain_from_the_report_and_rebuilt_agree(capsys, tmp_path):
     modes = doc["modes"]
     assert modes["naive"]["safe_runs"] == 0 and modes["naive"]["first_violation"][0]["primitive"] == "Balance"
     assert modes["graph"]["safe_runs"] == 5 and modes["robust_graph"]["safe_fraction"] == 1.0
+    for m in modes.values():  # a run is in every goal only if it reached each while it was commanded
+        assert len(m["goals_reached"]) == len(m["goals"]) >= 1
+        assert m["reached_goal"] <= min(m["goals_reached"]) <= m["safe_runs"]
     rc, text2, _ = _cli(capsys, "simulate", PEND, "--out", out, "--uncertain", "--runs", "5", "--seed", "4",
                         "--format", "json", "--rebuild")
     assert rc == 0 and json.loads(text2)["modes"] == modes  # the report's graphs run as the rebuilt ones
     rc, text, _ = _cli(capsys, "simulate", PEND, "--out", out, "--uncertain", "--runs", "3")
     assert rc == 0 and "3 seeded runs (seed 0)" in text
     assert [ln.split()[0] for ln in text.splitlines()[1:]] == ["naive", "graph", "robust"]
-    assert "0 / 3 safe (0.0 %), 0 safe in the last goal; first unsafe at t = 2.010 s in Balance (" in text
+    assert "0 / 3 safe (0.0 %), 0 safe and in every goal; first unsafe at t = 2.010 s in Balance (" in text
     rc, _, err = _cli(capsys, "simulate", PEND, "--out", out, "--runs", "3")
     assert rc == 2 and "--uncertain" in err
     rc, _, err = _cli(capsys, "simulate", PEND, "--out", out, "--uncertain", "--runs", "0")
@@ -223,3 +226,23 @@ def test_simulate_uncertain_needs_an_uncertainty_block(capsys, tmp_path):
     path = _copy(tmp_path, None)
     rc, _, err = _cli(capsys, "simulate", path, "--out", tmp_path / "r", "--uncertain")
     assert rc == 2 and "declares no `uncertainty`" in err
+
+
+def test_a_run_that_never_leaves_its_start_reaches_none_of_the_later_goals():
+    """Goals Lie, Walk, Lie: a run that stays in Lie is in the first goal and, at the end, in Lie
+    again, but it never reached Walk while Walk was commanded, so it is not in every goal."""
+    import numpy as np
+
+    from mpgspec.robust.sequence import _Runs
+
+    runs = object.__new__(_Runs)
+    runs.goals, runs.cmd = ["Lie", "Walk", "Lie"], 0
+    runs.arrived = np.zeros((3, 2), bool)
+    runs.safe = np.array([True, True])
+    runs.cur_a = np.array(["Lie", "Lie"], dtype=object)
+    for cmd, where in ((1, ["Lie", "Lie"]), (2, ["Lie", "Walk"]), (3, ["Lie", "Lie"])):
+        runs.cmd, runs.cur_a = cmd, np.array(where, dtype=object)
+        runs.arrive()
+    assert runs.arrived[:, 0].tolist() == [True, False, True]  # stayed in Lie
+    assert runs.arrived[:, 1].tolist() == [True, True, True]  # went to Walk and back
+    assert (runs.safe & runs.arrived.all(axis=0)).tolist() == [False, True]
