@@ -7,7 +7,8 @@
 - local_stability: eigenvalues of the closed-loop Jacobian at a fixed setpoint (Floquet
   multipliers of the orbit for periodic primitives, certify/monodromy.py);
 - robot_limits (rigid bodies, only when it warns): input bounds, and with the joint_limits block
-  joint velocity and position limits, that look like a URDF's placeholders and so bound nothing.
+  joint velocity and position limits, that look like a URDF's placeholders and so bound nothing;
+- switching_points (only when it warns): a loop whose switching points are too many to locate.
 
 Periodic primitives whose state jumps (gaits under a contact schedule) are checked on the loop's
 own discrete flow (RK4 steps and impacts, certify/hybrid_orbit.py): x*(t) by its orbit defect,
@@ -325,8 +326,22 @@ def robot_limits(p: CompiledPrimitive) -> AssumptionCheck | None:
                                                                   "position": PLACEHOLDER_POSITION}})
 
 
+def switching_points(p: CompiledPrimitive) -> AssumptionCheck | None:
+    """A WARN when the loop's switching points were too many, or the loop too large, to be located
+    (compile/guards.py): its rollouts then step across kinks as if the loop were smooth, and their
+    error estimates do not bound the error there (None otherwise)."""
+    g = p.guards
+    if g.exposed or "more than" not in g.why:
+        return None
+    return AssumptionCheck(p.name, "switching_points", "warn", "computed",
+                           f"the closed loop's switching points are not located ({g.why}): its rollouts step "
+                           "across them as if it were smooth, so their error estimates are not bounds there",
+                           {"why": g.why})
+
+
 def check_primitive(p: CompiledPrimitive, h_tol: float = 1e-9, dyn_tol: float = 1e-3) -> list[AssumptionCheck]:
-    """All assumption checks of one primitive, in the order of Definition 1 (and robot_limits when it warns)."""
-    limits = robot_limits(p)
+    """All assumption checks of one primitive, in the order of Definition 1 (and robot_limits and
+    switching_points when they warn)."""
+    extra = [c for c in (robot_limits(p), switching_points(p)) if c is not None]
     return [setpoint_dynamics(p, dyn_tol), setpoint_safe(p, h_tol), roa_in_safe_set(p, h_tol), local_stability(p),
-            *([limits] if limits is not None else [])]
+            *extra]

@@ -28,9 +28,10 @@ _OPS = {*_DIFF, *_ARG, *_PERIODIC, *_RATIO, ca.OP_COPYSIGN}
 _LOGIC = (ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_AND, ca.OP_OR, ca.OP_NOT)
 MAX_NODES = 100_000
 """Loops larger than this many SX nodes are not searched (the search takes about 30 us a node)."""
-MAX_GUARDS = 64
+MAX_GUARDS = 128
 """More distinct guards than this in one loop are not located one by one (the loop is reported as
-not exposed): each is evaluated at every RK4 stage."""
+not exposed, and `mpgspec verify` warns): each is evaluated at every RK4 stage. A trot has about 70
+(its torque limits, gait phases, swing profile, ramps and contact flags)."""
 
 
 @dataclass

@@ -54,9 +54,11 @@ def simulate_project(project, modes=("naive", "graph"), out="reports", rebuild_:
     xc = None
     if xcs is not None:
         from ..execute.crosscheck import crosscheck_runs
+        from ..execute.crosscheck.executor import ExecutorPlan
 
+        plan = ExecutorPlan.of(g, table, spec.project.sequence, cp.prims) if "graph" in done else None
         xc = crosscheck_runs(cp.prims, done, spec.project.sequence.duration, xcs.replace(runs=modes),
-                             cp.settings.h_tolerance).runs
+                             cp.settings.h_tolerance, plan=plan).runs
     return {"runs": done, "expected": expected(spec), "crosscheck": xc}
 
 

@@ -15,6 +15,7 @@ from ..compile.primitive import CompiledPrimitive, compile_primitive
 from ..compile.system import compile_system
 from ..errors import SpecError
 from ..execute.crosscheck import CrossCheckResult, crosscheck_runs
+from ..execute.crosscheck.executor import ExecutorPlan
 from ..execute.crosscheck.settings import settings_of as crosscheck_settings
 from ..execute.sequence import SequenceRun, simulate_sequence
 from ..graph.build import build_graph
@@ -157,8 +158,9 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     if xcs is not None and runs:
         if progress:
             progress(spec.name, f"cross-check ({xcs.simulator})", 0, len(xcs.runs))
+        plan = ExecutorPlan.of(g, table["next"], spec.project.sequence, prims) if "graph" in runs else None
         xc = crosscheck_runs(prims, runs, spec.project.sequence.duration, xcs, settings.h_tolerance, memo=memo,
-                             executor=executor)
+                             executor=executor, plan=plan)
         if xcs.require_agreement:
             checks += agreement_assertions(xc, start=len(checks))
     t1 = time.perf_counter()

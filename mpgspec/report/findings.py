@@ -12,7 +12,8 @@ def _num(v, digits: int = 4) -> str:
 
 
 def disagreements(report: dict) -> list[dict]:
-    """{mode, text} for each cross-checked run whose verdict differs from mpgspec's."""
+    """{mode, text} for each cross-checked run whose verdict differs from mpgspec's, and for a graph
+    executor run on the simulator's own state that is unsafe or does not reach every goal."""
     xc = report.get("crosscheck")
     if not isinstance(xc, dict):
         return []
@@ -27,6 +28,21 @@ def disagreements(report: dict) -> list[dict]:
         first = f": {v.get('h')} of {v.get('primitive')} at t = {_num(v.get('t'))} s, {_num(v.get('value'))}" if v else ""
         out.append({"mode": mode, "text": f"{sim} finds the {mode} run {'safe' if theirs.get('safe') else 'unsafe'} "
                                           f"where mpgspec finds it {'safe' if ours.get('safe') else 'unsafe'}{first}"})
+    for mode, r in (xc.get("runs") or {}).items():
+        e = r.get("executor") if isinstance(r, dict) else None
+        if not isinstance(e, dict):
+            continue
+        v = e.get("first_violation") or {}
+        if not e.get("safe", True):
+            first = f": {v.get('h')} of {v.get('primitive')} at t = {_num(v.get('t'))} s, {_num(v.get('value'))}" \
+                if v else f": {e.get('failed')}" if e.get("failed") else ""
+            out.append({"mode": mode, "text": f"the {mode} executor deciding from {sim}'s state is unsafe{first}"})
+        elif not e.get("reached_every_goal", True):
+            w = e.get("waiting") or {}
+            where = f": it waits in {w.get('primitive')}, whose E its state never enters (best E margin " \
+                    f"{_num(w.get('best_roa_margin'))})" if w else ""
+            out.append({"mode": mode, "text": f"the {mode} executor deciding from {sim}'s state does not reach "
+                                              f"every goal{where}"})
     return out
 
 

@@ -11,6 +11,7 @@ import numpy as np
 from ...compile.primitive import CompiledPrimitive
 from ...oracle.tasks import Failed
 from ..sequence import SequenceRun
+from .executor import ExecutorPlan, StateExecutor
 from .mjcf import MujocoRobot, build_robot
 from .replay import Replay, replay
 from .settings import CrossCheckSettings
@@ -41,8 +42,11 @@ class CrossCheckResult:
 
 def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, SequenceRun], duration: float,
                     settings: CrossCheckSettings, h_tolerance: float = 0.0, robot: MujocoRobot | None = None,
-                    memo=None, executor=None) -> CrossCheckResult:
+                    memo=None, executor=None, plan: ExecutorPlan | None = None) -> CrossCheckResult:
     """Replay each run named in settings.runs (that exists) for `duration` s and compare it.
+
+    plan (optional): the graph executor's lookup table and verified switch times; the graph run is
+    then also run by the executor on the simulator's own state (its `executor` entry).
 
     memo (mpgspec.oracle.cache.Memo, optional) keeps each comparison by the content hash of what
     decides it: the run, the primitives' closed loops, the settings and the simulator's version.
@@ -52,15 +56,15 @@ def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, Sequenc
     robot = robot or build_robot(system, settings)
     res = CrossCheckResult(settings.simulator, settings, dict(robot.info))
     modes = [mode for mode in settings.runs if mode in runs]
-    keys = {m: _memo_key(memo, prims, runs[m], duration, settings, h_tolerance, robot) for m in modes} \
-        if memo is not None else {}
+    keys = {m: _memo_key(memo, prims, runs[m], duration, settings, h_tolerance, robot,
+                         plan if m == "graph" else None) for m in modes} if memo is not None else {}
     known = {m: memo.get(keys[m]) for m in keys}
     todo = [m for m in modes if known.get(m) is None]
     if executor is not None and len(todo) > 1:  # each worker builds the same MuJoCo model from the system
-        shared = (None, prims, {m: runs[m] for m in todo}, duration, settings, h_tolerance)
+        shared = (None, prims, {m: runs[m] for m in todo}, duration, settings, h_tolerance, plan)
         done = executor.map(_replayed, todo, label=f"cross-check ({settings.simulator})", shared=shared)
     else:
-        done = [_replayed((robot, prims, runs, duration, settings, h_tolerance), m) for m in todo]
+        done = [_replayed((robot, prims, runs, duration, settings, h_tolerance, plan), m) for m in todo]
     for m, out in zip(todo, done):
         if isinstance(out, Failed):  # as a replay raising here would
             raise RuntimeError(f"the {settings.simulator} replay of the {m} run failed: {out.error}")
@@ -74,10 +78,32 @@ def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, Sequenc
 def _replayed(shared: tuple, mode: str) -> dict:
     """One run replayed and compared: shared = (robot or None to build it, prims, runs, duration,
     settings, h_tolerance)."""
-    robot, prims, runs, duration, settings, h_tolerance = shared
+    robot, prims, runs, duration, settings, h_tolerance, plan = shared
     robot = robot or build_robot(next(iter(prims.values())).system, settings)
     rep = replay(robot, prims, runs[mode].switches, _until(runs[mode], duration), settings, h_tolerance)
-    return compare(prims, rep, runs[mode], settings.control_rate)
+    out = compare(prims, rep, runs[mode], settings.control_rate)
+    if plan is not None and mode == "graph":
+        out["executor"] = executed(robot, prims, plan, runs[mode], duration, settings, h_tolerance)
+    return out
+
+
+def executed(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], plan: ExecutorPlan, run: SequenceRun,
+             duration: float, settings: CrossCheckSettings, h_tolerance: float) -> dict:
+    """The graph executor run on the simulator's state for `duration` s: its verdict, switches and
+    when it arrived in each goal, beside mpgspec's run (whose switch times the replay reuses)."""
+    ex = StateExecutor(plan, prims, settings.control_rate)
+    rep = replay(robot, prims, run.switches[:1], duration, settings, h_tolerance, decide=ex.decide)
+    goals = ex.goals(run.switches)
+    lags = [g["arrived"] - g["arrived_mpgspec"] for g in goals
+            if g["arrived"] is not None and g["arrived_mpgspec"] is not None]
+    return {"safe": rep.safe and not ex.unverified, "first_violation": rep.first_violation,
+            "violation_samples": rep.violation_samples, "failed": rep.failed or ex.unverified,
+            "switches": rep.switches, "goals": goals,
+            "reached_every_goal": all(g["arrived"] is not None for g in goals),
+            "largest_lag_s": max((abs(v) for v in lags), default=None),
+            "waiting": {"primitive": ex.cur, "best_roa_margin": ex.best.get(ex.cur)} if ex.goal != ex.cur else None,
+            "contact": rep.contact,
+            "law_failures": dict(rep.law_failures), "wall_s": rep.wall_s}
 
 
 def _until(run: SequenceRun, duration: float) -> float:
@@ -89,9 +115,10 @@ def _until(run: SequenceRun, duration: float) -> float:
     return duration
 
 
-def _memo_key(memo, prims, run: SequenceRun, duration, settings, h_tolerance, robot) -> str:
-    used = sorted({s["to"] for s in run.switches})
-    text = json.dumps(run.to_dict(), sort_keys=True, default=float)
+def _memo_key(memo, prims, run: SequenceRun, duration, settings, h_tolerance, robot, plan=None) -> str:
+    used = sorted({s["to"] for s in run.switches} | ({n for r in plan.table.values() for n in r.values() if n}
+                                                    | set(plan.table) if plan is not None else set()))
+    text = json.dumps([run.to_dict(), plan.key() if plan is not None else None], sort_keys=True, default=float)
     return memo.key("crosscheck", hashlib.sha256(text.encode()).hexdigest(), [prims[n].digest() for n in used],
                     duration, sorted(settings.to_dict().items()), h_tolerance, sorted(robot.info.items()))
 

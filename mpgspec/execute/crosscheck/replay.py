@@ -133,8 +133,11 @@ class _Sim:
 
 
 def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: list[dict], duration: float,
-           settings: CrossCheckSettings, tol: float = 0.0) -> Replay:
-    """Run `switches` (from a SequenceRun: t, to, clock; the first is the start) for `duration` s."""
+           settings: CrossCheckSettings, tol: float = 0.0, decide=None) -> Replay:
+    """Run `switches` (from a SequenceRun: t, to, clock; the first is the start) for `duration` s.
+    With `decide` ((t, x, clock) -> {t, to, clock} or None, e.g. executor.StateExecutor.decide),
+    only the first switch is taken from `switches`: the others are decided from the simulator's
+    state at each control update."""
     t_wall = time.perf_counter()
     sim, rate, n_sub = _Sim(robot), settings.control_rate, settings.substeps
     first = switches[0]
@@ -158,11 +161,15 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
     out.switches.append({"t": 0.0, "from": None, "to": p.name, "clock": clock0, "roa_margin": None})
     contact = {"max_penetration": 0.0, "max_slip_speed": 0.0, "slip_at": None, "lift_off": None,
                "trunk_contact": None}
-    queue, sw = list(switches[1:]), (p, clock0, 0.0, x)
+    queue, sw = ([] if decide is not None else list(switches[1:])), (p, clock0, 0.0, x)
     law = _Law(p, rate, out_failures)  # the run starts from the settled state: a fresh solve
     for k in range(n):
         t = T[k]
         x = sim.state()
+        if decide is not None and np.isfinite(x).all():
+            made = decide(float(t), x, sw[1] + (t - sw[2]))
+            if made is not None:
+                queue.append(made)
         while queue and queue[0]["t"] <= t + 0.5 / rate:
             s = queue.pop(0)
             left, c_left = sw[0], sw[1] + (t - sw[2])

@@ -85,6 +85,33 @@ class CrossCheckSeries(_Strict):
     least_h: CrossCheckPair
 
 
+class ExecutorGoal(_Strict):
+    t: float = Field(description="when the goal was commanded")
+    goal: str
+    arrived: Num = Field(description="when the executor's run was first in the goal while it was commanded "
+                                     "(null: never)")
+    arrived_mpgspec: Num = Field(description="the same for mpgspec's graph run")
+
+
+class ExecutorRun(_Strict):
+    """The graph executor run on the simulator's own state: it switches when the simulator's state is
+    in E of the active primitive and its clock at a verified t_A, as mpgspec's graph run does on its own."""
+
+    safe: bool
+    first_violation: Violation | None
+    violation_samples: int
+    failed: str
+    switches: list[CrossCheckSwitch]
+    goals: list[ExecutorGoal]
+    reached_every_goal: bool
+    largest_lag_s: Num = Field(description="largest |arrival - mpgspec's arrival| over the goals both reached, s")
+    waiting: dict[str, Any] | None = Field(default=None, description="where the run ended short of its goal: the "
+                                           "primitive it waited in and the largest E margin its state reached there")
+    contact: CrossCheckContact
+    law_failures: dict[str, int] = Field(default_factory=dict)
+    wall_s: float
+
+
 class CrossCheckRun(_Strict):
     """One sequence run replayed in the simulator and compared with mpgspec's rollout."""
 
@@ -102,6 +129,8 @@ class CrossCheckRun(_Strict):
                                          "law (the ID-QP) that did not converge in the replay (their last iterate "
                                          "was applied)")
     series: CrossCheckSeries
+    executor: ExecutorRun | None = Field(default=None, description="the graph run: the executor deciding from "
+                                         "the simulator's own state, not from mpgspec's switch times")
 
 
 class CrossCheck(_Strict):
