@@ -372,3 +372,31 @@ def test_falling_body_touches_down_alike(tmp_path):
     assert r["divergence"]["com"]["max"] < 2 * np.sqrt(2 * 9.81 * 0.1) * settings.dt
     k_z = names.index("base_z")
     assert np.abs(x_mj[:, k_z] - x_mpg[late, k_z]).max() < 5e-4  # and agree again once it stands
+
+
+def test_the_graph_executor_switches_from_mujocos_state(a1):
+    """The graph run's executor on MuJoCo's state: Lie's settled start is inside E_Lie, so when
+    Stand is commanded at 0.02 s it switches at that control update to the verified t_B, and the
+    report's entry says every goal was reached, 0 s from mpgspec's run."""
+    from mpgspec.execute.crosscheck.executor import ExecutorPlan
+
+    prims, settings, robot = a1
+    seq = Sequence(start="Lie", duration=0.05, commands=[GoalCommand(t=0.0, goal="Lie"),
+                                                         GoalCommand(t=0.02, goal="Stand")])
+    table = {"Lie": {"Stand": "Stand", "Lie": None}, "Stand": {"Lie": "Lie", "Stand": None}}
+    plan = ExecutorPlan("Lie", ((0.0, "Lie"), (0.02, "Stand")), table,
+                        {("Lie", "Stand"): ([0.0], [0.0]), ("Stand", "Lie"): ([0.0], [0.0])})
+    run = simulate_sequence(prims, None, None, seq, settings, "naive")
+    xs = CrossCheckSettings(runs=("graph",), settle=0.01)
+    res = crosscheck_runs(prims, {"graph": run}, seq.duration, xs, robot=robot, plan=plan)
+    e = res.runs["graph"]["executor"]
+    assert [(s["from"], s["to"]) for s in e["switches"]] == [(None, "Lie"), ("Lie", "Stand")]
+    assert e["switches"][1]["t"] == pytest.approx(0.02) and e["switches"][1]["roa_margin"] > 0
+    assert e["safe"] and e["reached_every_goal"] and e["waiting"] is None
+    assert [g["arrived"] for g in e["goals"]] == [0.0, pytest.approx(0.02)]
+    assert e["largest_lag_s"] == pytest.approx(0.0, abs=1e-9)
+    # an executor that cannot enter E waits and says so: E_Lie shrunk to nothing
+    tiny = {**prims, "Lie": prims["Lie"].with_radius(1e-12)}
+    e2 = crosscheck_runs(tiny, {"graph": run}, seq.duration, xs, robot=robot, plan=plan).runs["graph"]["executor"]
+    assert not e2["reached_every_goal"] and e2["waiting"]["primitive"] == "Lie"
+    assert e2["waiting"]["best_roa_margin"] < 0 and len(e2["switches"]) == 1
