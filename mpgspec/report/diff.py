@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from ..errors import gh_escape_data, gh_escape_property, gh_plain
 from .trust import (ReportError, _all_finite, _check_classes, _check_project, _check_robust, _refuse, check_graph,
                     check_integrity)
 
@@ -164,6 +165,12 @@ def _window_text(e: dict) -> str:
     return f"{e['from']} -> {e['to']}: {wide}safe cells {e['old_safe_cells']} -> {e['new_safe_cells']}"
 
 
+def _cell(text) -> str:
+    """Text for one markdown table cell or line: '|' escaped, line breaks as spaces (names and
+    descriptions come from specs and must not break the table)."""
+    return str(text).replace("\\", "\\\\").replace("|", "\\|").replace("\r", " ").replace("\n", " ")
+
+
 def format_diff(d: dict, fmt: str, notes: list[str] = ()) -> str:
     """The diff as text: human, json (compact), markdown or github (workflow commands)."""
     if fmt == "json":
@@ -173,10 +180,13 @@ def format_diff(d: dict, fmt: str, notes: list[str] = ()) -> str:
     head = (f"{n['project']}: {o['status']} -> {n['status']}, edges {o['edges']} -> {n['edges']}; "
             + ("REGRESSION" if d["regression"] else "no regression"))
     if fmt == "markdown":
-        rows = ["| level | change | what |", "|---|---|---|"] + [f"| {lv} | {k} | {t} |" for lv, k, t in lines]
-        return "\n".join([f"**{head}**", ""] + [f"> {x}" for x in notes] + ([""] + rows if lines else ["", "no changes"]))
+        rows = ["| level | change | what |", "|---|---|---|"] + [f"| {_cell(lv)} | {_cell(k)} | {_cell(t)} |"
+                                                                 for lv, k, t in lines]
+        return "\n".join([f"**{_cell(head)}**", ""] + [f"> {_cell(x)}" for x in notes]
+                         + ([""] + rows if lines else ["", "no changes"]))
     if fmt == "github":
-        return "\n".join([f"::{lv} title=mpgspec diff: {k}::{t}" for lv, k, t in lines]
-                         + [f"::warning title=mpgspec diff::{x}" for x in notes] + [head])
+        return "\n".join([f"::{lv} title={gh_escape_property('mpgspec diff: ' + k)}::{gh_escape_data(t)}"
+                          for lv, k, t in lines]
+                         + [f"::warning title=mpgspec diff::{gh_escape_data(x)}" for x in notes] + [gh_plain(head)])
     body = [f"  {lv:7s} {k}: {t}" for lv, k, t in lines] or ["  no changes"]
     return "\n".join([head] + [f"  note: {x}" for x in notes] + body)

@@ -75,7 +75,7 @@ def test_human_markdown_and_github_name_each_change(capsys, two_reports, tmp_pat
     rc, out, _ = run(capsys, "diff", old, new, "--format", "github")
     assert rc == 1
     for a, b in lost:
-        assert f"::error title=mpgspec diff: edge lost::{a} -> {b}" in out
+        assert f"::error title=mpgspec diff%3A edge lost::{a} -> {b}" in out
     md = summary.read_text()
     assert "| level | change | what |" in md and "edge lost" in md
 
@@ -189,5 +189,22 @@ def test_an_unwritable_step_summary_is_said_not_an_internal_error(capsys, two_re
     old, new = two_reports
     monkeypatch.setenv("GITHUB_STEP_SUMMARY", str(tmp_path / "no_such_folder" / "summary.md"))
     rc, out, err = run(capsys, "diff", old, new, "--format", "github")
-    assert rc == 1 and "::error title=mpgspec diff: edge lost::" in out
+    assert rc == 1 and "::error title=mpgspec diff%3A edge lost::" in out
     assert "cannot write the step summary" in err and "internal error" not in err
+
+
+def test_names_cannot_break_the_markdown_table_or_the_workflow_commands(monkeypatch):
+    """A '|' in a name or description is escaped in markdown, a line break in a message cannot start
+    another workflow command, and ':' or ',' in a title is escaped as GitHub reads properties."""
+    from mpgspec.report import diff as df
+
+    monkeypatch.setattr(df, "_lines", lambda d: [("error", "edge lost", "A|B -> C\n::error::injected")])
+    d = {"old": {"project": "p|q", "status": "PASS", "edges": 2}, "new": {"project": "p|q", "status": "FAIL", "edges": 1},
+         "regression": True}
+    md = df.format_diff(d, "markdown")
+    row = [ln for ln in md.splitlines() if ln.startswith("| error")]
+    assert row == ["| error | edge lost | A\\|B -> C ::error::injected |"]
+    assert row[0].count("|") - row[0].count("\\|") == 4  # three cells, whatever the names hold
+    gh = df.format_diff(d, "github").splitlines()
+    assert gh[0] == "::error title=mpgspec diff%3A edge lost::A|B -> C%0A::error::injected"
+    assert not any(ln.startswith("::error::") for ln in gh)
