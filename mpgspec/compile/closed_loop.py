@@ -109,6 +109,11 @@ class CompiledPrimitive:
             return self.domain
         return (0.0, 0.0)
 
+    def start_clock(self) -> float:
+        """The clock the primitive starts at when no verified t_B gives one: its domain's start for a
+        transient, else 0."""
+        return self.domain[0] if self.cls is PrimitiveClass.TRANSIENT else 0.0
+
     def clock_grid(self, n: int, role: str = "B") -> np.ndarray:
         """Grid over the clock: one point (fixed), n over one period (from grid_phase on), n over the domain.
 

@@ -115,10 +115,6 @@ def _record_body(run: SequenceRun, system, snaps: list[tuple]) -> None:
                           "trunk": trunk.T.tolist(), "legs": [pts[:, a:b].T.tolist() for a, b in zip(ends, ends[1:])]})
 
 
-def _start_clock(p: CompiledPrimitive) -> float:
-    return p.domain[0] if p.cls is PrimitiveClass.TRANSIENT else 0.0
-
-
 def simulate_sequence(prims: dict[str, CompiledPrimitive], graph: MotionPrimitiveGraph | None,
                       table: dict | None, seq: Sequence, settings: OracleSettings, mode: str,
                       max_points: int = 1500) -> SequenceRun:
@@ -179,7 +175,7 @@ class _Simulation:
     def start(self) -> bool:
         """Switch the start primitive in at its start clock from its setpoint; False if that is not finite."""
         run, cur = self.run, self.cur
-        clock = _start_clock(self.prims[cur])
+        clock = self.prims[cur].start_clock()
         x = self.prims[cur].x_star(clock)
         self.z = initial_state(self.prims[cur], x, clock)
         run.switches.append({"t": 0.0, "to": cur, "clock": clock, "reason": "start"})
@@ -193,7 +189,7 @@ class _Simulation:
 
     def switch(self, to: str, t_B: float | None, why: str, x_now: np.ndarray, t_now: float) -> None:
         self.seen = False
-        t_B = _start_clock(self.prims[to]) if t_B is None else t_B
+        t_B = self.prims[to].start_clock() if t_B is None else t_B
         self.run.switches.append({"t": t_now, "from": self.cur, "to": to, "clock": float(t_B), "reason": why})
         self.snaps.append((t_now, to, "switch", np.array(x_now, float)))
         self.cur, self.converged = to, False

@@ -78,10 +78,6 @@ class _Stepper:
         return z, h, m.ravel()
 
 
-def _start_clock(p: CompiledPrimitive) -> float:
-    return p.domain[0] if p.cls is PrimitiveClass.TRANSIENT else 0.0
-
-
 class _Bound:
     """A mapped Function called through a FunctionBuffer bound once to numpy arrays (column-major)."""
 
@@ -145,7 +141,7 @@ class DisturbedSequences:
     def run(self, graph, table, mode: str) -> dict:
         """Safe fraction, per-run outcome and the switches made per edge of one mode ('naive' or
         'graph' with the given graph)."""
-        seq, dt = self.seq, self.settings.dt
+        dt = self.settings.dt
         runs = _Runs(self, mode, graph, table)
         for k in range(self.steps):
             t = (k + 1) * dt
@@ -180,7 +176,7 @@ class _Runs:
         self.arrived = np.zeros((len(self.goals), n), bool)  # run r was in goal i while it was commanded
         self.taken: dict[tuple[str, str], int] = {}  # switches per edge over all runs
         self.trans = {name: p.cls is PrimitiveClass.TRANSIENT for name, p in prims.items()}
-        c0 = _start_clock(prims[seq.start])
+        c0 = prims[seq.start].start_clock()
         x0 = prims[seq.start].x_star(c0)[:, None] + ds.err
         self.enter(list(range(n)), seq.start, np.full(n, c0), x0, 0.0)
 
@@ -273,14 +269,14 @@ class _Runs:
                 or mode != "naive" and self.conv[r] and self.goal[r] != cur and not trans):
             return None
         if mode == "naive" and new_goal is not None and new_goal != cur:
-            return (new_goal, _start_clock(prims[new_goal]))
+            return (new_goal, prims[new_goal].start_clock())
         if trans and clk >= p.domain[1] - 1e-9:
             tr = graph.edge(cur, p.next) if graph is not None else None
             tb = tr.switch_clock(p.domain[1]) if tr is not None else None
             if mode != "naive" and tb is None:
                 self.first[r] = {"t": t, "primitive": cur, "unverified_hand_over": p.next}
                 self.safe[r] = False
-            return (p.next, tb if tb is not None and mode != "naive" else _start_clock(prims[p.next]))
+            return (p.next, tb if tb is not None and mode != "naive" else prims[p.next].start_clock())
         if mode != "naive" and self.goal[r] != cur and self.conv[r] and not trans:
             nxt = (self.table.get(cur) or {}).get(self.goal[r])
             tr = graph.edge(cur, nxt) if nxt and nxt != cur else None

@@ -310,9 +310,11 @@ class RigidBodyCompiledSystem(CompiledSystem):
             out += touchdown_gaps(plan, env)
         elif name == "aerial":  # C_aerial: no foot below the ground
             for f in m.contact_frames:  # a held foot sits at 0 up to the contact drift (tol); a free one must not sink
-                held = mode[f] if mode is not None else self.contact_flag(f)
-                allow = tol if f in contacts and held is None else \
-                    (AIRBORNE_TOLERANCE if held is None else ca.if_else(held > 0.5, tol, AIRBORNE_TOLERANCE))
+                held = mode[f] if mode is not None else self.contact_flag(f)  # None: the fixed contact set decides
+                if held is None:
+                    allow = tol if f in contacts else AIRBORNE_TOLERANCE
+                else:
+                    allow = ca.if_else(held > 0.5, tol, AIRBORNE_TOLERANCE)
                 out.append((f"above_ground[{f}]", env[f"{f}_z"] + allow))
         else:
             raise KeyError(name)

@@ -77,7 +77,8 @@ def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, Sequenc
 
 def _replayed(shared: tuple, mode: str) -> dict:
     """One run replayed and compared: shared = (robot or None to build it, prims, runs, duration,
-    settings, h_tolerance)."""
+    settings, h_tolerance, plan or None); with a plan the graph run is also executed on the
+    simulator's state."""
     robot, prims, runs, duration, settings, h_tolerance, plan = shared
     robot = robot or build_robot(next(iter(prims.values())).system, settings)
     rep = replay(robot, prims, runs[mode].switches, _until(runs[mode], duration), settings, h_tolerance)
@@ -116,8 +117,7 @@ def _until(run: SequenceRun, duration: float) -> float:
 
 
 def _memo_key(memo, prims, run: SequenceRun, duration, settings, h_tolerance, robot, plan=None) -> str:
-    used = sorted({s["to"] for s in run.switches} | ({n for r in plan.table.values() for n in r.values() if n}
-                                                    | set(plan.table) if plan is not None else set()))
+    used = sorted({s["to"] for s in run.switches} | (set(plan.table) if plan is not None else set()))
     text = json.dumps([run.to_dict(), plan.key() if plan is not None else None], sort_keys=True, default=float)
     return memo.key("crosscheck", hashlib.sha256(text.encode()).hexdigest(), [prims[n].digest() for n in used],
                     duration, sorted(settings.to_dict().items()), h_tolerance, sorted(robot.info.items()))

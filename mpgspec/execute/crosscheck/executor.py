@@ -80,7 +80,7 @@ class StateExecutor:
             t_B = plan.switch_clock(self.cur, p.next, p.domain[1], 1e-9)
             if t_B is None:
                 self.unverified = self.unverified or f"unverified hand-over {self.cur} -> {p.next} at t = {t:.3f} s"
-            return self._switch(t, p.next, t_B if t_B is not None else _start_clock(self.prims[p.next]))
+            return self._switch(t, p.next, t_B if t_B is not None else self.prims[p.next].start_clock())
         if self.goal == self.cur:
             return None
         if not self.converged:
@@ -125,8 +125,3 @@ def _arrival(arrivals: list[tuple[float, str]], goal: str, t0: float, t1: float)
         if t0 < t < t1 and name == goal:
             return float(t)
     return None
-
-
-def _start_clock(p: CompiledPrimitive) -> float:
-    """The clock a primitive starts at when nothing verified gives one (as the sequence runs do)."""
-    return float(p.domain[0]) if p.cls is PrimitiveClass.TRANSIENT else 0.0

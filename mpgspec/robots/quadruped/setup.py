@@ -77,19 +77,19 @@ LEGACY = {"kz": 100.0, "dz": 20.0, "d_yaw": 10.0, "f_min": 10.0, "regularization
           "touchdown_height": 0.0}
 """Settings the trot's law had as fixed numbers before they were spec fields: the hash of the inputs
 holds them only when they differ, so that tables generated before stay valid."""
+OPTIONAL = ("accel_limit", "friction")
+"""Settings added later whose default is none: the hash holds them only when they are given."""
 
 
 def trot_inputs(c, sys, speed: float) -> str:
     """Hash of what a gait table depends on: the robot model and limits, the trot's settings (as the
     law resolves them: h_d, f_min) and the speed."""
     m = sys.model
-    ctrl = c.model_dump(mode="json", exclude={"gait", "speed", "pairs", "f_min_fraction", "accel_limit", "friction", *LEGACY})
+    ctrl = c.model_dump(mode="json", exclude={"gait", "speed", "pairs", "f_min_fraction", *OPTIONAL, *LEGACY})
     ctrl["height"] = float(c.height) if c.height is not None else stance_height(sys, dict(c.pose))
     resolved = {**{k: float(getattr(c, k)) for k in LEGACY if k != "f_min"}, "f_min": min_normal_force(c, sys)}
     ctrl.update({k: v for k, v in resolved.items() if v != LEGACY[k]})
-    for key in ("accel_limit", "friction"):  # spec fields added later: in the hash only when given
-        if getattr(c, key) is not None:
-            ctrl[key] = float(getattr(c, key))
+    ctrl.update({k: float(getattr(c, k)) for k in OPTIONAL if getattr(c, k) is not None})
     if c.pairs is not None:
         ctrl["pairs"] = [list(p) for p in c.pairs]
     robot = {"mass": round(float(m.total_mass), 9), "nq": m.nq, "feet": list(m.contact_frames),
