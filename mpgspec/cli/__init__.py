@@ -1,6 +1,6 @@
 """Command line: a thin layer over mpgspec.api (arguments in args.py, one module per command).
 
-    mpgspec verify PATH [--out reports] [--format human|json|github]
+    mpgspec verify PATH [--out reports] [--format human|json|github|junit|sarif]
     mpgspec plan PROJECT --from A --to B [--weight duration|peak_input|hops]
     mpgspec simulate PROJECT [--mode naive|graph|both] [--uncertain --runs N --seed S]
     mpgspec diff OLD NEW [--format human|json|markdown|github]
@@ -44,6 +44,13 @@ def _fail(args, errors: list[dict], plain: str | None = None, code: int = EXIT_U
     fmt = getattr(args, "format", "human")
     if getattr(args, "cmd", None) == "verify" and fmt == "json":
         print(_json_doc(None, errors, code))
+    elif getattr(args, "cmd", None) == "verify" and fmt in ("junit", "sarif"):
+        import json
+
+        from ..report.ci import junit, sarif
+
+        print(junit([], errors=errors), end="") if fmt == "junit" else \
+            print(json.dumps(sarif([], exit_code=code, errors=errors), separators=(",", ":")))
     if plain is not None:
         print(gh_command("error", plain) if fmt == "github" else plain, file=sys.stderr)
     else:

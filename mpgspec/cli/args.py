@@ -32,14 +32,18 @@ def _verify_args(sub) -> None:
              "  mpgspec verify specs/pendulum -j 1         everything in this process\n"
              "  mpgspec verify specs/ --format github      annotations and a step summary in GitHub Actions\n"
              "  mpgspec verify specs/cart --format json --no-write > result.json\n"
+             "  mpgspec verify specs/ --format junit > mpgspec.xml   test results for Jenkins, GitLab\n"
+             "  mpgspec verify specs/ --format sarif > mpgspec.sarif  findings for code scanning\n"
              "  mpgspec verify specs/ --baseline main-reports/  exit 1 when an edge main had is lost")
     v.add_argument("paths", nargs="+", metavar="PATH", help="a project.yaml, a project folder, or a folder of projects")
     v.add_argument("--out", default="reports", metavar="DIR",
                    help="report folder; each project gets DIR/<project>/ (default: reports)")
     v.add_argument("--no-write", action="store_true", help="write no report files")
-    v.add_argument("--format", choices=("human", "json", "github"), default="human",
+    v.add_argument("--format", choices=("human", "json", "github", "junit", "sarif"), default="human",
                    help="human: text (default); json: the whole result on stdout; github: workflow annotations "
-                        "at the spec lines, plus a table in $GITHUB_STEP_SUMMARY when it is set")
+                        "at the spec lines, plus a table in $GITHUB_STEP_SUMMARY when it is set; junit: JUnit XML "
+                        "on stdout (a test case per assertion, assumption check and cross-checked run); sarif: "
+                        "SARIF 2.1.0 on stdout (a result per finding at its spec line)")
     v.add_argument("--method", metavar="NAME", help="oracle backend, e.g. rk4 or scipy (default: the project's)")
     v.add_argument("-j", "--jobs", type=int, default=None, metavar="N",
                    help="local worker processes for oracle calls and the robust stage's targets and uncertain "

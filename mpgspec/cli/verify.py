@@ -2,6 +2,8 @@
 result as text, JSON or GitHub annotations with a step summary."""
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 import re
 import sys
@@ -18,6 +20,8 @@ from ..streams import stdout_to_stderr
 from .output import MARK, _annotation, _json_doc, _line, _num, _print_errors, _progress, append_step_summary
 
 JOBS_PER_CORE = 4
+MACHINE_FORMATS = ("json", "junit", "sarif")
+"""Formats whose stdout is one document: every other line of the command goes to stderr."""
 
 if TYPE_CHECKING:
     from ..pipeline.results import VerifyResult
@@ -235,20 +239,31 @@ def cmd_verify(args) -> int:
         if show is not None:
             show.close()
     args.exit_code = res.exit_code
+    strict = getattr(args, "strict", False)
+    machine = args.format in MACHINE_FORMATS
     if args.format == "json":
         print(_json_doc(res))
+    elif args.format == "junit":
+        from ..report.ci import junit
+
+        print(junit(res.projects, strict), end="")
+    elif args.format == "sarif":
+        from ..report.ci import sarif
+
+        print(json.dumps(sarif(res.projects, strict, res.exit_code), separators=(",", ":")))
     else:
         _human(res, args.format)
         if len(res.projects) > 1 or not args.quiet:
             print(_line(summary(res.projects, time.perf_counter() - t0), args.format))
     if args.format == "github":
         _step_summary(res)
-    lost = _against_baseline(res, args.baseline, args.format, args.allow_path or None) \
-        if getattr(args, "baseline", None) else 0
-    warned = sum(warning_count(p.report) for p in res.projects if p.report is not None)
-    strict_failed = getattr(args, "strict", False) and warned > 0
-    if strict_failed:
-        print(_line(f"FAIL --strict: {warned} warning{'s' if warned != 1 else ''}", args.format))
+    with stdout_to_stderr() if machine else contextlib.nullcontext():  # stdout holds the document alone
+        lost = _against_baseline(res, args.baseline, args.format, args.allow_path or None) \
+            if getattr(args, "baseline", None) else 0
+        warned = sum(warning_count(p.report) for p in res.projects if p.report is not None)
+        strict_failed = strict and warned > 0
+        if strict_failed:
+            print(_line(f"FAIL --strict: {warned} warning{'s' if warned != 1 else ''}", args.format))
     mismatch = sum(int(((p.report or {}).get("timing") or {}).get("cache_mismatch", 0)) for p in res.projects)
     if mismatch:
         print(f"mpgspec: {mismatch} stored oracle results disagreed with a fresh run (--verify-cache): the result "
