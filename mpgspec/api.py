@@ -68,12 +68,13 @@ def run_project(path: Path, out_dir: Path | None, overrides: dict | None = None,
 
 
 def verify(paths, out_dir: str | Path | None = None, overrides: dict | None = None,
-           progress: Progress | None = None, executor=None, allow_paths=None) -> VerifyResult:
+           progress: Progress | None = None, executor=None, allow_paths=None, cache: bool = True) -> VerifyResult:
     """Verify every project found under `paths`; reports go to out_dir (None: write nothing).
 
     progress(project, phase, done, total): told as each stage starts.
     executor: where oracle calls run (mpgspec.oracle.executors: InProcess, ProcessPool,
-    DaskExecutor; make_executor(jobs, dask) picks one); in this process when omitted.
+    DaskExecutor; make_executor(jobs, dask) picks one); in this process when omitted, reusing and
+    storing oracle results in the result cache as `mpgspec verify` does (cache=False: run every call).
     allow_paths: folders outside each project folder that files named by specs may lie in
     (paths a spec names must otherwise resolve inside its project folder).
     """
@@ -81,9 +82,18 @@ def verify(paths, out_dir: str | Path | None = None, overrides: dict | None = No
     files: list[Path] = []
     for p in [paths] if isinstance(paths, (str, Path)) else paths:
         files.extend(discover(p))
-    return VerifyResult([run_project(f, Path(out_dir) if out_dir else None, overrides, progress, executor=executor,
-                                     allow_paths=allow_paths)
-                         for f in files])
+    if executor is None:
+        from .pipeline.tools import executor as make
+
+        executor = make(1, None, cache=cache)
+    res = VerifyResult([run_project(f, Path(out_dir) if out_dir else None, overrides, progress, executor=executor,
+                                    allow_paths=allow_paths)
+                        for f in files])
+    if out_dir and any(p.files for p in res.projects):
+        from .report.index import write_index
+
+        write_index(out_dir)
+    return res
 
 
 def plan(project, source: str, goal: str, weight: str = "duration", out: str | Path = "reports",

@@ -15,7 +15,7 @@ from .. import api
 from ..cores import usable_cores
 from ..errors import UsageError
 from ..oracle.cache import VERIFY_ENV
-from ..report.findings import disagreements, warning_count
+from ..report.findings import disagreements, nominal_only_path, path_text, warning_count
 from ..streams import stdout_to_stderr
 from .output import MARK, _annotation, _json_doc, _line, _num, _print_errors, _progress, append_step_summary
 
@@ -118,6 +118,11 @@ def _human(res: VerifyResult, fmt: str):
                 print(_annotation("warning", text, None, "mpgspec cross-check", file=p.path))
             else:
                 out(f"  {'WARN':5} {text}")
+        if (bad := nominal_only_path(r)) is not None:
+            if fmt == "github":
+                print(_annotation("warning", path_text(bad), None, "mpgspec robust", file=p.path))
+            else:
+                out(f"  {'WARN':5} {path_text(bad)}")
         for k, path in p.files.items():
             out(f"  wrote {k}: {path}")
         _print_errors(p.errors, fmt)

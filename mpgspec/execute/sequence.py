@@ -57,32 +57,55 @@ TRUNK_HEIGHT = 0.3
 """Half-height of the drawn trunk as a fraction of its half-length (hip to hip)."""
 
 
-def body_points(system) -> tuple[ca.Function, list[int]] | None:
+def body_points(system, box: bool = False) -> tuple[ca.Function, list[int]] | None:
     """x -> (CoM, trunk outline, leg points) of a floating-base rigid body, and the number of points
     of each leg; None for other systems.
 
     The trunk outline is the rectangle in the base's x-z plane spanning the legs' first joints (four
-    corners, world frame); each leg is the world position of every joint from the base down to its
-    contact frame, then the contact frame (for the A1: hip, thigh, knee, foot).
+    corners, world frame), or with `box` the box spanning them in x and y (eight corners: the four
+    of the rectangle at the least y, then at the largest); each leg is the world position of every
+    joint from the base down to its contact frame, then the contact frame (for the A1: hip, thigh,
+    knee, foot).
     """
     if not system.is_rigid_body or "base_qw" not in system.state_names:
         return None
     model = system.model
     tree = system.dyn.state(system.x[:model.nq])
-    legs, first = [], []
+    legs, first, side = [], [], []
     for f in model.contact_frames:
         chain = [j for j in reversed(tree.support(model.frame(f).joint)) if model.joints[j].kind != "free"]
         legs.append([tree.world[j].p for j in chain] + [tree.frame_position(f)])
         if chain and model.joints[chain[0]].parent == 0:
             first.append(float(model.joints[chain[0]].translation[0]))
+            side.append(float(model.joints[chain[0]].translation[1]))
     lo, hi = (min(first), max(first)) if first else (-0.1, 0.1)
     dz = TRUNK_HEIGHT * max(hi - lo, 1e-3) / 2
     base = tree.world[0]
     corners = np.array([[lo, hi, hi, lo], [0.0] * 4, [-dz, -dz, dz, dz]])
-    trunk = ca.repmat(base.p, 1, 4) + ca.mtimes(base.R, ca.DM(corners))
+    if box:
+        dy = max(max(side, default=0.0) - min(side, default=0.0), 2 * dz) / 2
+        corners = np.hstack([corners + [[0], [-dy], [0]], corners + [[0], [dy], [0]]])
+    trunk = ca.repmat(base.p, 1, corners.shape[1]) + ca.mtimes(base.R, ca.DM(corners))
     com = ca.vertcat(*[system.extra_env[f"com_{a}"] for a in "xyz"])
     pts = ca.horzcat(*[p for leg in legs for p in leg]) if legs else ca.SX.zeros(3, 0)
     return ca.Function("body_points", [system.x], [com, trunk, pts]), [len(leg) for leg in legs]
+
+
+PLAYBACK_FPS = 25.0
+"""Frames per second of the 3D playback's trajectories."""
+
+
+def playback_samples(t, fps: float = PLAYBACK_FPS) -> np.ndarray:
+    """Indices of the samples nearest to every 1/fps s of the sorted times t (each once): the frames
+    of a 3D playback, whatever the run's own sampling."""
+    t = np.asarray(t, float)
+    if not len(t):
+        return np.zeros(0, int)
+    grid = np.arange(t[0], t[-1] + 0.5 / fps, 1.0 / fps)
+    k = np.clip(np.searchsorted(t, grid), 1, len(t) - 1) if len(t) > 1 else np.zeros(len(grid), int)
+    if len(t) > 1:
+        k = np.where(np.abs(t[k - 1] - grid) <= np.abs(t[k] - grid), k - 1, k)
+    return np.unique(np.concatenate([k, [len(t) - 1]]))
 
 
 def euler_zyx(quat: np.ndarray) -> np.ndarray:

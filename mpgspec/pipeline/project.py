@@ -103,8 +103,26 @@ def _finish_project(res: ProjectResult, cp: CompiledProject, vg: VerifiedGraph, 
     report = build_report(cp, vg, ch, digest=_digest(cp.spec.path))
     _locate_checks(cp.spec, ch, report)
     res.status, res.report, res.compiled = ch.status, report, cp
+    res.pages = _playback(cp, ch, report)
     if out_dir is not None:
         from ..report.files import write_reports
 
-        res.files = write_reports(report, vg.graph, Path(out_dir) / cp.spec.name, formats)
+        res.files = write_reports(report, vg.graph, Path(out_dir) / cp.spec.name, formats, res.pages)
     return res
+
+
+def _playback(cp: CompiledProject, ch: Checks, report: dict) -> dict[str, str]:
+    """{'playback': playback.html} when the project's sequence ran a robot with a floating base (the
+    report's sequence entry then names the page); {} otherwise."""
+    from ..report.playback import playback_data, render_playback
+
+    seq = cp.spec.project.sequence
+    if not ch.runs or seq is None:
+        return {}
+    xc = ch.crosscheck
+    data = playback_data(cp.spec.name, next(iter(cp.prims.values())).system, ch.runs,
+                         xc.playback() if xc is not None else None, report.get("crosscheck"), float(seq.duration))
+    if data is None:
+        return {}
+    report["sequence"]["playback"] = "playback.html"
+    return {"playback": render_playback(data)}

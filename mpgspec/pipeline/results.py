@@ -21,7 +21,8 @@ class ProjectResult:
 
     graph: the networkx DiGraph the planner searches (edges it may take; attributes `class`,
     `duration`, `peak_input`, `hops`); mpg: the full MotionPrimitiveGraph with every oracle grid
-    (None for a result read back by load_report)."""
+    (None for a result read back by load_report); pages: further report files rendered with the
+    report (file key -> text, e.g. the 3D playback), written beside it."""
 
     path: Path
     name: str = ""
@@ -31,6 +32,7 @@ class ProjectResult:
     files: dict[str, str] = field(default_factory=dict)
     mpg: MotionPrimitiveGraph | None = None
     compiled: CompiledProject | None = field(default=None, repr=False)
+    pages: dict[str, str] = field(default_factory=dict, repr=False)
 
     @property
     def warnings(self) -> int:
@@ -128,9 +130,25 @@ class ProjectResult:
                        f"<td>{'yes' if e.get('usable', True) else 'no'}</td></tr>" for e in r["edges"])
         bad = "".join(f"<li>{escape(a['status'].upper())} {escape(a['description'])}: {escape(a['message'])}</li>"
                       for a in r["assertions"] if a["status"] != "pass")
+        bad += "".join(f"<li>WARN {escape(w)}</li>" for w in _warning_texts(r))
         files = f"<div>report: {escape(self.files['html'])}</div>" if self.files.get("html") else ""
-        return (f"<div>{head}{f'<ul>{bad}</ul>' if bad else ''}<table><tr><th>from</th><th>to</th><th>class</th>"
-                f"<th>duration (s)</th><th>planner</th></tr>{rows}</table>{files}</div>")
+        from ..report.svg import graph_svg, graphviz_svg
+
+        picture = graphviz_svg(r) or graph_svg(r)
+        return (f"<div>{head}{f'<ul>{bad}</ul>' if bad else ''}<div style=\"max-width: 720px\">{picture}</div>"
+                f"<details><summary>{len(r['edges'])} edges</summary><table><tr><th>from</th><th>to</th>"
+                f"<th>class</th><th>duration (s)</th><th>planner</th></tr>{rows}</table></details>{files}</div>")
+
+
+def _warning_texts(r: dict) -> list[str]:
+    """The report's warnings as the command line words them (findings)."""
+    from ..report.findings import disagreements, nominal_only_path, path_text
+
+    out = [f"assumption {c['name']} of {c['primitive']}: {c['message']}" for c in r.get("assumptions", [])
+           if c.get("status") == "warn"]
+    out += [f"cross-check of the {d['mode']} run: {d['text']}" for d in disagreements(r)]
+    bad = nominal_only_path(r)
+    return out + ([path_text(bad)] if bad is not None else [])
 
 
 @dataclass
@@ -160,6 +178,18 @@ class VerifyResult:
         return "".join(p._repr_html_() for p in self.projects)
 
 
+def _spec_path(spec: Path, folder: Path) -> Path:
+    """The project file a report names (a path relative to where verify ran, as written): as it
+    stands when it exists from here, else below the nearest folder above the report's that holds it
+    (reports/<project>/ beside specs/), so a loaded report simulates from any working folder."""
+    if spec.is_absolute() or spec.exists():
+        return spec
+    for up in folder.resolve().parents:
+        if (up / spec).is_file():
+            return up / spec
+    return spec
+
+
 def load_report(path) -> ProjectResult:
     """A verified project read back from its report.json (or the folder holding it): report, status,
     the planner's graph, plan(); simulate() compiles the project from the spec path in the report.
@@ -167,8 +197,10 @@ def load_report(path) -> ProjectResult:
     p = Path(path)
     report = read(p)
     name = report.get("project", {}).get("name", "")
-    html = (p if p.is_dir() else p.parent) / "report.html"
-    return ProjectResult(Path(report.get("project", {}).get("path", "")), name, report.get("status", "error"), report,
+    folder = p if p.is_dir() else p.parent
+    html = folder / "report.html"
+    spec = _spec_path(Path(report.get("project", {}).get("path", "")), folder)
+    return ProjectResult(spec, name, report.get("status", "error"), report,
                          files={"json": str(p / "report.json" if p.is_dir() else p),
                                 **({"html": str(html)} if html.is_file() else {})})
 
@@ -184,7 +216,7 @@ def write_reports(res: VerifyResult, out_dir, progress=None) -> None:
         if progress is not None:
             progress(p.name, "report (JSON, HTML, graph files)", 0, 1)
         try:
-            p.files = write_project_reports(p.report, out_dir, p.report["project"]["name"])
+            p.files = write_project_reports(p.report, out_dir, p.report["project"]["name"], pages=p.pages)
         except ReportWriteError as e:
             why = str(e)
         except Exception as e:  # noqa: BLE001 - a bug in a writer: this project's error, not the run's end
@@ -193,3 +225,7 @@ def write_reports(res: VerifyResult, out_dir, progress=None) -> None:
             continue
         p.status, p.files = "error", {}
         p.errors.append({"code": "MPG400", "file": str(p.path), "message": why, "text": f"{p.path}: MPG400 {why}"})
+    if any(p.files for p in res.projects):
+        from ..report.index import write_index
+
+        write_index(out_dir)

@@ -1,5 +1,7 @@
 """A verify run as JUnit XML and as SARIF 2.1.0, the formats CI systems and code-scanning pages read.
 
+Both take the run's projects (mpgspec.pipeline.results.ProjectResult: path, name, status, report, errors).
+
 JUnit: a test suite per project, a test case per assertion, per Definition 1 check (assumption) and per
 cross-checked run; a project that could not be verified is one test case with an error. Warnings (an
 assumption that warns, a cross-check disagreement) are failures only under --strict, as in the exit
@@ -14,15 +16,12 @@ from __future__ import annotations
 import os
 import socket
 import time
-from typing import TYPE_CHECKING
+from types import SimpleNamespace
 from xml.etree import ElementTree as ET
 
 from .. import __version__
 from ..codes import CODES
-from .findings import disagreements
-
-if TYPE_CHECKING:
-    from ..pipeline.results import ProjectResult
+from .findings import disagreements, nominal_only_path, path_text
 
 SARIF_SCHEMA = "https://json.schemastore.org/sarif-2.1.0.json"
 LEVEL = {"fail": "error", "error": "error", "warn": "warning", "info": "note"}
@@ -30,6 +29,7 @@ KINDS = {
     "assertion": "an assertion of the project spec does not hold",
     "assumption": "a Definition 1 check (a primitive's assumptions) failed or warns",
     "crosscheck": "a run replayed in an independent simulator reached another verdict than mpgspec's",
+    "robust": "the graph run takes edges that did not withstand the project's uncertainty (nominal only)",
 }
 
 
@@ -48,7 +48,7 @@ def _where(loc: dict | None) -> str:
     return f" ({loc['file']}:{loc['line']})" if loc and loc.get("line") else ""
 
 
-def _cases(p: ProjectResult, strict: bool) -> list[tuple[str, str, str | None, str, str]]:
+def _cases(p, strict: bool) -> list[tuple[str, str, str | None, str, str]]:
     """(classname, name, outcome, message, output) for each test case of a project; outcome None
     (passed), 'failure' or 'error'."""
     name = p.name or str(p.path)
@@ -73,18 +73,21 @@ def _cases(p: ProjectResult, strict: bool) -> list[tuple[str, str, str | None, s
         text = disputed.get(mode)
         out.append((f"{name}.crosscheck", f"{mode} run", "failure" if text and strict else None,
                     text or "", f"WARN {text}" if text else "agrees"))
+    bad = nominal_only_path(r)
+    if r.get("robust"):
+        out.append((f"{name}.robust", "graph run's path", "failure" if bad and strict else None,
+                    path_text(bad) if bad else "", f"WARN {path_text(bad)}" if bad else "every edge is robust"))
     for e in p.errors:  # e.g. the reports could not be written
         out.append((name, "write reports", "error", e.get("message", ""), e.get("text", "")))
     return out
 
 
-def junit(projects: list[ProjectResult], strict: bool = False, errors=()) -> str:
+def junit(projects: list, strict: bool = False, errors=()) -> str:
     """The run as JUnit XML (the schema Jenkins, GitLab and pytest's junit-10.xsd read); errors: those
     that ended the command before any project was verified (a usage error), as one erroring case."""
-    from ..pipeline.results import ProjectResult
-
     if errors:
-        projects = [*projects, ProjectResult(path="mpgspec", name="mpgspec", errors=list(errors))]
+        projects = [*projects, SimpleNamespace(path="mpgspec", name="mpgspec", status="error", report=None,
+                                               errors=list(errors))]
     root = ET.Element("testsuites", name="mpgspec verify")
     totals = {"tests": 0, "failures": 0, "errors": 0}
     stamp = time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime())
@@ -117,7 +120,7 @@ def junit(projects: list[ProjectResult], strict: bool = False, errors=()) -> str
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
-def _properties(p: ProjectResult) -> dict:
+def _properties(p) -> dict:
     r = p.report or {}
     out = {"mpgspec": __version__, "status": p.status}
     if r:
@@ -150,7 +153,7 @@ def _result(rule: str, level: str, text: str, loc: dict | None, fallback) -> dic
             "locations": [{"physicalLocation": physical}]}
 
 
-def sarif(projects: list[ProjectResult], strict: bool = False, exit_code: int = 0, errors=()) -> dict:
+def sarif(projects: list, strict: bool = False, exit_code: int = 0, errors=()) -> dict:
     """The run as a SARIF 2.1.0 log (GitHub code scanning, VS Code's SARIF viewer); errors: those that
     ended the command before any project was verified."""
     results = [_result(e.get("code") or "MPG000", "error", e.get("message", ""), e, e.get("file") or ".")
@@ -176,6 +179,9 @@ def sarif(projects: list[ProjectResult], strict: bool = False, exit_code: int = 
         for d in disagreements(r):
             results.append(_result("crosscheck", "error" if strict else "warning",
                                    f"{name}: cross-check of the {d['mode']} run: {d['text']}", None, project_file))
+        if (bad := nominal_only_path(r)) is not None:
+            results.append(_result("robust", "error" if strict else "warning", f"{name}: {path_text(bad)}", None,
+                                   project_file))
     used = {x["ruleId"] for x in results}
     rules = [{"id": k, "shortDescription": {"text": v}} for k, v in KINDS.items()]
     rules += [{"id": k, "name": short, "shortDescription": {"text": short}, "fullDescription": {"text": full},

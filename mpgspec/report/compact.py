@@ -14,7 +14,7 @@ floats, and the functions that turn them back into one dict per cell or one row 
 - A sequence run stores at most MAX_RUN samples, its first RUN_STATES states by column (`x[k]` is
   state k over `t`) and the active primitive as runs `[[name, samples], ...]`; its `body` series (CoM height,
   trunk angles) are sampled at the same `t`; switches, violations and poses are kept in full.
-- Floats keep 6 significant digits (oracle evidence, times; error bounds 3, peak inputs 4); plotted traces keep 4
+- Floats keep 6 significant digits (oracle evidence, times; error bounds 3, peak inputs and per-function margins 4); plotted traces keep 4
   and at most MAX_TRACE samples (every k-th, the last, and the first at or after the decision).
 - A trace (schema 2.2) keeps what its picture shows: the BINDING safety functions (the violated one
   first, then those with the least minimum), `h_least` (the least of all `h_count` functions at each
@@ -74,7 +74,7 @@ def compact_cells(rows: list[list[dict]], h_names: list[str]) -> dict:
         out[k] = [[rnd(c.get(k), BOUND_DIGITS if k == "error_bound" else DIGITS) for c in row] for row in rows]
     for k in CELL_VECTORS:
         n = max((len(c.get(k) or []) for row in rows for c in row), default=0)
-        d = TRACE_DIGITS if k != "min_margins" else DIGITS  # peak inputs: 4 digits of a torque or force
+        d = TRACE_DIGITS  # 4 digits of a torque, a force or a margin: what tables and plots show
         out[k] = [[[rnd((c.get(k) or [])[m], d) if m < len(c.get(k) or []) else None for c in row] for row in rows]
                   for m in range(n)]
     for k in CELL_FLAGS:

@@ -32,7 +32,7 @@ from .write import json_text, write_new
 
 FORMATS = ("json", "html", "dot", "graphml")
 FILE_NAMES = {"json": "report.json", "lookup_table": "lookup_table.json", "html": "report.html",
-              "dot": "graph.dot", "graphml": "graph.graphml"}
+              "dot": "graph.dot", "graphml": "graph.graphml", "playback": "playback.html"}
 TMP_PREFIX = ".mpgspec-tmp."   # + host.pid.random: a report set being written
 OLD_PREFIX = ".mpgspec-old."   # + host.pid.random: an older report set on its way out
 STALE_AFTER_S = 3600.0         # a leftover of another host (shared folder) is removed after this long
@@ -92,14 +92,17 @@ def sealed_text(data: dict) -> str:
     return body[:-1] + ("," if body != "{}" else "") + f'"integrity":{record}}}' + "\n"
 
 
-def write_project_reports(report: dict, out_dir, name: str | None = None, formats=FORMATS) -> dict[str, str]:
+def write_project_reports(report: dict, out_dir, name: str | None = None, formats=FORMATS,
+                          pages: dict[str, str] | None = None) -> dict[str, str]:
     """Write the report set of one project to out_dir/name as a unit; returns format -> path.
+    pages: further files of the set rendered elsewhere (key of FILE_NAMES -> text: the playback).
 
     Raises ReportWriteError when the folder is outside out_dir or anything cannot be written
     (read-only or missing permissions, out_dir a file, a full disk...)."""
     name = report.get("project", {}).get("name") if name is None else name
     root, target = project_folder(out_dir, name)
     texts = render_reports(report, formats)
+    texts.update({k: v for k, v in (pages or {}).items() if k in FILE_NAMES and k not in texts})
     where = Path(out_dir) / name
     if root.exists() and not root.is_dir():
         raise ReportWriteError(f"cannot write reports into {out_dir}: it is not a folder")
@@ -129,7 +132,7 @@ def write_project_reports(report: dict, out_dir, name: str | None = None, format
 
 
 def write_reports(report: dict, graph: MotionPrimitiveGraph | None, folder: Path,
-                  formats=FORMATS) -> dict[str, str]:
+                  formats=FORMATS, pages: dict[str, str] | None = None) -> dict[str, str]:
     """Write the requested formats into folder (the report folder joined with the project name, as
     mpgspec.api does); returns format -> path. See write_project_reports."""
     folder = Path(folder)
@@ -140,8 +143,8 @@ def write_reports(report: dict, graph: MotionPrimitiveGraph | None, folder: Path
             raise ReportWriteError(f"refusing to write reports: the project name {name!r} is not a folder name")
         if folder.parts[-len(parts):] == parts:
             root = Path(*folder.parts[:-len(parts)]) if len(folder.parts) > len(parts) else Path(".")
-            return write_project_reports(report, root, name, formats)
-    return write_project_reports(report, folder.parent, folder.name, formats)
+            return write_project_reports(report, root, name, formats, pages)
+    return write_project_reports(report, folder.parent, folder.name, formats, pages)
 
 
 # ----------------------------------------------------------------------------- the pieces

@@ -1,6 +1,7 @@
 """The warnings of a report, counted alike by the page, the command line and the API: assumption
-checks that warn, and sequence runs whose replay in an independent simulator reached another verdict
-than mpgspec's (the model mpgspec verified is then not the robot's: a finding that can hurt)."""
+checks that warn, sequence runs whose replay in an independent simulator reached another verdict
+than mpgspec's (the model mpgspec verified is then not the robot's: a finding that can hurt), and a
+graph run whose path takes edges that did not withstand the project's uncertainty (nominal only)."""
 from __future__ import annotations
 
 SIMULATORS = {"mujoco": "MuJoCo"}
@@ -46,7 +47,32 @@ def disagreements(report: dict) -> list[dict]:
     return out
 
 
+def nominal_only_path(report: dict) -> dict | None:
+    """{hops, nominal_only} of the graph run's path when the report has a robust graph and some hop
+    of that path is not in it (the planned path is then verified for the nominal model only); None
+    otherwise."""
+    rob = report.get("robust")
+    run = ((report.get("sequence") or {}).get("runs") or {}).get("graph")
+    if not isinstance(rob, dict) or not isinstance(run, dict):
+        return None
+    survives = {(e.get("from"), e.get("to")): bool(e.get("survives")) for e in rob.get("edges") or []}
+    hops = []
+    for s in run.get("switches") or []:
+        hop = (s.get("from"), s.get("to"))
+        if hop[0] is not None and hop in survives and hop not in hops:
+            hops.append(hop)
+    bad = [h for h in hops if not survives[h]]
+    return {"hops": len(hops), "nominal_only": [f"{a} -> {b}" for a, b in bad]} if bad else None
+
+
 def warning_count(report: dict | None) -> int:
-    """Assumption checks that warn plus cross-check disagreements."""
+    """Assumption checks that warn, cross-check disagreements, and a graph run through nominal-only edges."""
     r = report or {}
-    return sum(c.get("status") == "warn" for c in r.get("assumptions", [])) + len(disagreements(r))
+    return (sum(c.get("status") == "warn" for c in r.get("assumptions", [])) + len(disagreements(r))
+            + (nominal_only_path(r) is not None))
+
+
+def path_text(bad: dict) -> str:
+    """The warning line of nominal_only_path's result."""
+    return (f"{len(bad['nominal_only'])} of the {bad['hops']} edges the graph run takes are nominal only (not robust "
+            f"to the project's uncertainty): {', '.join(bad['nominal_only'])}")

@@ -15,7 +15,7 @@ from markupsafe import Markup
 
 from . import fig6, svg
 from .compact import h_families, least, readable
-from .findings import disagreements
+from .findings import disagreements, nominal_only_path, path_text
 from .proved import proved_text
 from .sections.registry import report_sections, section_data
 from .traversal import command_rows
@@ -104,9 +104,15 @@ def assertion_link(a: dict, report: dict, ids: Anchors) -> str:
 
 
 def _disagreements(report: dict) -> list[dict]:
-    """The summary's WARN items for cross-check disagreements (findings.disagreements)."""
-    return [{"status": "warn", "what": f"cross-check of the {d['mode']} run", "text": d["text"],
-             "href": "#crosscheck", "row": "#crosscheck"} for d in disagreements(report)]
+    """The summary's WARN items for cross-check disagreements (findings.disagreements) and for a graph
+    run through edges that are nominal only (findings.nominal_only_path)."""
+    out = [{"status": "warn", "what": f"cross-check of the {d['mode']} run", "text": d["text"],
+            "href": "#crosscheck", "row": "#crosscheck"} for d in disagreements(report)]
+    bad = nominal_only_path(report)
+    if bad is not None:
+        out.append({"status": "warn", "what": "the graph run's path", "text": path_text(bad),
+                    "href": "#robust", "row": "#robust"})
+    return out
 
 
 def _summary(report: dict, ids: Anchors) -> dict:

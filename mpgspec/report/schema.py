@@ -366,6 +366,8 @@ class Sequence(_Strict):
     commands: list[Command]
     state_names: list[str]
     runs: dict[str, Run]
+    playback: str | None = Field(default=None, description="the 3D playback page of the runs beside the report "
+                                                          "(playback.html), when the system has a floating base")
 
 
 class Integrity(_Strict):

@@ -27,7 +27,8 @@ ARROW_ID = "mpg-arrow"
 DASH = "6 4"
 DOT = "1.5 3.5"
 NOMINAL_ONLY = VERMILLION
-"""Nominal-only edges (safe for the nominal model, lost under the project's uncertainty): dotted, vermillion."""
+"""Nominal-only edges (safe for the nominal model, lost under the project's uncertainty): vermillion, in the
+line style of their class (solid Class 1, dashed Class 2): class and robustness never share a channel."""
 
 
 def _n(v: float) -> str:
@@ -406,7 +407,7 @@ def graph_dot(report: dict) -> str:
         if e["from"] == e["to"]:
             continue
         color = UNUSABLE if not v["usable"] else NOMINAL_ONLY if v["robust"] is False else "#333333"
-        style = "dotted" if v["robust"] is False else "dashed" if e["class"] == 2 else "solid"
+        style = "dashed" if e["class"] == 2 else "solid"  # class by line style, robustness by colour
         attrs = [f"style={style}", f"color={q(color)}", f"fontcolor={q(color)}",
                  f"label={q(v['label'])}", f"tooltip={q(v['tip'])}", f"labeltooltip={q(v['tip'])}"]
         if v["robust"] is False:
@@ -447,7 +448,7 @@ def graphviz_svg(report: dict, timeout: float = 10.0) -> str | None:
 
 def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str = "circular") -> str:
     """The motion primitive graph: box fixed, ellipse periodic, diamond transient; solid Class 1, dashed Class 2,
-    grey edges the planner cannot use, dotted vermillion edges that are nominal only; duration labels beside
+    grey edges the planner cannot use, vermillion edges that are nominal only; duration labels beside
     the edges (hand-made layout)."""
     prims = report.get("primitives", [])
     node = {p["name"]: (SHAPES.get(p["class"], "ellipse"), *_size(SHAPES.get(p["class"], "ellipse"), p["name"]))
@@ -483,7 +484,7 @@ def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str 
             ends.append(f"{_n(px + (cx - px) / d * r)} {_n(py + (cy - py) / d * r)}")
         body.append(_el("path", _tip(v["tip"]), d=f"M{ends[0]}Q{_n(cx)} {_n(cy)} {ends[1]}", fill="none",
                         stroke=color, stroke_width=1.6 if lost else 1.2,
-                        stroke_dasharray=DOT if lost else DASH if e["class"] == 2 else "",
+                        stroke_dasharray=DASH if e["class"] == 2 else "",  # class by style, robustness by colour
                         marker_end=f"url(#{arrow})"))
         if v["label"]:
             # beside the curve: from its midpoint, outwards along the bend's normal
@@ -505,10 +506,10 @@ def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str 
         body += [_node(shape, x, ly, 11, 8, NODE_FILL[cls]), _text(x + 15, ly + 4, cls, 10, "start")]
     keys = [("Class 1", "#333", "", ARROW_ID), ("Class 2 ⧗", "#333", DASH, ARROW_ID)]
     if any(v["robust"] is False for v in views):
-        keys.append(("nominal only ✗", NOMINAL_ONLY, DOT, ARROW_ID + "-nominal"))
+        keys.append(("nominal only ✗", NOMINAL_ONLY, "", ARROW_ID + "-nominal"))
     for k, (label, color, dash, arrow) in enumerate(keys):
         x = 250.0 + 120 * k
-        body += [_el("line", x1=x, x2=x + 30, y1=ly, y2=ly, stroke=color, stroke_width=1.6 if dash == DOT else 1.2,
+        body += [_el("line", x1=x, x2=x + 30, y1=ly, y2=ly, stroke=color, stroke_width=1.6 if color == NOMINAL_ONLY else 1.2,
                      stroke_dasharray=dash, marker_end=f"url(#{arrow})"),
                  _text(x + 36, ly + 4, label, 10, "start")]
     return _svg(width, height, body, f"motion primitive graph of {report.get('project', {}).get('name', '')}")

@@ -132,3 +132,83 @@ def test_a_run_the_cross_check_disputes_is_not_shown_as_safe(pages):
         assert (f">disputed: {own}<" in head) == (not q["agree"]) and own in head, head
         if not q["agree"] and q["mujoco"]["first_violation"]:
             assert q["mujoco"]["first_violation"]["h"] in text[start:start + 2000]
+
+
+PLAYBACK_PROBE = """(async () => {
+  const out = {};
+  for (const s of [0, %(later)s]) {
+    window.playback.seek(s);
+    await new Promise(r => requestAnimationFrame(() => r()));
+    const c = document.getElementById('scene');
+    out[s] = {state: window.playback.state(), image: c.toDataURL().length + ':' + c.toDataURL().slice(-64)};
+  }
+  const d = document.documentElement;
+  return {frames: out, width: innerWidth, scroll_width: d.scrollWidth, hash_t: %(hash_t)s};
+})()"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("width", WIDTHS)
+def test_the_a1_playback_moves_the_robot(pages, browser, tmp_path_factory, width):
+    """playback.html opens offline beside the A1 report: no console error, no overflow; at two times
+    the drawn robot is in another primitive, somewhere else, and the picture differs; an address with
+    #t= starts there."""
+    html, report, errors = pages("a1")
+    assert html is not None, errors
+    page = html.parent / "playback.html"
+    if not page.is_file():  # the report was rendered from reports/a1: verify the light A1 for its pages
+        p = api.verify(_a1_light(tmp_path_factory.mktemp("specs")), out_dir=tmp_path_factory.mktemp("out")).projects[0]
+        page = Path(p.files["html"]).parent / "playback.html"
+        report = p.report
+    assert report["sequence"]["playback"] == "playback.html"
+    later = 7.0  # Table II: Walk(fast) was commanded at 3 s
+    url = page.resolve().as_uri() + "#t=5.5"
+    png = tmp_path_factory.mktemp("shots") / f"playback-{width}.png"
+    r = browser.open(url, width, script=PLAYBACK_PROBE % {"later": later, "hash_t": "window.playback.state().t"},
+                     screenshot=png)
+    assert r["errors"] == [], r["errors"]
+    v = r["value"]
+    assert v["hash_t"] == pytest.approx(5.5)
+    assert max(v["scroll_width"], v["width"]) <= width
+    a, b = v["frames"]["0"], v["frames"][str(int(later)) if str(int(later)) in v["frames"] else str(later)]
+    assert a["image"] != b["image"]
+    runs_a, runs_b = a["state"]["runs"], b["state"]["runs"]
+    graph_a = next(x for x in runs_a if x["name"] == "graph (mpgspec)")
+    graph_b = next(x for x in runs_b if x["name"] == "graph (mpgspec)")
+    assert graph_a["primitive"] == "Lie" and graph_b["primitive"].startswith("Walk")
+    assert abs(graph_b["trunk"][0] - graph_a["trunk"][0]) > 0.1 and graph_b["trunk"][2] > graph_a["trunk"][2] + 0.1
+    if report.get("crosscheck"):  # the simulator's replays are drawn too
+        assert any("MuJoCo" in x["name"] for x in runs_a)
+    assert png.stat().st_size > 10_000
+
+
+FIRST_SCREEN = """(() => {
+  const top = e => e ? Math.round(e.getBoundingClientRect().top) : null;
+  const items = [...document.querySelectorAll('#summary li')].map(li => ({text: li.textContent, top: top(li)}));
+  return {height: innerHeight, verdict: top(document.querySelector('#summary b')), items,
+          page: document.documentElement.scrollHeight};
+})()"""
+
+
+@pytest.mark.slow
+def test_the_a1_first_screen_holds_the_verdict_the_dispute_and_the_nominal_only_path(pages, browser):
+    """At 1400 x 900 px the A1 report's first screen shows the verdict, every cross-check
+    disagreement and the edges of the graph run's path that are nominal only; with its sections
+    folded the page stays under 8,000 px."""
+    from mpgspec.report.findings import disagreements, nominal_only_path
+
+    html, report, errors = pages("a1")
+    assert html is not None, errors
+    r = browser.open(html.resolve().as_uri(), 1400, height=900, script=FIRST_SCREEN)
+    v = r["value"]
+    assert r["errors"] == [] and v["verdict"] is not None and 0 <= v["verdict"] < 900
+    wanted = [f"cross-check of the {d['mode']} run" for d in disagreements(report)]
+    bad = nominal_only_path(report)
+    assert bad is not None, "the A1's graph run goes through edges that are nominal only"
+    wanted.append(f"edges the graph run takes are nominal only (not robust to the project's uncertainty): "
+                  f"{', '.join(bad['nominal_only'])}")
+    for w in wanted:
+        item = next((i for i in v["items"] if w in i["text"]), None)
+        assert item is not None, f"not in the summary: {w}"
+        assert item["top"] < v["height"], f"below the first screen ({item['top']} px): {w}"
+    assert v["page"] <= 8000

@@ -88,15 +88,17 @@ def _edge_paths(root: ET.Element) -> dict[tuple[str, str], ET.Element]:
     return out
 
 
-def test_nominal_only_edges_are_dotted_vermillion_with_a_legend(sample):
+def test_nominal_only_edges_are_vermillion_in_their_class_style_with_a_legend(sample):
+    """Robustness is the colour, class the line style (solid 1, dashed 2): never one channel for both."""
     lost = {tuple(x.split(" -> ")) for x in sample["robust"]["summary"]["nominal_only"]}
     assert lost == {("Balance", "SwingUp")}
     root = _parse(graph_svg(sample))
     paths = _edge_paths(root)
     assert set(paths) == {(e["from"], e["to"]) for e in sample["edges"]}
+    classes = {(e["from"], e["to"]): e["class"] for e in sample["edges"]}
     for pair, p in paths.items():
-        dotted = p.get("stroke-dasharray") == DOT
-        assert dotted == (pair in lost), pair
+        assert (p.get("stroke-dasharray") == DASH) == (classes[pair] == 2), pair
+        assert p.get("stroke-dasharray") != DOT
         assert (p.get("stroke") == VERMILLION) == (pair in lost and next(
             e for e in sample["edges"] if (e["from"], e["to"]) == pair).get("usable", True) is not False)
         assert ("nominal only" in p.find(NS + "title").text) == (pair in lost)
@@ -107,9 +109,11 @@ def test_nominal_only_edges_are_dotted_vermillion_with_a_legend(sample):
 def test_nominal_only_edges_in_the_graphviz_layout(sample):
     lines = {ln.split(" [", 1)[0].strip(): ln for ln in graph_dot(sample).splitlines() if " -> " in ln}
     lost = lines.pop('"Balance" -> "SwingUp"')
-    assert "style=dotted" in lost and f'color="{VERMILLION}"' in lost and "nominal only" in lost
-    assert not any("style=dotted" in ln or "nominal only" in ln for ln in lines.values())
-    assert "style=dotted" not in graph_dot({**sample, "robust": None})
+    cls = next(e["class"] for e in sample["edges"] if (e["from"], e["to"]) == ("Balance", "SwingUp"))
+    assert f"style={'dashed' if cls == 2 else 'solid'}" in lost and f'color="{VERMILLION}"' in lost
+    assert "nominal only" in lost
+    assert not any(VERMILLION in ln or "nominal only" in ln for ln in lines.values())
+    assert "style=dotted" not in graph_dot(sample) and "nominal only" not in graph_dot({**sample, "robust": None})
 
 
 def test_a_window_of_one_grid_point_is_a_point():

@@ -10,7 +10,7 @@ import numpy as np
 
 from ...compile.primitive import CompiledPrimitive
 from ...oracle.tasks import Failed
-from ..sequence import SequenceRun
+from ..sequence import SequenceRun, playback_samples
 from .executor import ExecutorPlan, StateExecutor
 from .mjcf import MujocoRobot, build_robot
 from .replay import Replay, replay
@@ -18,6 +18,8 @@ from .settings import CrossCheckSettings
 
 SERIES_POINTS = 200
 """Samples kept of each compared series (for the report's plot)."""
+RECORD = 2
+"""Layout of the memoised comparison (part of its key): 2 keeps the playback samples."""
 WORST = 10
 """Kinds of safety functions listed per run (the least margin of each, least first)."""
 
@@ -36,8 +38,36 @@ class CrossCheckResult:
         return all(r["agree"] for r in self.runs.values())
 
     def to_dict(self) -> dict:
+        """What the report stores: everything but the runs' playback samples (playback())."""
+        runs = {m: _without_playback(r) for m, r in self.runs.items()}
         return {"simulator": self.simulator, "settings": self.settings.to_dict(), "model": self.model,
-                "agree": self.agree, "runs": self.runs}
+                "agree": self.agree, "runs": runs}
+
+    def playback(self) -> dict[str, dict]:
+        """name -> {t, x} of each replayed run's states at the 3D playback's frame rate ('graph',
+        'naive', and 'graph executor' for the executor on the simulator's state)."""
+        out = {}
+        for m, r in self.runs.items():
+            if isinstance(r.get("playback"), dict):
+                out[m] = r["playback"]
+            if isinstance((r.get("executor") or {}).get("playback"), dict):
+                out[f"{m} executor"] = r["executor"]["playback"]
+        return out
+
+
+def _without_playback(run: dict) -> dict:
+    out = {k: v for k, v in run.items() if k != "playback"}
+    if isinstance(out.get("executor"), dict):
+        out["executor"] = {k: v for k, v in out["executor"].items() if k != "playback"}
+    return out
+
+
+def _playback(rep: Replay, nq: int) -> dict:
+    """The replay's configurations at the playback's frame rate (positions only: what is drawn)."""
+    k = playback_samples(rep.t)
+    return {"t": [round(float(v), 4) for v in rep.t[k]],
+            "x": [[round(float(v), 5) for v in row] for row in rep.x[k, :nq]],
+            "active": [rep.active[i] for i in k] if len(rep.active) == len(rep.t) else []}
 
 
 def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, SequenceRun], duration: float,
@@ -104,7 +134,8 @@ def executed(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], plan: Exec
             "largest_lag_s": max((abs(v) for v in lags), default=None),
             "waiting": {"primitive": ex.cur, "best_roa_margin": ex.best.get(ex.cur)} if ex.goal != ex.cur else None,
             "contact": rep.contact,
-            "law_failures": dict(rep.law_failures), "wall_s": rep.wall_s}
+            "law_failures": dict(rep.law_failures), "wall_s": rep.wall_s,
+            "playback": _playback(rep, next(iter(prims.values())).system.model.nq)}
 
 
 def _until(run: SequenceRun, duration: float) -> float:
@@ -119,7 +150,7 @@ def _until(run: SequenceRun, duration: float) -> float:
 def _memo_key(memo, prims, run: SequenceRun, duration, settings, h_tolerance, robot, plan=None) -> str:
     used = sorted({s["to"] for s in run.switches} | (set(plan.table) if plan is not None else set()))
     text = json.dumps([run.to_dict(), plan.key() if plan is not None else None], sort_keys=True, default=float)
-    return memo.key("crosscheck", hashlib.sha256(text.encode()).hexdigest(), [prims[n].digest() for n in used],
+    return memo.key("crosscheck", RECORD, hashlib.sha256(text.encode()).hexdigest(), [prims[n].digest() for n in used],
                     duration, sorted(settings.to_dict().items()), h_tolerance, sorted(robot.info.items()))
 
 
@@ -182,4 +213,5 @@ def compare(prims: dict[str, CompiledPrimitive], rep: Replay, run: SequenceRun, 
         "law_failures": dict(rep.law_failures),
         "series": {"t": t[d].tolist(), "com_z": {"mujoco": rep.com[k[d], 2].tolist(), "mpgspec": com[d, 2].tolist()},
                    "least_h": {"mujoco": rep.least_h[k[d]].tolist(), "mpgspec": least[d].tolist()}},
+        "playback": _playback(rep, system.model.nq),
     }
