@@ -88,6 +88,8 @@ def test_github_annotations_carry_the_line_and_a_step_summary(capsys, failing, t
     assert "::error file=" in errors[0] and "project.yaml" in errors[0]
     table = summary.read_text()
     assert "| project | result |" in table and "| tiny | FAIL |" in table
+    row = next(ln for ln in table.splitlines() if ln.startswith("| tiny |"))
+    assert row.rstrip().endswith("| not written |")  # --no-write: no report to link
 
 
 def test_github_warnings_and_escaping(capsys, monkeypatch):

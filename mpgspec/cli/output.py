@@ -88,4 +88,4 @@ def _json_doc(res: VerifyResult | None, errors=(), code: int = EXIT_USAGE) -> st
          "assertions": p.report["assertions"] if p.report else [], "report": p.report} for p in res.projects]}
     if errors:
         doc["errors"] = list(errors)
-    return json.dumps(finite_json(doc), indent=1, allow_nan=False, default=str)
+    return json.dumps(finite_json(doc), separators=(",", ":"), allow_nan=False, default=str)

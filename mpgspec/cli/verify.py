@@ -17,7 +17,7 @@ from ..errors import UsageError
 from ..oracle.cache import VERIFY_ENV
 from ..report.findings import disagreements, nominal_only_path, path_text, warning_count
 from ..streams import stdout_to_stderr
-from .output import MARK, _annotation, _json_doc, _line, _num, _print_errors, _progress, append_step_summary
+from .output import MARK, _annotation, _rel, _json_doc, _line, _num, _print_errors, _progress, append_step_summary
 
 JOBS_PER_CORE = 4
 MACHINE_FORMATS = ("json", "junit", "sarif")
@@ -35,12 +35,12 @@ def _step_summary(res) -> None:
     def cell(v) -> str:
         return str(v).replace("|", "\\|").replace("\n", " ")
 
-    rows = ["| project | result | primitives | edges | oracle calls | assertions | warnings |",
-            "|---|---|---|---|---|---|---|"]
+    rows = ["| project | result | primitives | edges | oracle calls | assertions | warnings | report |",
+            "|---|---|---|---|---|---|---|---|"]
     for p in res.projects:
         if p.report is None:
             why = "; ".join(e.get("message", "") for e in p.errors)[:300]
-            rows.append(f"| {cell(p.name or p.path)} | ERROR | {cell(why)} | | | | |")
+            rows.append(f"| {cell(p.name or p.path)} | ERROR | {cell(why)} | | | | | |")
             continue
         r = p.report
         a = r.get("assertions", [])
@@ -50,9 +50,10 @@ def _step_summary(res) -> None:
             p.name or p.path, MARK.get(p.status, p.status.upper()), len(r.get("primitives", [])), len(r.get("edges", [])),
             (r.get("timing") or {}).get("oracle_calls", "–"),
             f"{len(a) - len(failed)}/{len(a)} pass" + (f" (failed: {'; '.join(x['description'] for x in failed)})"
-                                                        if failed else ""), warns)) + " |")
+                                                        if failed else ""), warns,
+            _rel(p.files["html"]) if p.files.get("html") else "not written")) + " |")
         for e in p.errors:  # e.g. the reports could not be written
-            rows.append(f"| {cell(p.name or p.path)} | ERROR | {cell(e.get('message', ''))} | | | | |")
+            rows.append(f"| {cell(p.name or p.path)} | ERROR | {cell(e.get('message', ''))} | | | | | |")
     append_step_summary("### mpgspec verify\n\n" + "\n".join(rows) + "\n\n")
 
 

@@ -2,7 +2,8 @@
 
 The template lives in templates/report.html.j2 and is loaded from the installed package; all text
 is autoescaped, and the pictures are inline SVG built by svg.py (the graph laid out by Graphviz's
-`dot` when it is installed). The page has no scripts and works offline.
+`dot` when it is installed). The page works offline and without scripts; one small inline script
+adds a filter box, "hide passing" and sortable columns to its longer tables.
 """
 from __future__ import annotations
 
@@ -29,11 +30,25 @@ EVIDENCE = (("certified", "proved, not sampled: a checked certificate, or valida
             ("empirical", "sampled executions"))
 
 
+def _spec_link(loc) -> Markup:
+    """file:line of a spec position, linked to the file (a file: address, for a local browser)."""
+    from html import escape
+    from pathlib import Path
+
+    if not isinstance(loc, dict) or not loc.get("file") or not loc.get("line"):
+        return Markup("–")
+    f = Path(str(loc["file"]))
+    label = escape(f"{f.name}:{int(loc['line'])}")
+    href = escape(f.as_uri()) if f.is_absolute() else escape(str(loc["file"]))
+    return Markup(f'<a href="{href}" title="{escape(str(loc["file"]))}">{label}</a>')
+
+
 @lru_cache(maxsize=1)
 def _env() -> jinja2.Environment:
     env = jinja2.Environment(loader=jinja2.PackageLoader("mpgspec.report", "templates"), autoescape=True,
                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
     env.filters["num"] = _num
+    env.filters["spec_link"] = _spec_link
     env.filters["windows"] = lambda ws: ", ".join(f"[{_num(a)}, {_num(b)}]" for a, b in ws) or "–"
     return env
 

@@ -191,6 +191,6 @@ def test_cli_writes_the_set_and_no_temporary_folder(capsys, tmp_path):
     for _ in range(2):
         rc, doc, _ = _verify_json(capsys, out)
         assert rc == 0 and doc["projects"][0]["status"] == "pass"
-    assert sorted(p.name for p in out.iterdir()) == ["tiny"]
+    assert sorted(p.name for p in out.iterdir()) == ["index.html", "tiny"]
     assert {p.name for p in (out / "tiny").iterdir()} == SET
     assert {Path(p).name for p in doc["projects"][0]["files"].values()} == SET
