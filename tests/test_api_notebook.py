@@ -68,3 +68,41 @@ def test_plan_on_the_robust_graph(tiny, example):
     p = example("pendulum").projects[0]  # its assertion: robust plan Hang => Balance through the swings
     assert p.plan("Hang", "Balance", robust=True)["path"] == ["Hang", "Swing(1)", "Swing(2.6)", "Balance"]
     assert p.plan("Hang", "Balance")["path"] == ["Hang", "Swing(1)", "Swing(2.6)", "Balance"]
+
+
+def test_a_report_verified_from_relative_paths_simulates_from_any_folder(tmp_path, monkeypatch):
+    import shutil
+
+    repo = tmp_path / "repo"
+    shutil.copytree(TINY, repo / "specs" / "tiny")
+    monkeypatch.chdir(repo)
+    api.verify("specs/tiny", out_dir="reports")
+    assert (repo / "reports" / "index.html").is_file()
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    back = api.load_report(repo / "reports" / "tiny")
+    assert back.path == repo / "specs" / "tiny" / "project.yaml"
+    assert back.simulate("graph").safe and back.plan("Left", "Right")["path"] == ["Left", "Mid", "Right"]
+
+
+def test_verify_reuses_stored_results_like_the_command(tmp_path):
+    first = api.verify(TINY)["tiny"].report["timing"]
+    again = api.verify(TINY)["tiny"].report["timing"]
+    assert again["oracle_calls"] == first["oracle_calls"] and again.get("cache_hits") == again["oracle_calls"]
+    fresh = api.verify(TINY, cache=False)["tiny"].report["timing"]
+    assert not fresh.get("cache_hits")
+
+
+def test_the_notebook_view_shows_the_verdict_the_graph_and_the_warnings(tmp_path):
+    import shutil
+
+    proj = tmp_path / "tiny"
+    shutil.copytree(TINY, proj)
+    spec = proj / "project.yaml"
+    drift = ("  - name: Drift\n    class: fixed\n    setpoint: {expr: [0.5]}\n"
+             "    controller: {type: pd, outputs: [x], kp: [0], kd: [0]}\n    roa: {radius: 0.05}\n")
+    spec.write_text(spec.read_text().replace("primitives:\n", "primitives:\n" + drift, 1))
+    html = api.verify(proj)["tiny"]._repr_html_()
+    assert "<b>FAIL</b>" in html and "<svg" in html and "edges</summary>" in html
+    assert "WARN assumption local_stability of Drift" in html

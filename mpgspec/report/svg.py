@@ -446,7 +446,45 @@ def graphviz_svg(report: dict, timeout: float = 10.0) -> str | None:
     return out
 
 
-def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str = "circular") -> str:
+def layered_layout(G: nx.DiGraph, order: list[str]) -> dict[str, tuple[float, float]]:
+    """Node -> (x, y) in [-1, 1]^2, layer by layer from the top: a node's layer is its distance (in
+    edges) from the first primitive of `order` (the paper draws its graphs this way, from Lie down);
+    nodes it cannot reach come last, in a layer by their distance from the rest. Within a layer
+    nodes are ordered by the mean position of their neighbours in the layers above (barycentres),
+    ties in the report's order: crossings stay few without a layout engine."""
+    if not len(G):
+        return {}
+    rank = {n: k for k, n in enumerate(order)}
+    dist = nx.single_source_shortest_path_length(G, order[0]) if order and order[0] in G else {}
+    rest = [n for n in G if n not in dist]
+    if rest:
+        far = max(dist.values(), default=-1) + 1
+        away = nx.multi_source_dijkstra_path_length(G.to_undirected(), set(dist)) if dist else {}
+        dist.update({n: far + max(int(away.get(n, 1)) - 1, 0) for n in rest})
+    layers: dict[int, list[str]] = {}
+    for n in sorted(G, key=lambda n: rank.get(n, len(rank))):
+        layers.setdefault(dist[n], []).append(n)
+    depth = sorted(layers)
+    x: dict[str, float] = {}
+    for d in depth:
+        row = layers[d]
+        def centre(n: str) -> float:
+            near = [x[m] for m in nx.all_neighbors(G, n) if m in x]
+            return sum(near) / len(near) if near else rank.get(n, 0) / max(len(rank), 1)
+        row.sort(key=lambda n: (centre(n), rank.get(n, 0)))
+        for i, n in enumerate(row):
+            x[n] = (i + 0.5) / len(row)
+    # a crowded layer takes two rows (every other node one row lower), so its nodes do not touch and
+    # the edges between them are curves one can follow
+    rows: list[list[str]] = []
+    for d in depth:
+        row = layers[d]
+        rows += [row[0::2], row[1::2]] if len(row) > 3 else [row]
+    gap = 2.0 / max(len(rows) - 1, 1)
+    return {n: (2.0 * x[n] - 1.0, 1.0 - gap * k) for k, row in enumerate(rows) for n in row}
+
+
+def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str = "layered") -> str:
     """The motion primitive graph: box fixed, ellipse periodic, diamond transient; solid Class 1, dashed Class 2,
     grey edges the planner cannot use, vermillion edges that are nominal only; duration labels beside
     the edges (hand-made layout)."""
@@ -460,7 +498,8 @@ def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str 
     G.add_nodes_from(node)
     G.add_edges_from((e["from"], e["to"]) for e in edges)
     kk = layout == "kamada_kawai" and len(G) > 2
-    pos = nx.kamada_kawai_layout(G.to_undirected()) if kk else nx.circular_layout(G)
+    pos = (layered_layout(G, [p["name"] for p in prims]) if layout == "layered" else
+           nx.kamada_kawai_layout(G.to_undirected()) if kk else nx.circular_layout(G))
     gh, m = height - 44, 12 + max((s[1] for s in node.values()), default=20)
     P = {k: (width / 2 + float(v[0]) * (width / 2 - m), gh / 2 - float(v[1]) * (gh / 2 - 34)) for k, v in pos.items()}
     body = [f'<defs><marker id="{ARROW_ID}" viewBox="0 0 10 10" refX="9" refY="5" markerWidth="7" markerHeight="7" '
@@ -482,7 +521,8 @@ def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str 
             d = math.hypot(cx - px, cy - py) or 1.0
             r = _reach(*node[nm], (cx - px) / d, (cy - py) / d) + gap
             ends.append(f"{_n(px + (cx - px) / d * r)} {_n(py + (cy - py) / d * r)}")
-        body.append(_el("path", _tip(v["tip"]), d=f"M{ends[0]}Q{_n(cx)} {_n(cy)} {ends[1]}", fill="none",
+        body.append(_el("path", _tip(v["tip"]), data_from=e["from"], data_to=e["to"],
+                        d=f"M{ends[0]}Q{_n(cx)} {_n(cy)} {ends[1]}", fill="none",
                         stroke=color, stroke_width=1.6 if lost else 1.2,
                         stroke_dasharray=DASH if e["class"] == 2 else "",  # class by style, robustness by colour
                         marker_end=f"url(#{arrow})"))
@@ -491,20 +531,22 @@ def graph_svg(report: dict, *, width: int = 640, height: int = 470, layout: str 
             mx, my = (ax + 2 * cx + bx) / 4, (ay + 2 * cy + by) / 4
             nx_, ny_ = cx - (ax + bx) / 2, cy - (ay + by) / 2
             d = math.hypot(nx_, ny_) or 1.0
-            lab = v["label"].split("\n")[0].strip() + (" ⧗" if e["class"] == 2 else "") + (" ✗" if lost else "")
+            lab = v["label"].split("\n")[0].strip() + (" (C2)" if e["class"] == 2 else "") + (" ✗" if lost else "")
             lx, ly = mx + nx_ / d * 9, my + ny_ / d * 9 + 3
             anchor = "middle" if abs(nx_ / d) < 0.4 else ("start" if nx_ > 0 else "end")
-            labels += [_text(lx, ly, lab, 10, anchor, stroke="#fff", stroke_width=3, stroke_linejoin="round"),
+            labels += [_text(lx, ly, lab, 10, anchor, stroke="#fff", stroke_width=3, stroke_linejoin="round",
+                             data_from=e["from"], data_to=e["to"]),
                        _el("text", _tip(v["tip"]) + escape(lab), x=float(lx), y=float(ly), font_size=10,
-                           text_anchor=anchor, fill=color)]
+                           text_anchor=anchor, fill=color, data_from=e["from"], data_to=e["to"])]
     for p in prims:
         (x, y), (shape, a, b) = P[p["name"]], node[p["name"]]
-        body += [_node(shape, x, y, a, b, NODE_FILL.get(p["class"], "#eee")), _text(x, y + 4, p["name"])]
+        body.append(_el("g", _node(shape, x, y, a, b, NODE_FILL.get(p["class"], "#eee")) + _text(x, y + 4, p["name"]),
+                        data_node=p["name"]))
     ly = height - 18.0
     body += labels
     for x, (cls, shape) in zip((20, 92, 174), SHAPES.items()):
         body += [_node(shape, x, ly, 11, 8, NODE_FILL[cls]), _text(x + 15, ly + 4, cls, 10, "start")]
-    keys = [("Class 1", "#333", "", ARROW_ID), ("Class 2 ⧗", "#333", DASH, ARROW_ID)]
+    keys = [("Class 1", "#333", "", ARROW_ID), ("Class 2 (C2)", "#333", DASH, ARROW_ID)]
     if any(v["robust"] is False for v in views):
         keys.append(("nominal only ✗", NOMINAL_ONLY, "", ARROW_ID + "-nominal"))
     for k, (label, color, dash, arrow) in enumerate(keys):

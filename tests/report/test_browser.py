@@ -135,7 +135,7 @@ def test_a_run_the_cross_check_disputes_is_not_shown_as_safe(pages):
 
 
 PLAYBACK_PROBE = """(async () => {
-  const out = {};
+  const start = window.playback.state().t, out = {};
   for (const s of [0, %(later)s]) {
     window.playback.seek(s);
     await new Promise(r => requestAnimationFrame(() => r()));
@@ -143,7 +143,7 @@ PLAYBACK_PROBE = """(async () => {
     out[s] = {state: window.playback.state(), image: c.toDataURL().length + ':' + c.toDataURL().slice(-64)};
   }
   const d = document.documentElement;
-  return {frames: out, width: innerWidth, scroll_width: d.scrollWidth, hash_t: %(hash_t)s};
+  return {frames: out, width: innerWidth, scroll_width: d.scrollWidth, hash_t: start};
 })()"""
 
 
@@ -164,8 +164,7 @@ def test_the_a1_playback_moves_the_robot(pages, browser, tmp_path_factory, width
     later = 7.0  # Table II: Walk(fast) was commanded at 3 s
     url = page.resolve().as_uri() + "#t=5.5"
     png = tmp_path_factory.mktemp("shots") / f"playback-{width}.png"
-    r = browser.open(url, width, script=PLAYBACK_PROBE % {"later": later, "hash_t": "window.playback.state().t"},
-                     screenshot=png)
+    r = browser.open(url, width, script=PLAYBACK_PROBE % {"later": later}, screenshot=png)
     assert r["errors"] == [], r["errors"]
     v = r["value"]
     assert v["hash_t"] == pytest.approx(5.5)
@@ -212,3 +211,50 @@ def test_the_a1_first_screen_holds_the_verdict_the_dispute_and_the_nominal_only_
         assert item is not None, f"not in the summary: {w}"
         assert item["top"] < v["height"], f"below the first screen ({item['top']} px): {w}"
     assert v["page"] <= 8000
+
+
+GRAPH_PROBE = """(() => {
+  const svg = document.querySelector('.graph svg');
+  const node = [...svg.querySelectorAll('[data-node], g.node')].find(g => (g.dataset.node ||
+    g.querySelector('title').textContent.trim()) === 'Lie');
+  node.dispatchEvent(new MouseEvent('click', {bubbles: true}));
+  const edges = [...svg.querySelectorAll('path[data-from], g.edge')];
+  const faded = edges.filter(e => e.style.opacity === '0.12').length;
+  const before = svg.getAttribute('viewBox');
+  document.querySelector('.zoombar button').click();
+  return {edges: edges.length, faded, zoomed: svg.getAttribute('viewBox') !== before};
+})()"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("layout", ["graphviz", "built-in"])
+def test_clicking_a_primitive_highlights_its_edges_and_the_graph_zooms(pages, browser, tmp_path, layout, monkeypatch):
+    """In the A1 report's graph, a click on Lie leaves only Lie's edges opaque; + zooms; with
+    Graphviz's layout and with the built-in layered one a user without Graphviz gets."""
+    _, report, errors = pages("a1")
+    assert report is not None, errors
+    if layout == "built-in":
+        monkeypatch.setenv("MPGSPEC_GRAPHVIZ", "0")
+    elif shutil.which("dot") is None:
+        pytest.skip("Graphviz's dot is not installed")
+    page = tmp_path / "report.html"
+    page.write_text(render_html(report), encoding="utf-8")
+    r = browser.open(page.resolve().as_uri(), 1400, script=GRAPH_PROBE)
+    assert r["errors"] == [], r["errors"]
+    v = r["value"]
+    touching = sum("Lie" in (e["from"], e["to"]) for e in report["edges"])
+    assert v["edges"] - v["faded"] == touching and v["faded"] > 0 and v["zoomed"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("width", WIDTHS)
+def test_the_index_page_reads_at_both_widths(browser, tmp_path, width):
+    from mpgspec.report.index import index_html
+
+    (tmp_path / "sample").mkdir()
+    shutil.copy(Path(__file__).parent / "data" / "sample_report.json", tmp_path / "sample" / "report.json")
+    (tmp_path / "index.html").write_text(index_html(tmp_path), encoding="utf-8")
+    r = browser.open((tmp_path / "index.html").resolve().as_uri(), width,
+                     script="({w: innerWidth, sw: document.documentElement.scrollWidth, "
+                            "rows: document.querySelectorAll('tr').length})")
+    assert r["errors"] == [] and r["value"]["sw"] <= width and r["value"]["rows"] >= 3
