@@ -30,6 +30,10 @@ class SequenceRun:
     body: com_z (m) and roll, pitch, yaw (rad, Z-Y-X Euler angles of the base, yaw unwrapped) at the
     samples of t; poses: stick figures in world coordinates (see body_points), each with its time,
     primitive and event (POSE_EVENTS). Both are empty for systems without a floating base.
+    violations holds the most violated function at the first MAX_RECORDED violating samples (and the
+    first of each function, and the first after each switch); violation_totals counts every violating
+    sample: per primitive and safety function, the first and last time, the number of samples and
+    the least value.
     """
 
     mode: str
@@ -44,6 +48,7 @@ class SequenceRun:
     failed: str = ""
     body: dict[str, list[float]] = field(default_factory=dict)
     poses: list[dict] = field(default_factory=list)
+    violation_totals: list[dict] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -172,6 +177,7 @@ def _simulate(run: SequenceRun, prims: dict[str, CompiledPrimitive], graph: Moti
         if not sim.advance():
             break
     run.final_primitive = sim.cur
+    run.violation_totals = [{"primitive": p, "h": h, **v} for (p, h), v in sim.totals.items()]
 
 
 class _Simulation:
@@ -193,6 +199,7 @@ class _Simulation:
         self.seen = False  # a violation recorded since the last switch
         self.firsts: set[tuple[str, int]] = set()  # (primitive, h index) whose first violation is recorded
         self.recorded = 0  # violating samples recorded
+        self.totals: dict[tuple[str, str], dict] = {}  # (primitive, h) -> every violating sample, counted
         self.z = None
 
     def start(self) -> bool:
@@ -285,6 +292,13 @@ class _Simulation:
             keep = self.recorded < MAX_RECORDED or not self.seen or worst in first
             rows = ([worst] if keep else []) + [j for j in first if j != worst]
             self.seen, self.recorded = True, self.recorded + keep
+            for j in np.flatnonzero(bad):
+                v = float(hv[j]) if np.isfinite(hv[j]) else None
+                tot = self.totals.setdefault((self.cur, p.h_names[j]), {"first": t_now, "last": t_now, "samples": 0,
+                                                                        "least": v})
+                tot["last"], tot["samples"] = t_now, tot["samples"] + 1
+                if v is None or tot["least"] is not None and v < tot["least"]:
+                    tot["least"] = None if v is None else v
             for j in rows:
                 self.firsts.add((self.cur, j))
                 v = float(hv[j]) if np.isfinite(hv[j]) else None

@@ -181,7 +181,7 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
                    "robust_s": t2 - t1, "assumptions_s": time.perf_counter() - t2}, robust, xc)
 
 
-SEQUENCE_RECORD = 1
+SEQUENCE_RECORD = 2
 """Layout of the memoised goal-sequence run (part of its key)."""
 
 

@@ -215,6 +215,7 @@ def compact_run(run: dict) -> dict:
     out["body"] = {k: rnd([v[i] for i in idx if i < len(v)], TRACE_DIGITS) for k, v in (run.get("body") or {}).items()}
     out["poses"] = [{**rnd({k: v for k, v in p.items() if k != "t"}, TRACE_DIGITS), "t": rnd(p["t"])}
                     for p in run.get("poses") or []]
+    out["violation_totals"] = rnd(run.get("violation_totals") or [])
     return out
 
 

@@ -326,6 +326,17 @@ class Violation(_Strict):
     value: Num
 
 
+class ViolationTotal(_Strict):
+    """Every violating sample of one safety function in one primitive, counted."""
+
+    primitive: str
+    h: str
+    first: float = Field(description="time of the first violating sample (s)")
+    last: float = Field(description="time of the last violating sample (s)")
+    samples: int = Field(description="violating samples (at the run's step)")
+    least: Num = Field(description="the least value (null: not finite)")
+
+
 Point = tuple[Num, Num, Num]
 
 
@@ -358,6 +369,9 @@ class Run(_Strict):
         "base, yaw unwrapped) at the samples of t"))
     poses: list[Pose] = Field(default_factory=list, description="stick figures at the start, each switch, the "
                                                                 "first violation and the end")
+    violation_totals: list[ViolationTotal] = Field(default_factory=list, description=(
+        "every violating sample counted per primitive and safety function (violations keeps the first 50 "
+        "samples' most violated function, each function's first and the first after each switch)"))
 
 
 class Sequence(_Strict):
