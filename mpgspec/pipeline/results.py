@@ -108,7 +108,8 @@ class ProjectResult:
         if cp.spec.project.sequence is None:
             raise UsageError(f"{cp.spec.path}: the project has no 'sequence'")
         if self.mpg is not None:
-            g, table = self.mpg, lookup_table(self.mpg, "duration")
+            seq = cp.spec.project.sequence
+            g, table = self.mpg, lookup_table(self.mpg, seq.weight)
         else:
             g, table = ReportGraph(self.report), self.report["lookup_table"]["next"]
         return simulate_sequence(cp.prims, g, table, cp.spec.project.sequence, cp.settings, mode)

@@ -49,7 +49,7 @@ def simulate_project(project, modes=("naive", "graph"), out="reports", rebuild_:
         from ..plan.planner import lookup_table
 
         cp, vg = rebuild(spec)
-        g, table = vg.graph, lookup_table(vg.graph)
+        g, table = vg.graph, lookup_table(vg.graph, spec.project.sequence.weight)
     done = {m: simulate_sequence(cp.prims, g, table, spec.project.sequence, cp.settings, m) for m in modes}
     xc = None
     if xcs is not None:
@@ -91,12 +91,13 @@ def simulate_uncertain(project, runs: int | None = None, seed: int | None = None
         cp = compiled(spec)
         rg = robust_report_graph(report)
         graphs = {"graph": (ReportGraph(report), report["lookup_table"]["next"]),
-                  "robust_graph": (rg, report_lookup_table(rg))}
+                  "robust_graph": (rg, report_lookup_table(rg, spec.project.sequence.weight))}
     else:
         from ..robust.graph import robust_stage
 
         cp, vg = rebuild(spec, executor)
         rob = robust_stage(cp, vg, memo=getattr(executor, "memo", None), executor=executor)
-        graphs = {"graph": (vg.graph, lookup_table(vg.graph)), "robust_graph": (rob.graph, lookup_table(rob.graph))}
+        w = spec.project.sequence.weight
+        graphs = {"graph": (vg.graph, lookup_table(vg.graph, w)), "robust_graph": (rob.graph, lookup_table(rob.graph, w))}
     stats = sequence_under_uncertainty(spec, cp.prims, cp.settings, graphs, runs, seed, executor)
     return {"stats": stats, "uncertainty": unc, "runs": runs, "seed": seed}

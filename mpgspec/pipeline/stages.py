@@ -144,7 +144,8 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     t0 = time.perf_counter()
     names = list(prims)
     plans = [shortest_plan(g, a, b, "duration") for a in names for b in names if a != b]
-    table = {"weight": "duration", "next": lookup_table(g, "duration")}
+    weight = spec.project.sequence.weight if spec.project.sequence is not None else "duration"
+    table = {"weight": weight, "next": lookup_table(g, weight)}
     runs = {}
     if spec.project.sequence is not None:
         if progress:

@@ -99,8 +99,9 @@ def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResul
     if spec.project.sequence is not None and unc.runs > 0:
         if progress:
             progress(spec.name, "sequence under uncertainty", 0, 3)
-        seq = sequence_under_uncertainty(spec, prims, settings, {"graph": (g, lookup_table(g)),
-                                                                 "robust_graph": (rg, lookup_table(rg))},
+        w = spec.project.sequence.weight
+        seq = sequence_under_uncertainty(spec, prims, settings, {"graph": (g, lookup_table(g, w)),
+                                                                 "robust_graph": (rg, lookup_table(rg, w))},
                                          unc.runs, unc.seed, executor, cb)
     timing = {"robust_s": time.perf_counter() - t0, "robust_build_s": build_s, "robust_rollouts": n_roll,
               "robust_sequence_s": time.perf_counter() - t1}

@@ -137,6 +137,10 @@ class Sequence(Strict):
     dt: Number | None = Field(default=None, gt=0, description="step of the sequence runs (s); default: the "
                               "oracle's dt. A run judges h at its samples without error bounds, so a run "
                               "that passes close to a boundary needs a step fine enough to resolve it")
+    weight: Literal["duration", "peak_input", "hops", "margin"] = Field(
+        default="duration", description="the edge weight of the lookup table the graph run follows (as "
+        "`mpgspec plan --weight`): duration, the fewest hops, the least peak input, or margin (1 / each edge's least "
+        "normalised safety margin: thin edges avoided)")
 
     @field_validator("commands")
     @classmethod
