@@ -104,3 +104,21 @@ def test_a_usage_error_is_a_valid_document_too(capsys, tmp_path, fmt):
         jsonschema.Draft4Validator(json.loads((SCHEMAS / "sarif-2.1.0.json").read_text())).validate(doc)
         assert [r["ruleId"] for r in doc["runs"][0]["results"]] == ["MPG001"]
         assert doc["runs"][0]["tool"]["driver"]["rules"][-1]["id"] == "MPG001"
+
+
+def test_characters_xml_cannot_hold_are_replaced_and_paths_are_uris():
+    from types import SimpleNamespace
+
+    from mpgspec.report.ci import junit, sarif
+
+    loc = {"file": "my specs/project.yaml", "line": 3}
+    report = {"assertions": [{"description": "edge A -> B\x07", "status": "fail", "message": "bell\x07 \x00 end",
+                              "location": loc}], "assumptions": [], "timing": {}}
+    p = SimpleNamespace(path="my specs/project.yaml", name="p\x01", status="fail", report=report, errors=[])
+    text = junit([p])
+    xmlschema.XMLSchema(SCHEMAS / "junit-10.xsd").validate(text)
+    assert "\x07" not in text and "bell\ufffd" in ET.fromstring(text).find("testsuite/testcase/failure").get("message")
+    doc = sarif([p])
+    jsonschema.Draft4Validator(json.loads((SCHEMAS / "sarif-2.1.0.json").read_text())).validate(doc)
+    assert doc["runs"][0]["results"][0]["locations"][0]["physicalLocation"]["artifactLocation"]["uri"] == \
+        "my%20specs/project.yaml"

@@ -14,9 +14,12 @@ is known. Rules are the error codes (`mpgspec explain`) and the kinds of finding
 from __future__ import annotations
 
 import os
+import re
 import socket
 import time
+from pathlib import Path
 from types import SimpleNamespace
+from urllib.parse import quote
 from xml.etree import ElementTree as ET
 
 from .. import __version__
@@ -44,41 +47,49 @@ def _time(s: float) -> str:
     return f"{max(s, 0.0):.3f}"
 
 
+NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+"""Characters XML 1.0 cannot hold (a spec or a message could contain them)."""
+
+
+def _xml(text) -> str:
+    return NOT_XML.sub("\ufffd", str(text))
+
+
 def _where(loc: dict | None) -> str:
     return f" ({loc['file']}:{loc['line']})" if loc and loc.get("line") else ""
 
 
-def _cases(p, strict: bool) -> list[tuple[str, str, str | None, str, str]]:
-    """(classname, name, outcome, message, output) for each test case of a project; outcome None
-    (passed), 'failure' or 'error'."""
+def _cases(p, strict: bool) -> list[tuple[str, str, str, str | None, str, str]]:
+    """(kind, classname, name, outcome, message, output) for each test case of a project; outcome None
+    (passed), 'failure' or 'error'; kind names the finding (assertion, assumption, crosscheck, robust)."""
     name = p.name or str(p.path)
     if p.report is None:
         msg = "; ".join(e.get("message", "") for e in p.errors) or "the project could not be verified"
         code = next((e.get("code") for e in p.errors if e.get("code")), "MPG000")
-        return [(name, "verify", "error", f"{code}: {msg}", "\n".join(e.get("text", "") for e in p.errors))]
+        return [("verify", name, "verify", "error", f"{code}: {msg}", "\n".join(e.get("text", "") for e in p.errors))]
     r = p.report
     out = []
     for a in r.get("assertions", []):
         bad = a["status"] in ("fail", "error")
-        out.append((f"{name}.assertions", a["description"], ("failure" if a["status"] == "fail" else "error")
-                    if bad else None, a.get("message", ""), f"{a['status'].upper()} {a.get('message', '')}"
-                    f"{_where(a.get('location'))}"))
+        out.append(("assertion", f"{name}.assertions", a["description"],
+                    ("failure" if a["status"] == "fail" else "error") if bad else None, a.get("message", ""),
+                    f"{a['status'].upper()} {a.get('message', '')}{_where(a.get('location'))}"))
     for c in r.get("assumptions", []):
         st = c["status"]
         outcome = "failure" if st in ("fail", "error") or (st == "warn" and strict) else None
-        out.append((f"{name}.assumptions.{c['primitive']}", c["name"], outcome, c.get("message", ""),
-                     f"{st.upper()} {c.get('message', '')}{_where(c.get('location'))}"))
+        out.append(("assumption", f"{name}.assumptions.{c['primitive']}", c["name"], outcome, c.get("message", ""),
+                    f"{st.upper()} {c.get('message', '')}{_where(c.get('location'))}"))
     disputed = {d["mode"]: d["text"] for d in disagreements(r)}
     for mode in ((r.get("crosscheck") or {}).get("runs") or {}):
         text = disputed.get(mode)
-        out.append((f"{name}.crosscheck", f"{mode} run", "failure" if text and strict else None,
+        out.append(("crosscheck", f"{name}.crosscheck", f"{mode} run", "failure" if text and strict else None,
                     text or "", f"WARN {text}" if text else "agrees"))
     bad = nominal_only_path(r)
     if r.get("robust"):
-        out.append((f"{name}.robust", "graph run's path", "failure" if bad and strict else None,
+        out.append(("robust", f"{name}.robust", "graph run's path", "failure" if bad and strict else None,
                     path_text(bad) if bad else "", f"WARN {path_text(bad)}" if bad else "every edge is robust"))
     for e in p.errors:  # e.g. the reports could not be written
-        out.append((name, "write reports", "error", e.get("message", ""), e.get("text", "")))
+        out.append(("verify", name, "write reports", "error", e.get("message", ""), e.get("text", "")))
     return out
 
 
@@ -96,21 +107,20 @@ def junit(projects: list, strict: bool = False, errors=()) -> str:
         cases = _cases(p, strict)
         s = _seconds(p.report)
         total_s += s
-        counts = {"tests": len(cases), "failures": sum(c[2] == "failure" for c in cases),
-                  "errors": sum(c[2] == "error" for c in cases)}
-        suite = ET.SubElement(root, "testsuite", name=p.name or str(p.path), file=str(p.path), skipped="0",
+        counts = {"tests": len(cases), "failures": sum(c[3] == "failure" for c in cases),
+                  "errors": sum(c[3] == "error" for c in cases)}
+        suite = ET.SubElement(root, "testsuite", name=_xml(p.name or p.path), file=_xml(p.path), skipped="0",
                               time=_time(s), timestamp=stamp, hostname=socket.gethostname(),
                               **{k: str(v) for k, v in counts.items()})
         props = ET.SubElement(suite, "properties")
         for k, v in _properties(p).items():
-            ET.SubElement(props, "property", name=k, value=str(v))
-        for classname, name, outcome, message, output in cases:
-            case = ET.SubElement(suite, "testcase", classname=classname, name=name, time="0.000")
+            ET.SubElement(props, "property", name=k, value=_xml(v))
+        for kind, classname, name, outcome, message, output in cases:
+            case = ET.SubElement(suite, "testcase", classname=_xml(classname), name=_xml(name), time="0.000")
             if outcome:
-                kind = classname[len(p.name or str(p.path)):].split(".")[1:2] or ["verify"]
-                ET.SubElement(case, outcome, message=message[:2000], type=kind[0]).text = output
+                ET.SubElement(case, outcome, message=_xml(message[:2000]), type=kind).text = _xml(output)
             elif output:
-                ET.SubElement(case, "system-out").text = output
+                ET.SubElement(case, "system-out").text = _xml(output)
         for k in totals:
             totals[k] += counts[k]
     root.set("time", _time(total_s))
@@ -139,8 +149,8 @@ def _uri(path: str) -> str:
     except ValueError:
         rel = ".."
     if not rel.startswith(".."):
-        return rel.replace(os.sep, "/")
-    return "file://" + os.path.abspath(path).replace(os.sep, "/")
+        return quote(rel.replace(os.sep, "/"))
+    return Path(os.path.abspath(path)).as_uri()
 
 
 def _result(rule: str, level: str, text: str, loc: dict | None, fallback) -> dict:

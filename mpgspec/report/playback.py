@@ -18,6 +18,7 @@ from functools import lru_cache
 
 import jinja2
 import numpy as np
+from markupsafe import Markup
 
 from ..execute.sequence import PLAYBACK_FPS, SequenceRun, body_points, playback_samples
 from .fig6 import run_color
@@ -123,4 +124,4 @@ def render_playback(data: dict) -> str:
     """playback.html's text: the template with the data inline (as JSON a script cannot close)."""
     text = json.dumps(data, separators=(",", ":"), allow_nan=False)
     text = text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
-    return _template().render(project=data["project"], data=jinja2.utils.markupsafe.Markup(text))
+    return _template().render(project=data["project"], data=Markup(text))
