@@ -32,16 +32,30 @@ from .evidence import OracleEvidence, Reason
 from .tasks import Executor, Task
 
 
+PRESENTATION = ("mpgspec/cli/", "mpgspec/report/sections/", "mpgspec/report/ci.py", "mpgspec/report/diff.py",
+                "mpgspec/report/fig6.py", "mpgspec/report/files.py", "mpgspec/report/findings.py",
+                "mpgspec/report/html.py", "mpgspec/report/index.py", "mpgspec/report/playback.py",
+                "mpgspec/report/svg.py", "mpgspec/report/write.py")
+"""Source that only shows or writes what was computed (the command line, pages, pictures, CI formats):
+nothing it does reaches a cached result, so a change to it keeps the cache. Everything else is hashed."""
+
+
+def code_files(root: Path) -> list[Path]:
+    """The source files code_version hashes: mpgspec's and the verifiers', but PRESENTATION."""
+    files = sorted(f for d in ("mpgspec", "verifiers") for f in (root / d).rglob("*.py"))
+    return [f for f in files if not f.relative_to(root).as_posix().startswith(PRESENTATION)]
+
+
 @lru_cache(maxsize=1)
 def code_version() -> str:
     """The package version and a hash of the source of mpgspec and its verifiers: cached results
-    are keyed by it, so a changed oracle, judge or verifier never serves results computed by the old one."""
+    are keyed by it, so a changed oracle, judge or verifier never serves results computed by the old one
+    (a change to how results are shown, PRESENTATION, keeps them)."""
     root = Path(__file__).resolve().parents[2]
     h = hashlib.sha256(__version__.encode())
-    for d in ("mpgspec", "verifiers"):
-        for f in sorted((root / d).rglob("*.py")):
-            h.update(f.relative_to(root).as_posix().encode())
-            h.update(f.read_bytes())
+    for f in code_files(root):
+        h.update(f.relative_to(root).as_posix().encode())
+        h.update(f.read_bytes())
     return f"{__version__}+{h.hexdigest()[:16]}"
 
 
