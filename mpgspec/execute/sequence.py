@@ -17,7 +17,7 @@ import numpy as np
 
 from ..compile.contacts import grid_clock
 from ..compile.primitive import INACTIVE, CompiledPrimitive
-from ..graph.transition import MotionPrimitiveGraph
+from ..graph.transition import MotionPrimitiveGraph, switch_clocks
 from ..oracle.integrator import build_chunk, initial_state
 from ..settings import OracleSettings
 from ..spec.models import PrimitiveClass, Sequence
@@ -201,6 +201,7 @@ class _Simulation:
         self.recorded = 0  # violating samples recorded
         self.totals: dict[tuple[str, str], dict] = {}  # (primitive, h) -> every violating sample, counted
         self.z = None
+        self.clocks: dict[tuple[str, str], list] = {}  # (from, to) -> the switch-in clock per t_A
 
     def start(self) -> bool:
         """Switch the start primitive in at its start clock from its setpoint; False if that is not finite."""
@@ -335,15 +336,17 @@ class _Simulation:
         return (i, "transient_end", (p.next, t_B if self.mode == "graph" else None))
 
     def _graph_switch(self, p: CompiledPrimitive, i: int, clk: float):
-        """Towards the goal by the lookup table, at a grid time t_A the oracle verified (within dt / 2)."""
+        """Towards the goal by the lookup table, at a grid time t_A the oracle verified (within dt / 2)
+        that the sequence's switching rule takes (graph.transition.switch_clocks)."""
         nxt = self.table[self.cur].get(self.goal)
         tr = self.graph.edge(self.cur, nxt) if nxt and nxt != self.cur else None
         if tr is None:
             return None
         c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clk, p.period)
         j = int(np.argmin(np.abs(tr.t_A - c)))
-        if abs(tr.t_A[j] - c) <= self.dt / 2 + 1e-12 and tr.best_t_B[j] is not None:
-            return (i, "graph", (nxt, tr.best_t_B[j]))
+        clocks = self.clocks.setdefault((self.cur, nxt), switch_clocks(tr, self.seq.switch))
+        if abs(tr.t_A[j] - c) <= self.dt / 2 + 1e-12 and clocks[j] is not None:
+            return (i, "graph", (nxt, clocks[j]))
         return None
 
     def _act(self, event, X) -> bool:

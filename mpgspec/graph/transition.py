@@ -32,6 +32,10 @@ class Transition:
     best_t_B: list[float | None] = field(default_factory=list)  # per t_A: the t_B to switch in at
     windows: list[tuple[float, float]] = field(default_factory=list)  # t_A intervals with a safe t_B
     weights: dict[str, float] = field(default_factory=dict)
+    row_margins: list[float | None] = field(default_factory=list)
+    """Per t_A: the least normalised safety margin of the cell at its best t_B (see measure_margins),
+    None where no t_B is verified; empty until measured."""
+    _normalised: list[bool] = field(default_factory=list, repr=False)
     certified: dict = field(default_factory=dict)
     """t_A intervals proved for every t_A in them, not only at grid points: {windows: [[a, b], ...],
     boxes: start boxes used, order: Taylor order, width: largest start-box width, seconds}; empty
@@ -79,31 +83,62 @@ class Transition:
         if durations:
             self.weights = {"duration": float(max(durations)), "peak_input": float(max(peaks)), "hops": 1.0}
 
-    def least_margin(self, names: list[str], scales: np.ndarray) -> float | None:
-        """The least normalised safety margin over the cells the edge switches through (the verified t_B
-        of each t_A): each safety function's error-aware lower bound over the rollout divided by its
-        value at B's setpoint at that t_B (scales[j], one row per t_B in the order of names; a function at most 0 there, or
-        parked outside its window, is left out). 1: the flow keeps every function as far from its
-        boundary as the setpoint does; 0: it touches one. 1 when no function can be normalised (B has
-        none, or none is positive at its setpoint); None without a verified cell."""
-        out, cells = None, 0
+    def measure_margins(self, names: list[str], scales: np.ndarray) -> None:
+        """Fill row_margins: per t_A, the least normalised safety margin of the cell it switches
+        through (its best t_B): each safety function's error-aware lower bound over the rollout
+        divided by its value at B's setpoint at that t_B (scales[j], one row per t_B in the order of
+        names; a function at most 0 there, or parked outside its window, is left out). 1: the flow
+        keeps every function as far from its boundary as the setpoint does; 0: it touches one. 1 when
+        no function can be normalised (B has none, or none is positive at its setpoint)."""
+        self.row_margins, self._normalised = [], []
         for i, t_b in enumerate(self.best_t_B):
             if t_b is None:
+                self.row_margins.append(None)
                 continue
             j = int(np.argmin(np.abs(self.t_B - t_b)))
-            e, cells = self.evidence[i][j], cells + 1
+            e, out = self.evidence[i][j], None
             for k, h in enumerate(names):
                 lb, ref = e.lower_bounds.get(h), float(scales[j][k])
                 if lb is None or not np.isfinite(lb) or not (0 < ref < INACTIVE / 2):
                     continue
                 m = max(float(lb), 0.0) / ref
                 out = m if out is None else min(out, m)
-        return out if out is not None or not cells else 1.0
+            self.row_margins.append(1.0 if out is None else out)
+            self._normalised.append(out is not None)
+
+    def least_margin(self, names: list[str], scales: np.ndarray) -> float | None:
+        """The least normalised safety margin over the cells the edge switches through (measure_margins);
+        None without a verified cell."""
+        self.measure_margins(names, scales)
+        vals = [m for m in self.row_margins if m is not None]
+        kept = [m for m, ok in zip(vals, self._normalised) if ok]
+        return min(kept) if kept else 1.0 if vals else None
 
     def switch_clock(self, t_A: float) -> float | None:
         """The verified t_B for a grid time t_A, None where no transition starts."""
         i = int(np.argmin(np.abs(self.t_A - t_A)))
         return self.best_t_B[i] if abs(self.t_A[i] - t_A) < 1e-9 else None
+
+
+SWITCH_RULES = ("first", "margin")
+MARGIN_SHARE = 0.8
+"""Under the 'margin' rule, a t_A is taken when its row margin is at least this share of the edge's best."""
+
+
+def switch_clocks(tr, rule: str = "first") -> list[float | None]:
+    """Per t_A of a transition (Transition or a report's): the t_B an executor switches in at, None
+    where it does not switch. 'first': at every verified t_A, so the first one the run meets is taken;
+    'margin': only at the verified t_A whose row margin is at least MARGIN_SHARE of the edge's best
+    (an executor in a periodic primitive then waits for the well-kept switches of its cycle; where the
+    margins were not measured, as 'first')."""
+    best = list(tr.best_t_B)
+    rows = list(getattr(tr, "row_margins", None) or [])
+    if rule == "first" or len(rows) != len(best):
+        return best
+    top = max((m for m, b in zip(rows, best) if m is not None and b is not None), default=None)
+    if top is None:
+        return best
+    return [b if b is not None and m is not None and m >= MARGIN_SHARE * top else None for b, m in zip(best, rows)]
 
 
 def _windows(t: np.ndarray, avail: np.ndarray) -> list[tuple[float, float]]:

@@ -145,7 +145,8 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     names = list(prims)
     plans = [shortest_plan(g, a, b, "duration") for a in names for b in names if a != b]
     weight = spec.project.sequence.weight if spec.project.sequence is not None else "duration"
-    table = {"weight": weight, "next": lookup_table(g, weight)}
+    switch = spec.project.sequence.switch if spec.project.sequence is not None else "first"
+    table = {"weight": weight, "switch": switch, "next": lookup_table(g, weight)}
     runs = {}
     if spec.project.sequence is not None:
         if progress:

@@ -88,6 +88,7 @@ def transition_entry(tr, h_names: list[str]) -> dict:
         "t_A": [float(t) for t in tr.t_A], "t_B": [float(t) for t in tr.t_B],
         "verdicts": tr.verdicts.tolist(), "cells": compact_cells(cells, h_names),
         "windows": [list(w) for w in tr.windows], "best_t_B": tr.best_t_B, "weights": tr.weights,
+        **({"row_margins": [finite_json(m) for m in tr.row_margins]} if tr.row_margins else {}),
         "counts": {"safe": sum(e.verdict for e in flat), "total": len(flat),
                    "inconclusive": sum(e.status == "inconclusive" for e in flat),
                    "refined": sum(e.refined for e in flat), "errors": sum(e.reason.value == "error" for e in flat),

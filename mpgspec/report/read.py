@@ -76,6 +76,7 @@ class ReportTransition:
     best_t_B: list
     windows: list
     weights: dict = field(default_factory=dict)
+    row_margins: list = field(default_factory=list)
 
     @cached_property
     def t_A(self):
@@ -112,7 +113,8 @@ class ReportGraph:
                                                    **{k: e[k] for k in WEIGHTS if e.get(k) is not None}})
             self.transitions[(e["from"], e["to"])] = ReportTransition(
                 e["from"], e["to"], e["class"], list(t.get("t_A", [])), list(t.get("best_t_B", [])),
-                [tuple(w) for w in t.get("windows", [])], {k: e[k] for k in WEIGHTS if e.get(k) is not None})
+                [tuple(w) for w in t.get("windows", [])], {k: e[k] for k in WEIGHTS if e.get(k) is not None},
+                list(t.get("row_margins") or []))
 
     @property
     def nodes(self) -> list[str]:

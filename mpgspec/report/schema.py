@@ -188,6 +188,9 @@ class Transition(_Strict):
     windows: list[tuple[float, float]]
     best_t_B: list[Num]
     weights: dict[str, float]
+    row_margins: list[Num] | None = Field(None, description="per t_A: the least normalised safety margin of the "
+                                          "cell at its best t_B (null where none is verified); what "
+                                          "`sequence: {switch: margin}` chooses switch times by")
     counts: Counts
     certified: Certified | None = Field(None, description="t_A intervals proved for every t_A in them (null: none)")
 
@@ -205,8 +208,10 @@ class Transition(_Strict):
         for name in ("status", "reason", "checked", "refined", "saturated", "method"):
             if any(not row.isdigit() for row in getattr(c, name) or () if row):
                 raise ValueError(f"{name} of {self.from_} -> {self.to} must be strings of digits")
-        if len(self.best_t_B) != shape[0]:
-            raise ValueError(f"best_t_B of {self.from_} -> {self.to} has {len(self.best_t_B)} entries, not {shape[0]}")
+        for name in ("best_t_B", "row_margins"):
+            v = getattr(self, name)
+            if v is not None and len(v) != shape[0]:
+                raise ValueError(f"{name} of {self.from_} -> {self.to} has {len(v)} entries, not {shape[0]}")
         return self
 
 
@@ -272,6 +277,8 @@ class Plan(_Strict):
 
 class LookupTable(_Strict):
     weight: str
+    switch: Literal["first", "margin"] = Field("first", description="the sequence's switching rule: the first "
+                                              "verified t_A, or the well-kept ones (sequence.switch)")
     next: dict[str, dict[str, str | None]] = Field(description="next[current][goal] = primitive to switch to")
 
 

@@ -131,6 +131,12 @@ def _check_transitions(trs, names: list[str], where) -> dict:
               f"a list of {len(t_A)} entries (one per t_A)", best)
         for j, b in enumerate(best):
             _number(b, f"{key}.best_t_B[{j}]", where)
+        rows = t.get("row_margins")
+        if rows is not None:
+            _need(isinstance(rows, (list, tuple)) and len(rows) == len(t_A), where, f"{key}.row_margins",
+                  f"a list of {len(t_A)} entries (one per t_A)", rows)
+            for j, m in enumerate(rows):
+                _number(m, f"{key}.row_margins[{j}]", where)
         _windows(t.get("windows"), f"{key}.windows", where)
         weights = t.get("weights", {})
         _need(isinstance(weights, dict), where, f"{key}.weights", "an object", weights)

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..compile.contacts import grid_clock
 from ..compile.primitive import CompiledPrimitive
+from ..graph.transition import switch_clocks
 from ..oracle.flow import rk4
 from ..oracle.jit import compile_many, cse
 from ..oracle.tasks import Failed
@@ -175,6 +176,7 @@ class _Runs:
         self.goals = [c.goal for c in seq.commands]
         self.arrived = np.zeros((len(self.goals), n), bool)  # run r was in goal i while it was commanded
         self.taken: dict[tuple[str, str], int] = {}  # switches per edge over all runs
+        self.clocks: dict[tuple[str, str], list] = {}  # (from, to) -> the switch-in clock per t_A
         self.trans = {name: p.cls is PrimitiveClass.TRANSIENT for name, p in prims.items()}
         c0 = prims[seq.start].start_clock()
         x0 = prims[seq.start].x_star(c0)[:, None] + ds.err
@@ -283,8 +285,9 @@ class _Runs:
             if tr is not None:
                 c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clk, p.period)
                 j = int(np.argmin(np.abs(tr.t_A - c)))
-                if abs(tr.t_A[j] - c) <= self.ds.settings.dt / 2 + 1e-12 and tr.best_t_B[j] is not None:
-                    return (nxt, tr.best_t_B[j])
+                clocks = self.clocks.setdefault((cur, nxt), switch_clocks(tr, self.ds.seq.switch))
+                if abs(tr.t_A[j] - c) <= self.ds.settings.dt / 2 + 1e-12 and clocks[j] is not None:
+                    return (nxt, clocks[j])
         return None
 
 

@@ -141,6 +141,10 @@ class Sequence(Strict):
         default="duration", description="the edge weight of the lookup table the graph run follows (as "
         "`mpgspec plan --weight`): duration, the fewest hops, the least peak input, or margin (1 / each edge's least "
         "normalised safety margin: thin edges avoided)")
+    switch: Literal["first", "margin"] = Field(
+        default="first", description="when the graph run leaves a primitive along an edge: at the first "
+        "verified t_A it meets (first), or only at the t_A whose least normalised safety margin is at least "
+        "0.8 of the edge's best (margin: a periodic primitive waits in its cycle for the well-kept switches)")
 
     @field_validator("commands")
     @classmethod

@@ -17,18 +17,20 @@ import numpy as np
 
 from ...compile.contacts import grid_clock
 from ...compile.primitive import CompiledPrimitive
+from ...graph.transition import switch_clocks
 from ...spec.models import PrimitiveClass
 
 
 @dataclass(frozen=True)
 class ExecutorPlan:
     """What the graph executor reads: start primitive, goal commands (t, goal), the lookup table
-    (primitive -> goal -> next primitive) and each edge's (t_A grid, best t_B per t_A)."""
+    (primitive -> goal -> next primitive) and each edge's (t_A grid, the t_B the sequence's switching
+    rule takes per t_A)."""
 
     start: str
     commands: tuple[tuple[float, str], ...]
     table: dict = field(hash=False)
-    edges: dict = field(hash=False)  # (from, to) -> (t_A list, best_t_B list, None where none)
+    edges: dict = field(hash=False)  # (from, to) -> (t_A list, switch-in clock list, None where none)
 
     @classmethod
     def of(cls, graph, table: dict, seq, prims: dict[str, CompiledPrimitive]) -> "ExecutorPlan":
@@ -40,7 +42,8 @@ class ExecutorPlan:
         for a, b in sorted(pairs):
             tr = graph.edge(a, b)
             if tr is not None:
-                edges[(a, b)] = ([float(v) for v in tr.t_A], [None if v is None else float(v) for v in tr.best_t_B])
+                edges[(a, b)] = ([float(v) for v in tr.t_A],
+                                 [None if v is None else float(v) for v in switch_clocks(tr, getattr(seq, "switch", "first"))])
         return cls(seq.start, tuple((float(c.t), c.goal) for c in seq.commands), table, edges)
 
     def key(self) -> list:
