@@ -23,7 +23,7 @@ from mpgspec.oracle.backend import COMPILED, HYBRID
 from mpgspec.oracle.evidence import OracleEvidence, Reason
 from mpgspec.oracle.integrator import Chunk, build_chunk, build_first, start_states
 from mpgspec.oracle.judged import LANES, JudgedChunk, build_judged_chunk, decided_evidence, prebuild
-from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidences, judge
+from mpgspec.oracle.verdict import ENVELOPE_STEPS, INCONCLUSIVE, Block, Carry, evidences, judge
 from mpgspec.settings import OracleSettings
 
 SIZES = (1, 4, 16, 64, 256)
@@ -213,7 +213,7 @@ class RK4Runner:
             end_ok = np.isfinite(Zf).all(axis=0)
             finite[:, -1] &= end_ok
             blk = Block(out[r.h], out[r.lb], out[r.dh], out[r.margin], out[r.err], out[r.s], out[r.dt],
-                        out[r.u_raw], out[r.u], finite, out[r.ds] if r.doubling else None)
+                        out[r.u_raw], out[r.u], finite, out[r.ds] if r.doubling else None, ENVELOPE_STEPS * self.dt)
             d = judge(blk, carry, T[order[ids]], self.s.h_tolerance, self.c_margin, lo, hi)
             done = np.flatnonzero(d.done)
             msgs = {int(b): _non_finite(out[:, b, int(d.k[b])], r, int(d.k[b]) == K - 1 and not end_ok[b])

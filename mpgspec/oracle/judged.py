@@ -12,8 +12,8 @@ boundary.
 With the embedded ('local') error estimates, the judge's error sums run in blocks of B steps from
 the rollout's start (B = settings.chunk): in a block, the estimate at a sample is the block's carry
 plus the running sum; at the block's end, the carry grows by the block's sum taken in eight lanes
-(verdict.lane_sum), as the Python judge folds it. Under step doubling the estimates are absolute
-and the judge keeps no sums.
+(verdict.lane_sum), as the Python judge folds it. Under step doubling the estimates are absolute;
+the judge keeps their envelopes (verdict.envelope) in the slots of the sums.
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .integrator import Rows, step_body
 from .jit import compile_cached, cse_sx
 from .looplib import attach, caller_flags, compile_callers, guarded, libs_of
-from .verdict import LANES, Block, Carry, Decision, evidences, lane_sum
+from .verdict import ENVELOPE_STEPS, LANES, Block, Carry, Decision, evidences, lane_sum
 
 KINDS = ("", "safe", "left_C", "non_finite", "horizon", "doubt", "doubt_E")
 SAFE, LEFT_C, NON_FINITE, HORIZON, DOUBT, DOUBT_E = range(1, 7)
@@ -138,7 +138,7 @@ def _error_sums(g: dict, nh: int, dh, err, fob) -> dict:
 
 
 def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, first: bool, B: int, tol: float, cm: float,
-               lo, hi) -> ca.Function:
+               lo, hi, span: float = 0.0) -> ca.Function:
     """(J, out, zend, last_k) -> J after judging a step of a chunk of K (its first when `first`; its
     last when last_k is 1), whose outputs are `out` (Rows order) and whose end state is zend; see
     verdict.judge for the rules this applies one step at a time.
@@ -149,7 +149,8 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, first: bool, B: int,
     lane order at every chunk's start and end. Two functions serve every step of a chunk, so the
     C of a large judge is generated twice, not K times. A decided rollout folds nothing more and
     keeps its decision (its running sums may run on; en_c + lane_sum of its lanes, which its
-    evidence reads, stays)."""
+    evidence reads, stays). Under step doubling the estimates are the envelopes of the rows'
+    differences, decaying over `span` seconds (verdict.envelope)."""
     J, o, zend = ca.SX.sym("J", lay.size), ca.SX.sym("o", n_out), ca.SX.sym("zend", lay.nz)
     last_k = ca.SX.sym("last_k")
     g = {n: J[lay.slice(n)] for n in lay.parts}
@@ -159,8 +160,13 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, first: bool, B: int,
     fob = i == 0 if first else False
     last = False if first else ca.logic_and(last_k, i == B - K)
     sums = _error_sums(g, nh, dh, err, fob) if not rows.doubling else {}
-    # step doubling: the rows hold absolute estimates (h's at the sample and at the step's end, the margin's)
-    eh_s, eh_e, en_s = (o[rows.ds], dh, err) if rows.doubling else (sums["eh_s"], sums["eh_e"], sums["en_s"])
+    if rows.doubling:  # the envelopes of the two rollouts' differences (verdict.envelope); cdh and cen carry them
+        dec = ca.fmax(0, 1 - dt / span)
+        eh_s = ca.fmax(o[rows.ds], g["cdh"])
+        eh_e = ca.fmax(dh, eh_s * dec)
+        en_s = ca.fmax(err, g["cen"])
+    else:
+        eh_s, eh_e, en_s = sums["eh_s"], sums["eh_e"], sums["en_s"]
     viol, doubt_s = _any((h + eh_s) < -tol), _any((h - eh_s) < -tol)
     doubt_t = _any((lb - eh_e) < -tol)
     probes = [_probe(g["zero"], v) for v in (h, margin, u_raw, lb)]
@@ -198,8 +204,9 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, first: bool, B: int,
     new["pend"] = ca.logic_and(ft, doubt_t)
     new["s_prev"] = s
     new.update(_folded(g, rows, o, fs, ft, eh_s, eh_e, lo, hi))
-    if rows.doubling:  # the margin's error at the last sample judged
-        new["en_c"] = ca.if_else(fs, err, g["en_c"])
+    if rows.doubling:  # the margin's error at the last sample judged; the envelopes run on
+        new["en_c"] = ca.if_else(fs, en_s, g["en_c"])
+        new["cdh"], new["cen"] = eh_e, en_s * dec
     else:
         lh, le = sums["lh"], sums["le"]
         new["lh"] = ca.vertcat(*lh[1:], lh[0] + ca.if_else(ft, dh, 0)) if nh else g["lh"]
@@ -295,8 +302,8 @@ def _judged_function(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: fl
     lay = Layout(len(prim.h_names), prim.system.nu, nz)
     n_out = body.size1_out(1)
     rows = Rows(lay.nh, lay.nu, doubling=doubling)
-    steps = [judge_step(lay, rows, n_out, K, first, B, tol, cm, prim.system.u_lo, prim.system.u_hi)
-             for first in (True, False)]
+    steps = [judge_step(lay, rows, n_out, K, first, B, tol, cm, prim.system.u_lo, prim.system.u_hi,
+                        ENVELOPE_STEPS * dt) for first in (True, False)]
     name = "judged_" + hashlib.sha1(f"{prim.name}{dt}{K}{B}{tol}{cm}{doubling}".encode()).hexdigest()[:10]
     return _chunk(body, steps, nz, lay, K, name), nz, lay
 

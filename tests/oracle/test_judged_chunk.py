@@ -97,6 +97,10 @@ def test_lane_sum_is_numpys_sum_for_whole_blocks_and_lanes_otherwise():
     assert (lane_sum(b) == want).all()
 
 
+SPAN = 0.06
+"""Step doubling's envelope decays over 6 of the made-up 0.01 s steps (verdict.ENVELOPE_STEPS)."""
+
+
 def _synthetic(n: int, steps: int, doubling: bool, rng) -> np.ndarray:
     """Per-step outputs (Rows order, nh = 2, nu = 1) of n made-up rollouts, built to hit every rule:
     margins and safety functions that wander across their error bands, shortened steps, inactive
@@ -130,7 +134,7 @@ def _python_judge(O, T, B, tol, cm, lo, hi, prim, doubling):
     for j0 in range(0, steps, B):
         b = O[:, alive, j0:j0 + B]
         blk = Block(b[rows.h], b[rows.lb], b[rows.dh], b[rows.margin], b[rows.err], b[rows.s], b[rows.dt],
-                    b[rows.u_raw], b[rows.u], np.isfinite(b).all(axis=0), b[rows.ds] if doubling else None)
+                    b[rows.u_raw], b[rows.u], np.isfinite(b).all(axis=0), b[rows.ds] if doubling else None, SPAN)
         d = judge(blk, carry, T[alive], tol, cm, lo, hi)
         done = np.flatnonzero(d.done)
         msgs = {int(i): _non_finite(b[:, i, int(d.k[i])], rows, False) for i in done if d.kind[i] == "non_finite"}
@@ -146,7 +150,7 @@ def _compiled_judge(O, T, K, B, tol, cm, lo, hi, prim, doubling):
     """The judged chunk's steps (judge_step, K per chunk) over the same outputs; evidence from J."""
     rows, (n_out, n, steps) = Rows(2, 1, doubling=doubling), O.shape
     lay = Layout(2, 1, 1)
-    fns = [judge_step(lay, rows, n_out, K, first, B, tol, cm, lo, hi) for first in (True, False)]
+    fns = [judge_step(lay, rows, n_out, K, first, B, tol, cm, lo, hi, SPAN) for first in (True, False)]
     J = lay.start(T)
     for j in range(steps):
         zend, k = np.zeros((1, n)), j % K  # the end state is finite
