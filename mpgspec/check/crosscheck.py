@@ -14,10 +14,16 @@ def _verdict(side: dict) -> str:
 
 
 def agreement_assertions(result, start: int) -> list[AssertionResult]:
-    """One assertion per replayed run of a CrossCheckResult: the simulator's verdict is mpgspec's."""
+    """One assertion per replayed run and per variant of a CrossCheckResult: the simulator's verdict
+    is mpgspec's."""
     out = []
     for mode, r in result.runs.items():
         msg = f"{result.simulator}: {_verdict(r['mujoco'])}; mpgspec: {_verdict(r['mpgspec'])}"
         out.append(AssertionResult(start + len(out), "crosscheck", f"{mode} run agrees in {result.simulator}",
                                    "pass" if r["agree"] else "fail", msg))
+    for v in result.variants:
+        sim = result.simulator
+        msg = f"{sim}: {_verdict(v[sim])}; mpgspec: {_verdict(v['mpgspec'])}"
+        out.append(AssertionResult(start + len(out), "crosscheck", f"graph run agrees in {sim} with {v['name']}",
+                                   "pass" if v["agree"] else "fail", msg))
     return out

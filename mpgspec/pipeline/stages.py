@@ -14,9 +14,9 @@ from ..check.severity import check_assumptions
 from ..compile.primitive import CompiledPrimitive, compile_primitive
 from ..compile.system import compile_system
 from ..errors import SpecError
-from ..execute.crosscheck import CrossCheckResult, crosscheck_runs
+from ..execute.crosscheck import CrossCheckResult, crosscheck_runs, crosscheck_variants
 from ..execute.crosscheck.executor import ExecutorPlan
-from ..execute.crosscheck.settings import settings_of as crosscheck_settings
+from ..execute.crosscheck.settings import settings_of as crosscheck_settings, variants_of
 from ..execute.sequence import SequenceRun, simulate_sequence
 from ..graph.build import build_graph
 from ..graph.certified import certify_windows
@@ -83,7 +83,9 @@ def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progres
     executor's workers (in this process when omitted)."""
     t0 = time.perf_counter()
     check_uncertainty(spec)
-    crosscheck_settings(spec)  # a cross-check that cannot run is a spec error before anything is built
+    xcs = crosscheck_settings(spec)  # a cross-check that cannot run is a spec error before anything is built
+    if xcs is not None:
+        variants_of(spec, xcs)
     if progress:
         progress(spec.name, "compile (closed loops as CasADi functions)", 0, len(spec.primitives))
     prims = compile_project(spec)
@@ -163,6 +165,12 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
         plan = ExecutorPlan.of(g, table["next"], spec.project.sequence, prims) if "graph" in runs else None
         xc = crosscheck_runs(prims, runs, spec.project.sequence.duration, xcs, settings.h_tolerance, memo=memo,
                              executor=executor, plan=plan)
+        variants = variants_of(spec, xcs) if "graph" in runs else []
+        if variants:
+            if progress:
+                progress(spec.name, f"cross-check variants ({xcs.simulator})", 0, len(variants))
+            xc.variants = crosscheck_variants(prims, runs["graph"], spec.project.sequence.duration, variants,
+                                              settings.h_tolerance, memo=memo)
         if xcs.require_agreement:
             checks += agreement_assertions(xc, start=len(checks))
     t1 = time.perf_counter()

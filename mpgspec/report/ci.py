@@ -79,11 +79,17 @@ def _cases(p, strict: bool) -> list[tuple[str, str, str, str | None, str, str]]:
         outcome = "failure" if st in ("fail", "error") or (st == "warn" and strict) else None
         out.append(("assumption", f"{name}.assumptions.{c['primitive']}", c["name"], outcome, c.get("message", ""),
                     f"{st.upper()} {c.get('message', '')}{_where(c.get('location'))}"))
-    disputed = {d["mode"]: d["text"] for d in disagreements(r)}
+    found = disagreements(r)
+    disputed = {d["mode"]: d["text"] for d in found if "variant" not in d}
     for mode in ((r.get("crosscheck") or {}).get("runs") or {}):
         text = disputed.get(mode)
         out.append(("crosscheck", f"{name}.crosscheck", f"{mode} run", "failure" if text and strict else None,
                     text or "", f"WARN {text}" if text else "agrees"))
+    varied = {d["variant"]: d["text"] for d in found if "variant" in d}
+    for v in ((r.get("crosscheck") or {}).get("variants") or []):
+        text = varied.get(str(v.get("name")))
+        out.append(("crosscheck", f"{name}.crosscheck", f"graph run with {v.get('name')}",
+                    "failure" if text and strict else None, text or "", f"WARN {text}" if text else "agrees"))
     bad = nominal_only_path(r)
     if r.get("robust"):
         out.append(("robust", f"{name}.robust", "graph run's path", "failure" if bad and strict else None,

@@ -13,8 +13,9 @@ def _num(v, digits: int = 4) -> str:
 
 
 def disagreements(report: dict) -> list[dict]:
-    """{mode, text} for each cross-checked run whose verdict differs from mpgspec's, and for a graph
-    executor run on the simulator's own state that is unsafe or does not reach every goal."""
+    """{mode, text} for each cross-checked run whose verdict differs from mpgspec's, for each variant
+    of the graph run whose verdict differs (also `variant`: its name), and for a graph executor run on
+    the simulator's own state that is unsafe or does not reach every goal."""
     xc = report.get("crosscheck")
     if not isinstance(xc, dict):
         return []
@@ -29,6 +30,15 @@ def disagreements(report: dict) -> list[dict]:
         first = f": {v.get('h')} of {v.get('primitive')} at t = {_num(v.get('t'))} s, {_num(v.get('value'))}" if v else ""
         out.append({"mode": mode, "text": f"{sim} finds the {mode} run {'safe' if theirs.get('safe') else 'unsafe'} "
                                           f"where mpgspec finds it {'safe' if ours.get('safe') else 'unsafe'}{first}"})
+    for v in xc.get("variants") or []:
+        if not isinstance(v, dict) or v.get("agree", True):
+            continue
+        theirs, ours = v.get(key) or {}, v.get("mpgspec") or {}
+        f = theirs.get("first_violation") or {}
+        first = f": {f.get('h')} of {f.get('primitive')} at t = {_num(f.get('t'))} s, {_num(f.get('value'))}" if f else ""
+        out.append({"mode": "graph", "variant": str(v.get("name")),
+                    "text": f"with {v.get('name')}, {sim} finds the graph run {'safe' if theirs.get('safe') else 'unsafe'} "
+                            f"where mpgspec finds it {'safe' if ours.get('safe') else 'unsafe'}{first}"})
     for mode, r in (xc.get("runs") or {}).items():
         e = r.get("executor") if isinstance(r, dict) else None
         if not isinstance(e, dict):

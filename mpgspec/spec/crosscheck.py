@@ -21,6 +21,28 @@ class ContactModel(Strict):
                                    "post-processing (0: off)")
 
 
+class VariantContact(Strict):
+    """A variant's contact parameters: each given one replaces the cross-check's."""
+
+    timeconst: Number | None = Field(default=None, gt=0, description="as contact.timeconst")
+    dampratio: Number | None = Field(default=None, gt=0, description="as contact.dampratio")
+    impratio: Number | None = Field(default=None, ge=1, description="as contact.impratio")
+    noslip_iterations: int | None = Field(default=None, ge=0, le=100, description="as contact.noslip_iterations")
+
+
+class Variant(Strict):
+    """The graph run replayed once more with some of the cross-check's settings replaced: another
+    contact model, control rate or integrator. What a variant does not name is as the cross-check's."""
+
+    name: str | None = Field(default=None, min_length=1, max_length=80, description="how the report names it "
+                             "(default: the settings it replaces)")
+    control_rate: Number | None = Field(default=None, gt=0, description="as control_rate")
+    timestep: Number | None = Field(default=None, gt=0, description="as timestep")
+    integrator: Literal["euler", "implicitfast", "rk4"] | None = Field(default=None, description="as integrator")
+    foot_radius: Number | None = Field(default=None, gt=0, description="as foot_radius")
+    contact: VariantContact | None = Field(default=None, description="contact parameters it replaces")
+
+
 class CrossCheck(Strict):
     """Replay the sequence's runs (their switches and switch clocks) in an independent simulator with the
     same compiled control laws, and compare its safety verdict and trajectory with mpgspec's."""
@@ -40,7 +62,10 @@ class CrossCheck(Strict):
     runs: list[Literal["naive", "graph"]] = Field(default=["naive", "graph"], min_length=1,
                                                   description="which sequence runs to replay")
     require_agreement: bool = Field(default=False, description="fail the project when the simulator's safety "
-                                    "verdict of a replayed run differs from mpgspec's")
+                                    "verdict of a replayed run (or of a variant) differs from mpgspec's")
+    variants: list[Variant] = Field(default_factory=list, max_length=16, description="the graph run replayed "
+                                    "again under other contact models, control rates or integrators: does the "
+                                    "verified plan transfer beyond one simulator setting?")
 
     @field_validator("timestep")
     @classmethod

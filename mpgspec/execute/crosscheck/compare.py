@@ -32,16 +32,18 @@ class CrossCheckResult:
     settings: CrossCheckSettings
     model: dict
     runs: dict[str, dict] = field(default_factory=dict)
+    variants: list[dict] = field(default_factory=list)
+    """The graph run replayed under each of the project's variants (crosscheck_variants)."""
 
     @property
     def agree(self) -> bool:
-        return all(r["agree"] for r in self.runs.values())
+        return all(r["agree"] for r in self.runs.values()) and all(v["agree"] for v in self.variants)
 
     def to_dict(self) -> dict:
         """What the report stores: everything but the runs' playback samples (playback())."""
         runs = {m: _without_playback(r) for m, r in self.runs.items()}
         return {"simulator": self.simulator, "settings": self.settings.to_dict(), "model": self.model,
-                "agree": self.agree, "runs": runs}
+                "agree": self.agree, "runs": runs, **({"variants": self.variants} if self.variants else {})}
 
     def playback(self) -> dict[str, dict]:
         """name -> {t, x} of each replayed run's states at the 3D playback's frame rate ('graph',
@@ -103,6 +105,22 @@ def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, Sequenc
             memo.put(keys[m], out)
     res.runs = {m: known[m] for m in modes}
     return res
+
+
+def crosscheck_variants(prims: dict[str, CompiledPrimitive], run: SequenceRun, duration: float,
+                        variants: list[tuple[str, CrossCheckSettings, dict]], h_tolerance: float = 0.0,
+                        memo=None) -> list[dict]:
+    """The graph run replayed under each variant (name, settings, what it replaces), each kept in the
+    memo as a cross-checked run is: its verdict beside mpgspec's, its first violation, how many
+    control updates violate, the least margins and the largest CoM divergence."""
+    out = []
+    for name, st, changed in variants:
+        r = crosscheck_runs(prims, {"graph": run}, duration, st, h_tolerance, memo=memo).runs["graph"]
+        theirs = r.get(st.simulator) or {}
+        out.append({"name": name, "replaces": changed, "agree": r["agree"], st.simulator: theirs,
+                    "mpgspec": r.get("mpgspec"), "worst": (r.get("worst") or [])[:5],
+                    "com_divergence": ((r.get("divergence") or {}).get("com") or {}).get("max")})
+    return out
 
 
 def _replayed(shared: tuple, mode: str) -> dict:

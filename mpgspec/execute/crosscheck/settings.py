@@ -72,3 +72,42 @@ def settings_of(spec, force: bool = False) -> CrossCheckSettings | None:
                         expected="mujoco installed", found="not installed", code="MPG121",
                         hint='pip install "mpgspec[xcheck]"')
     return CrossCheckSettings.from_spec(cfg) if cfg is not None else CrossCheckSettings()
+
+
+CONTACT_KEYS = ("timeconst", "dampratio", "impratio", "noslip_iterations")
+"""Settings a variant sets under `contact`."""
+
+
+def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSettings, dict]]:
+    """(name, settings, the settings it replaces) of each of the project's cross-check variants: the
+    base settings with what the variant names replaced, replaying the graph run only. Raises a located
+    SpecError for a variant MuJoCo cannot run (a control period that is not a whole number of steps,
+    a contact softer than two steps can resolve, nothing replaced)."""
+    from ...errors import SpecError
+
+    cfg = spec.project.crosscheck
+    out = []
+    for i, v in enumerate(cfg.variants if cfg is not None else []):
+        changed = {k: getattr(v, k) for k in ("control_rate", "timestep", "integrator", "foot_radius")
+                   if getattr(v, k) is not None}
+        changed |= {k: getattr(v.contact, k) for k in CONTACT_KEYS if v.contact is not None
+                    and getattr(v.contact, k) is not None}
+        where, key = spec.locate(("crosscheck", "variants", i)), f"crosscheck.variants[{i}]"
+        if not changed:
+            raise SpecError("a cross-check variant replaces none of the cross-check's settings", location=where,
+                            key=key, expected="control_rate, timestep, integrator, foot_radius or contact",
+                            found="only a name" if v.name else "nothing", code="MPG103")
+        st = base.replace(runs=("graph",), **{k: (float(x) if k not in ("integrator", "noslip_iterations") else x)
+                                              for k, x in changed.items()})
+        n = 1.0 / (st.control_rate * st.timestep)
+        if n < 1 - 1e-9 or abs(n - round(n)) > 1e-6 * max(1.0, n):
+            raise SpecError("a variant's control period must be a whole number of timesteps", location=where,
+                            key=key, expected=f"1/control_rate a multiple of the timestep ({st.timestep:g} s)",
+                            found=f"1/control_rate = {1 / st.control_rate:g} s", code="MPG104")
+        if st.timeconst < 2 * st.timestep:
+            raise SpecError("a variant's contact is softer than MuJoCo resolves", location=where, key=key,
+                            expected=f"contact.timeconst at least twice the timestep ({2 * st.timestep:g} s)",
+                            found=f"{st.timeconst:g} s", code="MPG104")
+        name = v.name or ", ".join(f"{k} {x:g}" if isinstance(x, float) else f"{k} {x}" for k, x in changed.items())
+        out.append((name, st, changed))
+    return out

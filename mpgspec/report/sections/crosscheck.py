@@ -133,14 +133,28 @@ class CrossCheckRun(_Strict):
                                          "the simulator's own state, not from mpgspec's switch times")
 
 
+class CrossCheckVariant(_Strict):
+    """The graph run replayed once more with some of the cross-check's settings replaced."""
+
+    name: str
+    replaces: dict[str, Any] = Field(description="the settings it replaces, by name (contact ones by theirs)")
+    agree: bool = Field(description="the simulator's verdict is mpgspec's")
+    mujoco: CrossCheckVerdict
+    mpgspec: CrossCheckVerdict
+    worst: list[CrossCheckWorst] = Field(description="the five least margins of a kind of h in the simulator")
+    com_divergence: Num = Field(description="largest distance between the two centres of mass, metres")
+
+
 class CrossCheck(_Strict):
     """The sequence's runs replayed in an independent simulator with the same compiled control laws."""
 
     simulator: str
     settings: dict[str, Any]
     model: dict[str, Any] = Field(description="what the simulator's model was built from and holds")
-    agree: bool
+    agree: bool = Field(description="every replayed run and every variant agrees")
     runs: dict[str, CrossCheckRun]
+    variants: list[CrossCheckVariant] = Field(default_factory=list, description="the graph run under the "
+                                              "project's other contact models and control rates (crosscheck.variants)")
 
 
 def data(cp, vg, ch) -> dict | None:
@@ -153,8 +167,10 @@ def count(xc: dict) -> tuple:
     runs = xc.get("runs") or {}
     agree = sum(bool(r.get("agree")) for r in runs.values())
     sim = SIMULATORS.get(xc.get("simulator"), str(xc.get("simulator")))
+    vs = xc.get("variants") or []
+    more = f"; {sum(bool(v.get('agree')) for v in vs)} of {len(vs)} variants agree" if vs else ""
     return (f"cross-check in {sim}", f"{agree} / {len(runs)}",
-            "runs agree" + "".join(f"; {m} disagrees" for m, r in runs.items() if not r.get("agree")))
+            "runs agree" + "".join(f"; {m} disagrees" for m, r in runs.items() if not r.get("agree")) + more)
 
 
 def view(xc: dict) -> dict:
