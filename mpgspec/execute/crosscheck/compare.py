@@ -109,18 +109,41 @@ def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, Sequenc
 
 def crosscheck_variants(prims: dict[str, CompiledPrimitive], run: SequenceRun, duration: float,
                         variants: list[tuple[str, CrossCheckSettings, dict]], h_tolerance: float = 0.0,
-                        memo=None) -> list[dict]:
-    """The graph run replayed under each variant (name, settings, what it replaces), each kept in the
-    memo as a cross-checked run is: its verdict beside mpgspec's, its first violation, how many
-    control updates violate, the least margins and the largest CoM divergence."""
+                        memo=None, executor=None) -> list[dict]:
+    """The graph run replayed under each variant (name, settings, what it replaces): its verdict
+    beside mpgspec's, its first violation, how many control updates violate, the least margins and
+    the largest CoM divergence. Each replay is kept in the memo as a cross-checked run is; the ones
+    not in it run side by side through the executor's map (each in its own process)."""
+    system = next(iter(prims.values())).system
+    keys = [_memo_key(memo, prims, run, duration, st, h_tolerance, build_robot(system, st))
+            if memo is not None else None for _n, st, _c in variants]
+    done = [memo.get(k) if k is not None else None for k in keys]
+    todo = [i for i, r in enumerate(done) if r is None]
+    items = [variants[i][1] for i in todo]
+    shared = (prims, run, duration, h_tolerance)
+    label = f"cross-check variants ({variants[0][1].simulator})" if variants else "cross-check variants"
+    got = executor.map(_variant, items, label=label, shared=shared) if executor is not None else \
+        [_variant(shared, st) for st in items]
+    for i, r in zip(todo, got):
+        if isinstance(r, Failed):
+            raise RuntimeError(f"the replay of the graph run with {variants[i][0]} failed: {r.error}")
+        done[i] = r
+        if keys[i] is not None:
+            memo.put(keys[i], r)
     out = []
-    for name, st, changed in variants:
-        r = crosscheck_runs(prims, {"graph": run}, duration, st, h_tolerance, memo=memo).runs["graph"]
+    for (name, st, changed), r in zip(variants, done):
         theirs = r.get(st.simulator) or {}
         out.append({"name": name, "replaces": changed, "agree": r["agree"], st.simulator: theirs,
                     "mpgspec": r.get("mpgspec"), "worst": (r.get("worst") or [])[:5],
                     "com_divergence": ((r.get("divergence") or {}).get("com") or {}).get("max")})
     return out
+
+
+def _variant(shared: tuple, st: CrossCheckSettings) -> dict:
+    """The graph run replayed and compared under one variant's settings; shared = (prims, run,
+    duration, h_tolerance)."""
+    prims, run, duration, h_tolerance = shared
+    return _without_playback(_replayed((None, prims, {"graph": run}, duration, st, h_tolerance, None), "graph"))
 
 
 def _replayed(shared: tuple, mode: str) -> dict:
