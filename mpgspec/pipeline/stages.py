@@ -170,7 +170,8 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
             if progress:
                 progress(spec.name, f"cross-check variants ({xcs.simulator})", 0, len(variants))
             xc.variants = crosscheck_variants(prims, runs["graph"], spec.project.sequence.duration, variants,
-                                              settings.h_tolerance, memo=memo, executor=executor)
+                                              settings.h_tolerance, memo=memo, executor=executor,
+                                              progress=of_project(progress, spec.name))
         if xcs.require_agreement:
             checks += agreement_assertions(xc, start=len(checks))
     t1 = time.perf_counter()

@@ -109,11 +109,12 @@ def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, Sequenc
 
 def crosscheck_variants(prims: dict[str, CompiledPrimitive], run: SequenceRun, duration: float,
                         variants: list[tuple[str, CrossCheckSettings, dict]], h_tolerance: float = 0.0,
-                        memo=None, executor=None) -> list[dict]:
+                        memo=None, executor=None, progress=None) -> list[dict]:
     """The graph run replayed under each variant (name, settings, what it replaces): its verdict
     beside mpgspec's, its first violation, how many control updates violate, the least margins and
     the largest CoM divergence. Each replay is kept in the memo as a cross-checked run is; the ones
-    not in it run side by side through the executor's map (each in its own process)."""
+    not in it run side by side through the executor's map (each in its own process; progress(what,
+    done, total) as they finish)."""
     system = next(iter(prims.values())).system
     keys = [_memo_key(memo, prims, run, duration, st, h_tolerance, build_robot(system, st))
             if memo is not None else None for _n, st, _c in variants]
@@ -122,7 +123,7 @@ def crosscheck_variants(prims: dict[str, CompiledPrimitive], run: SequenceRun, d
     items = [variants[i][1] for i in todo]
     shared = (prims, run, duration, h_tolerance)
     label = f"cross-check variants ({variants[0][1].simulator})" if variants else "cross-check variants"
-    got = executor.map(_variant, items, label=label, shared=shared) if executor is not None else \
+    got = executor.map(_variant, items, progress, label=label, shared=shared) if executor is not None else \
         [_variant(shared, st) for st in items]
     for i, r in zip(todo, got):
         if isinstance(r, Failed):
