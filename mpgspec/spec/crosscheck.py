@@ -9,6 +9,12 @@ from .base import Strict
 from .system import Number
 
 
+def whole_steps(rate: float, timestep: float) -> bool:
+    """Whether a control period 1/rate is a whole number (at least 1) of simulator steps."""
+    n = 1.0 / (rate * timestep)
+    return n >= 1 - 1e-9 and abs(n - round(n)) <= 1e-6 * max(1.0, n)
+
+
 class ContactModel(Strict):
     """MuJoCo's soft contact between the feet and the floor (solref, elliptic cones)."""
 
@@ -71,10 +77,17 @@ class CrossCheck(Strict):
     @classmethod
     def _whole_steps(cls, v, info: ValidationInfo):
         rate = info.data.get("control_rate")
-        if rate is not None:
-            n = 1.0 / (rate * v)
-            if n < 1 - 1e-9 or abs(n - round(n)) > 1e-6 * max(1.0, n):
-                raise ValueError(f"1/control_rate ({1 / rate:g} s) must be a whole number of timesteps ({v:g} s)")
+        if rate is not None and not whole_steps(rate, v):
+            raise ValueError(f"1/control_rate ({1 / rate:g} s) must be a whole number of timesteps ({v:g} s)")
+        return v
+
+    @field_validator("variants")
+    @classmethod
+    def _distinct_names(cls, v):
+        names = [x.name for x in v if x.name is not None]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"variant names must differ; {', '.join(twice)} names more than one")
         return v
 
     @field_validator("contact")

@@ -69,3 +69,10 @@ def test_a_variant_mujoco_cannot_run_is_a_located_spec_error(tmp_path, variant, 
         variants_of(spec, settings_of(spec))
     e = err.value
     assert e.code == code and word in str(e) and e.key == "crosscheck.variants[1]" and e.location.line > 0
+
+
+def test_variants_need_distinct_names(tmp_path):
+    with pytest.raises(SpecError) as err:
+        load_project(_variants(tmp_path, [{"name": "soft", "contact": {"timeconst": 0.001}},
+                                          {"name": "soft", "contact": {"timeconst": 0.002}}]))
+    assert "variant names must differ" in str(err.value) and err.value.location.line > 0

@@ -84,6 +84,7 @@ def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSet
     SpecError for a variant MuJoCo cannot run (a control period that is not a whole number of steps,
     a contact softer than two steps can resolve, nothing replaced)."""
     from ...errors import SpecError
+    from ...spec.crosscheck import whole_steps
 
     cfg = spec.project.crosscheck
     out = []
@@ -99,8 +100,7 @@ def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSet
                             found="only a name" if v.name else "nothing", code="MPG103")
         st = base.replace(runs=("graph",), **{k: (float(x) if k not in ("integrator", "noslip_iterations") else x)
                                               for k, x in changed.items()})
-        n = 1.0 / (st.control_rate * st.timestep)
-        if n < 1 - 1e-9 or abs(n - round(n)) > 1e-6 * max(1.0, n):
+        if not whole_steps(st.control_rate, st.timestep):
             raise SpecError("a variant's control period must be a whole number of timesteps", location=where,
                             key=key, expected=f"1/control_rate a multiple of the timestep ({st.timestep:g} s)",
                             found=f"1/control_rate = {1 / st.control_rate:g} s", code="MPG104")
