@@ -14,7 +14,7 @@ import pytest
 pytest.importorskip("mujoco")
 
 from mpgspec import api  # noqa: E402
-from mpgspec.errors import SpecError  # noqa: E402
+from mpgspec.errors import SpecError, SpecErrors  # noqa: E402
 from mpgspec.execute.crosscheck.settings import settings_of, variants_of  # noqa: E402
 from mpgspec.report.ci import junit  # noqa: E402
 from mpgspec.report.findings import disagreements  # noqa: E402
@@ -72,7 +72,8 @@ def test_a_variant_mujoco_cannot_run_is_a_located_spec_error(tmp_path, variant, 
 
 
 def test_variants_need_distinct_names(tmp_path):
-    with pytest.raises(SpecError) as err:
+    with pytest.raises(SpecErrors) as err:
         load_project(_variants(tmp_path, [{"name": "soft", "contact": {"timeconst": 0.001}},
                                           {"name": "soft", "contact": {"timeconst": 0.002}}]))
-    assert "variant names must differ" in str(err.value) and err.value.location.line > 0
+    (e,) = err.value.errors
+    assert "variant names must differ; soft" in str(e) and e.key == "crosscheck.variants" and e.location.line > 0
