@@ -17,7 +17,7 @@ import numpy as np
 
 from ..compile.contacts import grid_clock
 from ..compile.primitive import INACTIVE, CompiledPrimitive
-from ..graph.transition import MotionPrimitiveGraph, switch_clocks
+from ..graph.transition import MotionPrimitiveGraph
 from ..oracle.integrator import build_chunk, initial_state
 from ..settings import OracleSettings
 from ..spec.models import PrimitiveClass, Sequence
@@ -201,7 +201,10 @@ class _Simulation:
         self.recorded = 0  # violating samples recorded
         self.totals: dict[tuple[str, str], dict] = {}  # (primitive, h) -> every violating sample, counted
         self.z = None
-        self.clocks: dict[tuple[str, str], list] = {}  # (from, to) -> the switch-in clock per t_A
+        from .crosscheck.executor import ExecutorPlan  # (crosscheck imports this module)
+
+        # the switch-in clocks the sequence's rule takes, shared with the executor on a simulator's state
+        self.plan = ExecutorPlan.of(graph, table, seq, prims) if mode == "graph" and graph is not None else None
 
     def start(self) -> bool:
         """Switch the start primitive in at its start clock from its setpoint; False if that is not finite."""
@@ -337,17 +340,13 @@ class _Simulation:
 
     def _graph_switch(self, p: CompiledPrimitive, i: int, clk: float):
         """Towards the goal by the lookup table, at a grid time t_A the oracle verified (within dt / 2)
-        that the sequence's switching rule takes (graph.transition.switch_clocks)."""
+        that the sequence's switching rule takes (ExecutorPlan.switch_clock)."""
         nxt = self.table[self.cur].get(self.goal)
-        tr = self.graph.edge(self.cur, nxt) if nxt and nxt != self.cur else None
-        if tr is None:
+        if not nxt or nxt == self.cur:
             return None
         c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clk, p.period)
-        j = int(np.argmin(np.abs(tr.t_A - c)))
-        clocks = self.clocks.setdefault((self.cur, nxt), switch_clocks(tr, self.seq.switch))
-        if abs(tr.t_A[j] - c) <= self.dt / 2 + 1e-12 and clocks[j] is not None:
-            return (i, "graph", (nxt, clocks[j]))
-        return None
+        t_B = self.plan.switch_clock(self.cur, nxt, c, self.dt / 2)
+        return None if t_B is None else (i, "graph", (nxt, t_B))
 
     def _act(self, event, X) -> bool:
         """Switch (or end) at the event's step; False when the run ends."""

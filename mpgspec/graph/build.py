@@ -76,7 +76,7 @@ def build_graph(prims: dict[str, CompiledPrimitive], settings: OracleSettings, n
             tr.classify()
             if tr.weights:
                 scales = _scales(prims[b], gB[b]) if scales is None else scales
-                m = tr.least_margin(prims[b].h_names, scales)
+                m = tr.measure_margins(prims[b].h_names, scales)
                 if m is not None:
                     tr.weights["margin"] = m
     if progress:

@@ -35,7 +35,6 @@ class Transition:
     row_margins: list[float | None] = field(default_factory=list)
     """Per t_A: the least normalised safety margin of the cell at its best t_B (see measure_margins),
     None where no t_B is verified; empty until measured."""
-    _normalised: list[bool] = field(default_factory=list, repr=False)
     certified: dict = field(default_factory=dict)
     """t_A intervals proved for every t_A in them, not only at grid points: {windows: [[a, b], ...],
     boxes: start boxes used, order: Taylor order, width: largest start-box width, seconds}; empty
@@ -83,36 +82,31 @@ class Transition:
         if durations:
             self.weights = {"duration": float(max(durations)), "peak_input": float(max(peaks)), "hops": 1.0}
 
-    def measure_margins(self, names: list[str], scales: np.ndarray) -> None:
-        """Fill row_margins: per t_A, the least normalised safety margin of the cell it switches
-        through (its best t_B): each safety function's error-aware lower bound over the rollout
-        divided by its value at B's setpoint at that t_B (scales[j], one row per t_B in the order of
-        names; a function at most 0 there, or parked outside its window, is left out). 1: the flow
-        keeps every function as far from its boundary as the setpoint does; 0: it touches one. 1 when
-        no function can be normalised (B has none, or none is positive at its setpoint)."""
-        self.row_margins, self._normalised = [], []
-        for i, t_b in enumerate(self.best_t_B):
-            if t_b is None:
-                self.row_margins.append(None)
-                continue
-            j = int(np.argmin(np.abs(self.t_B - t_b)))
-            e, out = self.evidence[i][j], None
-            for k, h in enumerate(names):
-                lb, ref = e.lower_bounds.get(h), float(scales[j][k])
-                if lb is None or not np.isfinite(lb) or not (0 < ref < INACTIVE / 2):
-                    continue
-                m = max(float(lb), 0.0) / ref
-                out = m if out is None else min(out, m)
-            self.row_margins.append(1.0 if out is None else out)
-            self._normalised.append(out is not None)
-
-    def least_margin(self, names: list[str], scales: np.ndarray) -> float | None:
-        """The least normalised safety margin over the cells the edge switches through (measure_margins);
+    def measure_margins(self, names: list[str], scales: np.ndarray) -> float | None:
+        """Fill row_margins and return the edge's least: per t_A, the least normalised safety margin of
+        the cell it switches through (its best t_B): each safety function's error-aware lower bound
+        over the rollout divided by its value at B's setpoint at that t_B (scales[j], one row per t_B
+        in the order of names; a function at most 0 there, or parked outside its window, is left out).
+        1: the flow keeps every function as far from its boundary as the setpoint does; 0: it touches
+        one. 1 where no function can be normalised (B has none, or none is positive at its setpoint);
         None without a verified cell."""
-        self.measure_margins(names, scales)
-        vals = [m for m in self.row_margins if m is not None]
-        kept = [m for m, ok in zip(vals, self._normalised) if ok]
-        return min(kept) if kept else 1.0 if vals else None
+        raw = [None if t_b is None else self._normalised(i, t_b, names, scales)
+               for i, t_b in enumerate(self.best_t_B)]
+        self.row_margins = [None if t_b is None else 1.0 if m is None else m for t_b, m in zip(self.best_t_B, raw)]
+        kept = [m for m in raw if m is not None]
+        return min(kept) if kept else 1.0 if any(m is not None for m in self.row_margins) else None
+
+    def _normalised(self, i: int, t_b: float, names: list[str], scales: np.ndarray) -> float | None:
+        """The least normalised margin of row i's cell at t_b, None when no function can be normalised."""
+        j = int(np.argmin(np.abs(self.t_B - t_b)))
+        e, out = self.evidence[i][j], None
+        for k, h in enumerate(names):
+            lb, ref = e.lower_bounds.get(h), float(scales[j][k])
+            if lb is None or not np.isfinite(lb) or not (0 < ref < INACTIVE / 2):
+                continue
+            m = max(float(lb), 0.0) / ref
+            out = m if out is None else min(out, m)
+        return out
 
     def switch_clock(self, t_A: float) -> float | None:
         """The verified t_B for a grid time t_A, None where no transition starts."""
@@ -120,7 +114,6 @@ class Transition:
         return self.best_t_B[i] if abs(self.t_A[i] - t_A) < 1e-9 else None
 
 
-SWITCH_RULES = ("first", "margin")
 MARGIN_SHARE = 0.8
 """Under the 'margin' rule, a t_A is taken when its row margin is at least this share of the edge's best."""
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..compile.contacts import grid_clock
 from ..compile.primitive import CompiledPrimitive
-from ..graph.transition import switch_clocks
+from ..execute.crosscheck.executor import ExecutorPlan
 from ..oracle.flow import rk4
 from ..oracle.jit import compile_many, cse
 from ..oracle.tasks import Failed
@@ -176,7 +176,7 @@ class _Runs:
         self.goals = [c.goal for c in seq.commands]
         self.arrived = np.zeros((len(self.goals), n), bool)  # run r was in goal i while it was commanded
         self.taken: dict[tuple[str, str], int] = {}  # switches per edge over all runs
-        self.clocks: dict[tuple[str, str], list] = {}  # (from, to) -> the switch-in clock per t_A
+        self.plan = ExecutorPlan.of(graph, table, seq, prims) if mode != "naive" and graph is not None else None
         self.trans = {name: p.cls is PrimitiveClass.TRANSIENT for name, p in prims.items()}
         c0 = prims[seq.start].start_clock()
         x0 = prims[seq.start].x_star(c0)[:, None] + ds.err
@@ -281,13 +281,11 @@ class _Runs:
             return (p.next, tb if tb is not None and mode != "naive" else prims[p.next].start_clock())
         if mode != "naive" and self.goal[r] != cur and self.conv[r] and not trans:
             nxt = (self.table.get(cur) or {}).get(self.goal[r])
-            tr = graph.edge(cur, nxt) if nxt and nxt != cur else None
-            if tr is not None:
+            if nxt and nxt != cur:
                 c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clk, p.period)
-                j = int(np.argmin(np.abs(tr.t_A - c)))
-                clocks = self.clocks.setdefault((cur, nxt), switch_clocks(tr, self.ds.seq.switch))
-                if abs(tr.t_A[j] - c) <= self.ds.settings.dt / 2 + 1e-12 and clocks[j] is not None:
-                    return (nxt, clocks[j])
+                tb = self.plan.switch_clock(cur, nxt, c, self.ds.settings.dt / 2)
+                if tb is not None:
+                    return (nxt, tb)
         return None
 
 

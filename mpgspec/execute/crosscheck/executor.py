@@ -35,15 +35,16 @@ class ExecutorPlan:
     @classmethod
     def of(cls, graph, table: dict, seq, prims: dict[str, CompiledPrimitive]) -> "ExecutorPlan":
         """From a verified graph (MotionPrimitiveGraph or ReportGraph), its lookup table, the
-        sequence and the primitives (for the transients' hand-overs)."""
+        sequence (its switching rule) and the primitives (for the transients' hand-overs)."""
         pairs = {(a, b) for a, row in table.items() for b in row.values() if b and b != a}
         pairs |= {(n, p.next) for n, p in prims.items() if p.cls is PrimitiveClass.TRANSIENT and p.next}
         edges = {}
         for a, b in sorted(pairs):
             tr = graph.edge(a, b)
-            if tr is not None:
+            if tr is not None:  # a transient hands over at the end of its domain: the rule chooses no time there
+                rule = "first" if prims[a].cls is PrimitiveClass.TRANSIENT else seq.switch
                 edges[(a, b)] = ([float(v) for v in tr.t_A],
-                                 [None if v is None else float(v) for v in switch_clocks(tr, getattr(seq, "switch", "first"))])
+                                 [None if v is None else float(v) for v in switch_clocks(tr, rule)])
         return cls(seq.start, tuple((float(c.t), c.goal) for c in seq.commands), table, edges)
 
     def key(self) -> list:

@@ -74,10 +74,6 @@ def settings_of(spec, force: bool = False) -> CrossCheckSettings | None:
     return CrossCheckSettings.from_spec(cfg) if cfg is not None else CrossCheckSettings()
 
 
-CONTACT_KEYS = ("timeconst", "dampratio", "impratio", "noslip_iterations")
-"""Settings a variant sets under `contact`."""
-
-
 def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSettings, dict]]:
     """(name, settings, the settings it replaces) of each of the project's cross-check variants: the
     base settings with what the variant names replaced, replaying the graph run only. Raises a located
@@ -89,10 +85,8 @@ def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSet
     cfg = spec.project.crosscheck
     out = []
     for i, v in enumerate(cfg.variants if cfg is not None else []):
-        changed = {k: getattr(v, k) for k in ("control_rate", "timestep", "integrator", "foot_radius")
-                   if getattr(v, k) is not None}
-        changed |= {k: getattr(v.contact, k) for k in CONTACT_KEYS if v.contact is not None
-                    and getattr(v.contact, k) is not None}
+        changed = v.model_dump(exclude={"name", "contact"}, exclude_none=True)
+        changed |= v.contact.model_dump(exclude_none=True) if v.contact is not None else {}
         where, key = spec.locate(("crosscheck", "variants", i)), f"crosscheck.variants[{i}]"
         if not changed:
             raise SpecError("a cross-check variant replaces none of the cross-check's settings", location=where,
