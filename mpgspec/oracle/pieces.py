@@ -223,7 +223,7 @@ class _Parts:
         self.state = [i for i in range(self.ng) if i not in self.clock]
         if self.clock:
             gc = ca.substitute(ca.vertcat(*[g[i] for i in self.clock]), live, ca.DM.zeros(live.shape[0]))
-            self.Gc = ca.Function("clock_guards", [a[1], a[2]], [gc])
+            self.Gc = ca.Function("hot_clock_guards", [a[1], a[2]], [gc])
 
     def clock_cut(self, t, s, h, edge):
         """(h, edge): a step of h from clock t shortened to end just past the first crossing of a
@@ -506,7 +506,7 @@ def guarded_body(prim: CompiledPrimitive, dt: float, start: ca.Function, end: ca
     suspect = parts.smooth_suspect([(parts.G(x, t + dl, s + dl, xs), gs_)], rc,
                                    [(t + h / 2, s + h / 2), (t + te, s + te)])
     en_c, eh_c, _e = parts.clock_nudge(on_c, dl, x, t, s, xs, k1s_)
-    smooth = cse(ca.Function("smooth", [z], [*inline(finish, z, h, te, xe_, k4_, 0, en_c, eh_c, h0_, d0_, ur_, u_),
+    smooth = cse(ca.Function("hot_smooth", [z], [*inline(finish, z, h, te, xe_, k4_, 0, en_c, eh_c, h0_, d0_, ur_, u_),
                                               suspect]))
     # the located step: trial, the location, the outputs
     Z = ca.MX.sym("z", 2 * nx + 2)
@@ -631,6 +631,6 @@ def guarded_doubling_body(prim: CompiledPrimitive, dt: float, start: ca.Function
                                     (parts.G(xc, t + dl, s + dl, xs), gc_)], rc, clocks)
     en_j, eh_j, e_j = parts.clock_nudge(on_c, dl, x, t, s, xs, k1_)
     en_c, eh_c, _e = parts.clock_nudge(on_c, dl, xc, t, s, xs, kc_)
-    smooth = cse(ca.Function("smooth2", [z], [*inline(finish, z, h, te, xe_2, xce_2, 0, en_j + en_c, eh_j + eh_c,
+    smooth = cse(ca.Function("hot_smooth2", [z], [*inline(finish, z, h, te, xe_2, xce_2, 0, en_j + en_c, eh_j + eh_c,
                                                       e_j, h0_, d0_, h0c_, ur_, u_, uc_), suspect]))
     return _smooth_or_located(smooth, located)

@@ -154,3 +154,30 @@ def test_two_processes_compile_one_library_once(tmp_path):
     outs = [p.communicate(timeout=120)[0].strip() for p in procs]
     assert outs == ["7.0", "7.0"]
     assert count.read_text().count("x") == 1
+
+
+def _caller(hot: bool) -> ca.Function:
+    """An MX caller of two SX Functions, one of them named as hot code."""
+    x = ca.SX.sym("x", 3)
+    inner = ca.Function(("hot_" if hot else "") + "step", [x], [ca.fmax(ca.sin(x) * x[0], ca.cos(x)) + ca.sqrt(1 + x * x)])
+    rare = ca.Function("rare", [x], [ca.exp(x) - ca.fmin(x, 0.5)])
+    X = ca.MX.sym("X", 3)
+    return ca.Function("caller", [X], [inner(X) + rare(inner(X))])
+
+
+def test_hot_code_is_optimised_alone_with_the_same_values():
+    code = _caller(True)
+    cg = ca.CodeGenerator("caller.c", {"with_header": False})
+    cg.add(code)
+    src = cg.dump()
+    hot = jit.hot_code(src, ("-O0",))
+    assert hot.count('#pragma GCC optimize ("O1")') == 2  # CasADi's helpers and the hot Function
+    assert hot.count("#pragma GCC push_options") == hot.count("#pragma GCC pop_options") == 2
+    body = hot[hot.index("hot_step:("):]
+    assert body.index("#pragma GCC pop_options") < body.index("/* rare:(")  # the rarely run code stays at -O0
+    assert jit.hot_code(src, ("-O1",)) == src and jit.hot_code(src.replace("hot_", "cold_"), ("-O0",)) == \
+        src.replace("hot_", "cold_")
+    v = [0.3, -1.7, 2.5]
+    a, b = compile_cached(_caller(True), ("-O0",)), compile_cached(_caller(False), ("-O0",))
+    assert np.array_equal(_eval(a, v), _eval(b, v))  # bit for bit: -O1 does not reassociate
+    np.testing.assert_allclose(_eval(a, v), _eval(_caller(True), v), rtol=1e-15)
