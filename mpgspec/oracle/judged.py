@@ -284,7 +284,8 @@ GUARDED_FLAGS = ("-O1",)
 (the smooth step, the location in a conditional, the judge), 73-101 KB of C on the pendulum; at -O1
 gcc takes about 0.3 s more per primitive than at -O0 and the chunk runs in about a third of the
 time, faster than the unguarded loop's inlined chunk at -O0 (bench/bench_pieces.py). A chunk that
-calls a loop library is compiled at looplib.CALLER_FLAGS: its loop evaluations dominate."""
+calls a loop library is compiled at looplib.CALLER_FLAGS: its loop evaluations dominate, and its
+smooth step, run at every step, is compiled at jit.HOT_LEVEL inside it (jit.hot_code)."""
 
 
 def _flags(prim: CompiledPrimitive, flags: tuple[str, ...]) -> tuple[str, ...]:

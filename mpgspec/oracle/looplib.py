@@ -52,7 +52,9 @@ CALLER_FLAGS = ("-O0",)
 """gcc flags of a Function whose large parts are calls into a loop library (a judged or trace chunk,
 the gait's period map): its own code is bookkeeping around the calls. Measured on Walk(slow)'s
 judged chunk of 16 steps: -O0 1.7 CPU-s of gcc against 6.1 at -O1, the same run time (the calls
-dominate it) and the same bits."""
+dominate it) and the same bits. A guarded step's smooth path, run at every step and a small part of
+the code, is compiled at jit.HOT_LEVEL inside it (jit.hot_code): the guards' bookkeeping at -O0 cost
+the walks about 13 % of their oracle time."""
 
 _LOCK = threading.Lock()
 
