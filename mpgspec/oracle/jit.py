@@ -66,9 +66,9 @@ except ImportError:  # not on POSIX: concurrent processes may compile the same l
 HOT_PREFIX = "hot_"
 """Functions so named are compiled at HOT_LEVEL in a library whose flags optimise less."""
 HOT_LEVEL = "O1"
-"""Measured on the A1's Walk(fast) judged chunk (0.75 MB of C, 2 cores): the whole chunk at -O1 takes
-10.2 s of gcc against 3.3 s at -O0; its smooth step alone at -O1, 3.5 s, and the guarded oracle then
-runs at 1.16x the unguarded one's time instead of 1.38x (bench/bench_pieces.py)."""
+"""Measured on the A1's Walk(fast) judged chunk (0.75 MB of C): gcc takes 3.3 s at -O0, 3.5 s with its
+hot code at -O1, 10.2 s all at -O1; the four walks' guarded oracle takes 0.87x the time of the same
+chunks all at -O0 (7 interleaved rounds; bench/RESULTS.md, "Guards: stepping piece by piece (A1)")."""
 _HOT_HEADER = re.compile(r"^/\* %s[A-Za-z0-9_]*:\(" % HOT_PREFIX)
 _HELPER = re.compile(r"^(casadi_real|casadi_int|void|int) casadi_[a-z_0-9]+\(")
 _HELPERS_END = re.compile(r"^(/\* Configuration|/\* External functions|static const casadi_|/\* [A-Za-z0-9_]+:\()")
