@@ -69,7 +69,7 @@ HOT_LEVEL = "O1"
 """Measured on the A1's Walk(fast) judged chunk (0.75 MB of C): gcc takes 3.3 s at -O0, 3.5 s with its
 hot code at -O1, 10.2 s all at -O1; the four walks' guarded oracle takes 0.87x the time of the same
 chunks all at -O0 (7 interleaved rounds; bench/RESULTS.md, "Guards: stepping piece by piece (A1)")."""
-_HOT_HEADER = re.compile(r"^/\* %s[A-Za-z0-9_]*:\(" % HOT_PREFIX)
+_HOT_HEADER = re.compile(r"^/\* %s[A-Za-z0-9_]*:\(" % HOT_PREFIX, re.MULTILINE)
 _HELPER = re.compile(r"^(casadi_real|casadi_int|void|int) casadi_[a-z_0-9]+\(")
 _HELPERS_END = re.compile(r"^(/\* Configuration|/\* External functions|static const casadi_|/\* [A-Za-z0-9_]+:\()")
 
@@ -156,12 +156,17 @@ def _library_job(name: str, fn, code: str, flags: tuple[str, ...], libs: tuple[P
     return _Job(name, fn, code, tuple(flags), lib, sealed(lib), links)
 
 
+def optimising(flags: tuple[str, ...]) -> bool:
+    """Whether gcc flags ask for optimisation (an -O other than -O0)."""
+    return any(f.startswith("-O") and f != "-O0" for f in flags)
+
+
 def hot_code(code: str, flags: tuple[str, ...]) -> str:
     """code with each HOT_PREFIX Function's definition (from its header comment to its closing brace,
     as CasADi generates it) and CasADi's helpers (casadi_copy, casadi_fmax, ...: small, called from
     every Function) compiled at HOT_LEVEL, when `flags` optimise less (no -O or -O0) and the code
     holds a HOT_PREFIX Function."""
-    if any(f.startswith("-O") and f != "-O0" for f in flags) or HOT_PREFIX not in code:
+    if optimising(flags) or not _HOT_HEADER.search(code):
         return code
     out, inside, helpers = [], False, "before"
     for line in code.split("\n"):

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .integrator import Rows, step_body
-from .jit import compile_cached, cse_sx
+from .jit import compile_cached, cse_sx, optimising
 from .looplib import attach, caller_flags, compile_callers, guarded, libs_of
 from .verdict import ENVELOPE_STEPS, LANES, Block, Carry, Decision, evidences, lane_sum
 
@@ -291,7 +291,7 @@ smooth step, run at every step, is compiled at jit.HOT_LEVEL inside it (jit.hot_
 def _flags(prim: CompiledPrimitive, flags: tuple[str, ...]) -> tuple[str, ...]:
     """The gcc flags of a judged chunk: `flags`, with GUARDED_FLAGS for a loop with guards where
     `flags` optimise less."""
-    if not guarded(prim) or any(f.startswith("-O") and f != "-O0" for f in flags):
+    if not guarded(prim) or optimising(flags):
         return tuple(flags)
     return tuple(f for f in flags if not f.startswith("-O")) + GUARDED_FLAGS
 
