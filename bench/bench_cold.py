@@ -35,7 +35,9 @@ from common import machine, revision, write_section  # noqa: E402
 
 HEADING = "## Cold verify"
 PHASES = ("compile_s", "roa_s", "graph_s", "traces_s", "plan_execute_s", "crosscheck_s", "robust_s",
-          "assumptions_s")
+          "assumptions_s", "checks_s")
+"""Phases from report.json; the check stage's parts overlap (each from the stage's start), checks_s is
+the whole stage (absent before the parts ran side by side)."""
 CC_WRAPPER = """#!{python}
 import json, os, resource, subprocess, sys
 src = next((a for a in sys.argv[1:] if a.endswith(".c")), "")

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from ..compile.primitive import CompiledPrimitive
 from ..oracle.executors import InProcess
+from ..oracle.joint import Map, together
 from ..oracle.tasks import Failed
 from .assumptions import AssumptionCheck, check_primitive
 from .region_size import region_size
@@ -13,16 +14,16 @@ def primitive_checks(prims: dict[str, CompiledPrimitive], name: str) -> list[dic
     return [c.to_dict() for c in check_primitive(prims[name])]
 
 
-def _checks_by_name(prims: dict[str, CompiledPrimitive], memo, executor, progress) -> dict[str, list[dict]]:
-    """Every primitive's checks: from the memo (by content hash) or computed through the executor's
-    map, one primitive per item (each primitive's checks depend on it alone, so the results are
-    the same on any executor). A primitive whose checks raised raises here, as it would in place."""
+def _checks_by_name(prims: dict[str, CompiledPrimitive], memo):
+    """Every primitive's checks: from the memo (by content hash) or computed through one map, one
+    primitive per item (each primitive's checks depend on it alone, so the results are the same on
+    any executor). A primitive whose checks raised raises here, as it would in place."""
     keys = {n: memo.key("assumptions", p.digest()) for n, p in prims.items()} if memo else {}
     known = {n: memo.get(k) for n, k in keys.items()}
     todo = [n for n in prims if known.get(n) is None]
     if todo:
-        done = (executor or InProcess()).map(primitive_checks, todo, progress, label="assumptions (Definition 1)",
-                                             shared=prims)
+        done = yield Map(primitive_checks, todo, "assumptions (Definition 1)", prims,
+                         cost=[float(prims[n].system.nx) for n in todo])
         for n, res in zip(todo, done):
             if isinstance(res, Failed):
                 raise RuntimeError(f"the Definition 1 checks of {n}: {res.error}")
@@ -41,7 +42,13 @@ def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict, memo=
     RoARecord of mpgspec.certify.roa) adds `roa_size` where E is empty (fail) or collapsed (warn).
     executor (optional, in this process when omitted) runs the primitives' checks through its map,
     with progress(label, i, n)."""
-    known = _checks_by_name(prims, memo, executor, progress)
+    stage = assumptions_stage(prims, severity, memo, roa)
+    return together({"assumptions": stage}, executor or InProcess(), progress)["assumptions"]
+
+
+def assumptions_stage(prims: dict[str, CompiledPrimitive], severity: dict, memo=None, roa: dict | None = None):
+    """check_assumptions as a stage (mpgspec.oracle.joint)."""
+    known = yield from _checks_by_name(prims, memo)
     out = []
     for p in prims.values():
         checks = [AssumptionCheck(**c) for c in known[p.name]]

@@ -15,6 +15,7 @@ from .. import api
 from ..cores import usable_cores
 from ..errors import UsageError
 from ..oracle.cache import VERIFY_ENV
+from ..report.ci import project_seconds
 from ..report.findings import disagreements, nominal_only_path, path_text, warning_count
 from ..streams import stdout_to_stderr
 from .output import MARK, _annotation, _rel, _json_doc, _line, _num, _print_errors, _progress, append_step_summary
@@ -88,8 +89,7 @@ def _human(res: VerifyResult, fmt: str):
             continue
         r = p.report
         t = r["timing"]
-        total = sum(v for k, v in t.items() if k.endswith("_s") and not k.endswith("per_s")
-                    and isinstance(v, (int, float)))
+        total = project_seconds(t)
         out(f"{MARK[p.status]} {p.name}: {len(r['primitives'])} primitives, {len(r['edges'])} edges, "
             f"{t['oracle_calls']} oracle calls ({_proved(r)}) in {_num(t['graph_s'], '.2f')} s"
             f"{_inconclusive(r)}{_cached(t)}; {_num(total, '.1f')} s for the project")

@@ -10,6 +10,9 @@ import hashlib
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
+from ..oracle.executors import InProcess
+from ..oracle.joint import Map, run
+from ..oracle.tasks import Failed
 from ..oracle.trace import prebuild, trace
 from ..settings import OracleSettings
 from .transition import MotionPrimitiveGraph, TransitionClass
@@ -32,11 +35,12 @@ def _horizon(prims, settings, tr, b: str, i: int, j: int) -> float:
     return min(horizon, max(tr.evidence[i][j].t_stop * 1.2 + 0.2, 0.5))
 
 
-def _traces(g, prims, settings, cells: list[tuple[str, str, int, int]], memo) -> list[dict]:
-    """The entries of the chosen (A, B, i, j) cells: dense series of B's closed loop from x_A*(t_A[i])
-    at clock t_B[j]. Series traced before with the same closed loop, start, horizon and settings
-    come from the memo (a run with nothing changed simulates nothing); the trace chunks of the rest
-    are compiled side by side first. An error is the trace's content, never remembered."""
+def _traces(g, prims, settings, cells: list[tuple[str, str, int, int]], memo):
+    """The entries of the chosen (A, B, i, j) cells as a stage (mpgspec.oracle.joint): dense series of
+    B's closed loop from x_A*(t_A[i]) at clock t_B[j]. Series traced before with the same closed
+    loop, start, horizon and settings come from the memo (a run with nothing changed simulates
+    nothing); the trace chunks of the rest are compiled side by side first, then traced as one map.
+    An error is the trace's content, never remembered."""
     keys, series, horizons = [], [], []
     for a, b, i, j in cells:
         tr = g.transitions[(a, b)]
@@ -47,27 +51,56 @@ def _traces(g, prims, settings, cells: list[tuple[str, str, int, int]], memo) ->
                        repr(float(tr.t_B[j])), repr(horizons[-1]), repr(settings)) if memo is not None else None
         keys.append(key)
         series.append(memo.get(key) if key is not None else None)
-    prebuild(list({id(prims[c[1]]): prims[c[1]] for c, s in zip(cells, series) if s is None}.values()), settings)
-    out = []
-    for (a, b, i, j), key, known, horizon in zip(cells, keys, series, horizons):
+    todo = [k for k, known in enumerate(series) if known is None]
+    prebuild(list({id(prims[cells[k][1]]): prims[cells[k][1]] for k in todo}.values()), settings)
+    items = []
+    for k in todo:
+        a, b, i, j = cells[k]
         tr = g.transitions[(a, b)]
-        if known is None:
-            try:
-                known = trace(prims[b], prims[a].x_star(float(tr.t_A[i])), float(tr.t_B[j]), horizon, settings)
-                if key is not None and "failed" not in known:
-                    memo.put(key, known)
-            except Exception as err:
-                known = {"error": str(err)[:300]}
+        items.append((b, prims[a].x_star(float(tr.t_A[i])), float(tr.t_B[j]), horizons[k]))
+    done = yield Map(_traced, items, "traces", (prims, settings), cost=[h for *_, h in items])
+    for k, known in zip(todo, done):
+        if isinstance(known, Failed):  # the worker died: as a raising trace
+            known = {"error": known.error[:300]}
+        elif keys[k] is not None and "failed" not in known and "error" not in known:
+            memo.put(keys[k], known)
+        series[k] = known
+    out = []
+    for (a, b, i, j), known in zip(cells, series):
+        tr = g.transitions[(a, b)]
         e = tr.evidence[i][j]
         out.append({"from": a, "to": b, "t_A": float(tr.t_A[i]), "t_B": float(tr.t_B[j]), "reason": e.reason.value,
                     "violated": e.violated, "t_stop": _f(e.t_stop), "series": known})
     return out
 
 
+def _traced(shared: tuple, item: tuple) -> dict:
+    """One dense series (a map item): shared = (prims, settings), item = (B, x0, t_B, horizon)."""
+    prims, settings = shared
+    b, x0, t_b, horizon = item
+    try:
+        return trace(prims[b], x0, t_b, horizon, settings)
+    except Exception as err:  # noqa: BLE001 - the trace's content
+        return {"error": str(err)[:300]}
+
+
+def traces_stage(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
+                 pairs: list[tuple[str, str]], memo=None):
+    """(edge_traces, failure_traces) as one stage: their series traced in one map."""
+    edges, failures = _edge_cells(g), _failure_cells(g, pairs)
+    out = yield from _traces(g, prims, settings, edges + failures, memo)
+    return out[:len(edges)], out[len(edges):]
+
+
 def failure_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
-                   pairs: list[tuple[str, str]], memo=None) -> list[dict]:
+                   pairs: list[tuple[str, str]], memo=None, executor=None) -> list[dict]:
     """For pairs without an edge: h over time from the start point whose flow came closest to E
-    (memo: mpgspec.oracle.cache.Memo, to keep traces between runs)."""
+    (memo: mpgspec.oracle.cache.Memo, to keep traces between runs; executor: where they are traced,
+    in this process when omitted)."""
+    return run(_traces(g, prims, settings, _failure_cells(g, pairs), memo), executor or InProcess())
+
+
+def _failure_cells(g: MotionPrimitiveGraph, pairs: list[tuple[str, str]]) -> list[tuple[str, str, int, int]]:
     cells = []
     for a, b in pairs:
         tr = g.transitions.get((a, b))
@@ -77,17 +110,21 @@ def failure_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive],
         i, j = max(grid, key=lambda c: (tr.evidence[c[0]][c[1]].t_stop,
                                         tr.evidence[c[0]][c[1]].best_roa_margin or -np.inf))
         cells.append((a, b, i, j))
-    return _traces(g, prims, settings, cells, memo)
+    return cells
 
 
 def edge_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
-                memo=None) -> list[dict]:
+                memo=None, executor=None) -> list[dict]:
     """For every edge: h and the E margin over time of the verified switch from the first available t_A
-    (memo as in failure_traces)."""
+    (memo and executor as in failure_traces)."""
+    return run(_traces(g, prims, settings, _edge_cells(g), memo), executor or InProcess())
+
+
+def _edge_cells(g: MotionPrimitiveGraph) -> list[tuple[str, str, int, int]]:
     cells = []
     for (a, b), tr in g.transitions.items():
         if tr.cls is TransitionClass.NONE:
             continue
         i = next(k for k, t_b in enumerate(tr.best_t_B) if t_b is not None)
         cells.append((a, b, i, int(np.argmin(np.abs(tr.t_B - tr.best_t_B[i])))))
-    return _traces(g, prims, settings, cells, memo)
+    return cells

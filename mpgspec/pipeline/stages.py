@@ -10,26 +10,28 @@ from dataclasses import dataclass
 from ..certify.roa import size_regions
 from ..check.assertions import AssertionResult, evaluate_assertions, roa_requirements
 from ..check.crosscheck import agreement_assertions
-from ..check.severity import check_assumptions
+from ..check.severity import assumptions_stage
 from ..compile.primitive import CompiledPrimitive, compile_primitive
 from ..compile.system import compile_system
 from ..errors import SpecError
-from ..execute.crosscheck import CrossCheckResult, crosscheck_runs, crosscheck_variants
+from ..execute.crosscheck import CrossCheckResult, runs_stage, variants_stage
 from ..execute.crosscheck.executor import ExecutorPlan
 from ..execute.crosscheck.settings import settings_of as crosscheck_settings, variants_of
 from ..execute.sequence import SequenceRun, simulate_sequence
 from ..graph.build import build_graph
 from ..graph.certified import certify_windows
-from ..graph.traces import edge_traces, failure_traces
+from ..graph.traces import traces_stage
 from ..graph.transition import MotionPrimitiveGraph
 from ..oracle.executors import Executor, InProcess
+from ..oracle.joint import Map, concurrently, run, together
 from ..oracle.looplib import build_all as build_loop_libraries
 from ..oracle.oracle import CapabilityError, require_capabilities
 from ..oracle.registry import get_backend
+from ..oracle.tasks import Failed
 from ..plan.planner import lookup_table, shortest_plan
 from ..progress import Progress, of_project
 from ..spec.uncertainty_refs import check_uncertainty, check_uncertainty_compiled
-from ..robust.graph import RobustResult, prefetch_robust, robust_stage
+from ..robust.graph import RobustResult, prefetch_robust, robust_steps
 from ..settings import OracleSettings
 from ..spec.loader import ProjectSpec
 from ..spec.project import asserted_edges
@@ -105,7 +107,8 @@ def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progres
 
 def graph_stage(cp: CompiledProject, progress: Progress | None = None,
                 executor: Executor | None = None) -> VerifiedGraph:
-    """Algorithm 1 through the executor, then the traces of every edge and of the closest failures."""
+    """Algorithm 1 through the executor, then the traces of every edge and of the closest failures
+    (one map on the executor)."""
     spec, prims, settings = cp.spec, cp.prims, cp.settings
     executor = executor or InProcess()
     cb = of_project(progress, spec.name)
@@ -129,7 +132,7 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     if progress:
         progress(spec.name, "traces of the edges and failed pairs", 0, 0)
     memo = getattr(executor, "memo", None)
-    edges, failures = edge_traces(g, prims, settings, memo), failure_traces(g, prims, settings, pairs, memo)
+    edges, failures = run(traces_stage(g, prims, settings, pairs, memo), executor, cb)
     calls = sum(len(tr.t_A) * len(tr.t_B) for tr in g.transitions.values())
     timing = {"graph_s": t1 - t0, "oracle_calls": calls, "oracle_calls_per_s": calls / max(t1 - t0, 1e-9),
               "traces_s": time.perf_counter() - t1,
@@ -139,10 +142,16 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
 
 def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | None = None, memo=None,
                 executor: Executor | None = None) -> Checks:
-    """Plans, the goal sequence naive and through the graph, assertions and assumptions; the robust
-    stage's per-target work and the primitives' Definition 1 checks run through the executor (in
-    this process when omitted)."""
-    spec, prims, settings, g = cp.spec, cp.prims, cp.settings, vg.graph
+    """Plans, the goal sequence naive and through the graph, assertions and assumptions. The
+    sequence's runs go first (the cross-check replays them); then the cross-check, the robust stage
+    and the primitives' Definition 1 checks, independent of each other, run side by side through
+    the executor (mpgspec.oracle.joint: their maps merged, so one stage's last item never leaves the
+    other cores idle), each computed as it would be alone (in this process when the executor is
+    omitted). Their timings overlap: each is the time from the start of the checks until that
+    stage was done; checks_s is the whole."""
+    spec, prims, g = cp.spec, cp.prims, vg.graph
+    executor = executor or InProcess()
+    cb = of_project(progress, spec.name)
     t0 = time.perf_counter()
     names = list(prims)
     plans = [shortest_plan(g, a, b, "duration") for a in names for b in names if a != b]
@@ -153,63 +162,90 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     if spec.project.sequence is not None:
         if progress:
             progress(spec.name, "sequence", 0, 2)
-        for mode in ("naive", "graph"):
-            runs[mode] = _sequence_run(cp, g, table["next"], mode, memo)
+        runs = run(_sequence_runs(cp, g, table["next"], memo), executor, cb)
     checks = evaluate_assertions(spec.project.assertions, g, runs)
     checks += roa_requirements(spec, cp.roa, start=len(checks))
-    t_x = time.perf_counter()
-    xcs, xc = crosscheck_settings(spec), None
-    if xcs is not None and runs:
-        if progress:
-            progress(spec.name, f"cross-check ({xcs.simulator})", 0, len(xcs.runs))
-        plan = ExecutorPlan.of(g, table["next"], spec.project.sequence, prims) if "graph" in runs else None
-        xc = crosscheck_runs(prims, runs, spec.project.sequence.duration, xcs, settings.h_tolerance, memo=memo,
-                             executor=executor, plan=plan)
-        variants = variants_of(spec, xcs) if "graph" in runs else []
-        if variants:
-            if progress:
-                progress(spec.name, f"cross-check variants ({xcs.simulator})", 0, len(variants))
-            xc.variants = crosscheck_variants(prims, runs["graph"], spec.project.sequence.duration, variants,
-                                              settings.h_tolerance, memo=memo, executor=executor,
-                                              progress=of_project(progress, spec.name))
-        if xcs.require_agreement:
-            checks += agreement_assertions(xc, start=len(checks))
-    t1 = time.perf_counter()
-    robust = robust_stage(cp, vg, progress, memo, executor)
+    timing: dict = {"plan_execute_s": time.perf_counter() - t0}
+
+    def timed(name: str, stage):
+        out = yield from stage
+        timing[name] = time.perf_counter() - t0
+        return out
+
+    xcs = crosscheck_settings(spec) if runs else None
+    parts = together({"crosscheck": timed("crosscheck_s", _crosscheck(cp, g, table, runs, xcs, progress, memo))
+                      if xcs is not None else _nothing(None),
+                      "robust": timed("robust_s", robust_steps(cp, vg, progress, memo, executor.workers)),
+                      "assumptions": timed("assumptions_s", assumptions_stage(prims, spec.project.assumptions, memo,
+                                                                             cp.roa))}, executor, cb)
+    xc, robust, assumed = parts["crosscheck"], parts["robust"], parts["assumptions"]
+    if xc is not None and xcs.require_agreement:
+        checks += agreement_assertions(xc, start=len(checks))
     if robust is not None:
         for a in robust.assertions:
             a.index = len(checks)
             checks.append(a)
-    t2 = time.perf_counter()
-    if progress:
-        progress(spec.name, "assumptions (Definition 1)", 0, len(prims))
-    cb = of_project(progress, spec.name)
-    assumed = check_assumptions(prims, spec.project.assumptions, memo, cp.roa, executor, cb)
     st = [c.status for c in checks] + [a.status for a in assumed]
     status = "error" if "error" in st else "fail" if "fail" in st else "pass"
-    return Checks(plans, table, runs, checks, assumed, status,
-                  {"plan_execute_s": t_x - t0, **({"crosscheck_s": t1 - t_x} if xc is not None else {}),
-                   "robust_s": t2 - t1, "assumptions_s": time.perf_counter() - t2}, robust, xc)
+    timing["checks_s"] = time.perf_counter() - t0
+    return Checks(plans, table, runs, checks, assumed, status, timing, robust, xc)
+
+
+def _crosscheck(cp: CompiledProject, g: MotionPrimitiveGraph, table: dict, runs: dict, xcs, progress, memo):
+    """The cross-check as a stage: the sequence's runs replayed, the executor on the simulator's
+    state and the variants, side by side."""
+    spec, prims, settings = cp.spec, cp.prims, cp.settings
+    if progress:
+        progress(spec.name, f"cross-check ({xcs.simulator})", 0, len(xcs.runs))
+    plan = ExecutorPlan.of(g, table["next"], spec.project.sequence, prims) if "graph" in runs else None
+    duration = spec.project.sequence.duration
+    variants = variants_of(spec, xcs) if "graph" in runs else []
+    both = yield from concurrently({
+        "runs": runs_stage(prims, runs, duration, xcs, settings.h_tolerance, memo=memo, plan=plan),
+        "variants": variants_stage(prims, runs["graph"], duration, variants, settings.h_tolerance, memo)
+        if variants else _nothing([])})
+    xc = both["runs"]
+    xc.variants = both["variants"]
+    return xc
+
+
+def _nothing(value):
+    """A stage that runs nothing and returns value."""
+    return value
+    yield  # noqa: unreachable - makes this a generator
 
 
 SEQUENCE_RECORD = 2
 """Layout of the memoised goal-sequence run (part of its key)."""
 
 
-def _sequence_run(cp: CompiledProject, g: MotionPrimitiveGraph, table: dict, mode: str, memo=None) -> SequenceRun:
-    """The goal sequence in one mode, kept in the memo by what decides it: the closed loops, the
-    oracle's grid and settings (which decide the graph and its table), the sequence and the mode."""
+def _sequence_runs(cp: CompiledProject, g: MotionPrimitiveGraph, table: dict, memo=None):
+    """mode -> the goal sequence's run, naive and through the graph, as a stage: each kept in the memo
+    by what decides it (the closed loops, the oracle's grid and settings, which decide the graph and
+    its table, the sequence and the mode); the others one map, a mode per item."""
     spec, prims, settings = cp.spec, cp.prims, cp.settings
-    key = memo.key("sequence", SEQUENCE_RECORD, mode, *(p.digest() for p in prims.values()),
-                   spec.project.oracle.grid.model_dump_json(), spec.project.sequence.model_dump_json(),
-                   sorted(dataclasses.asdict(settings).items())) if memo is not None else None
-    known = memo.get(key) if memo is not None else None
-    if known is not None:
-        return SequenceRun(**known)
-    run = simulate_sequence(prims, g, table, spec.project.sequence, settings, mode)
-    if memo is not None:
-        memo.put(key, run.to_dict())
-    return run
+    modes = ("naive", "graph")
+    keys = {mode: memo.key("sequence", SEQUENCE_RECORD, mode, *(p.digest() for p in prims.values()),
+                           spec.project.oracle.grid.model_dump_json(), spec.project.sequence.model_dump_json(),
+                           sorted(dataclasses.asdict(settings).items())) for mode in modes} if memo is not None else {}
+    known = {mode: memo.get(keys[mode]) for mode in keys}
+    runs = {mode: SequenceRun(**known[mode]) for mode in modes if known.get(mode) is not None}
+    todo = [mode for mode in modes if mode not in runs]
+    if todo:
+        done = yield Map(_simulated, todo, "sequence", (prims, g, table, spec.project.sequence, settings))
+        for mode, got in zip(todo, done):
+            if isinstance(got, Failed):
+                raise RuntimeError(f"the {mode} run of the sequence failed: {got.error}")
+            runs[mode] = got
+            if memo is not None:
+                memo.put(keys[mode], got.to_dict())
+    return {mode: runs[mode] for mode in modes}
+
+
+def _simulated(shared: tuple, mode: str) -> SequenceRun:
+    """One mode of the goal sequence (a map item): shared = (prims, graph, table, sequence, settings)."""
+    prims, g, table, seq, settings = shared
+    return simulate_sequence(prims, g, table, seq, settings, mode)
 
 
 def build(spec: ProjectSpec, settings: OracleSettings, progress: Progress | None = None,

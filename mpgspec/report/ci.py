@@ -36,10 +36,20 @@ KINDS = {
 }
 
 
-def _seconds(report: dict | None) -> float:
-    t = (report or {}).get("timing") or {}
-    return float(sum(v for k, v in t.items() if k.endswith("_s") and not k.endswith("per_s")
+CHECK_PARTS = ("plan_execute_s", "crosscheck_s", "robust_s", "assumptions_s")
+"""The check stage's parts: they run side by side, each timed from the stage's start (checks_s is the whole)."""
+
+
+def project_seconds(t: dict) -> float:
+    """A project's wall time from its report's timing: the phases one after the other, the check
+    stage counted once (checks_s, when the report has it, instead of its overlapping parts)."""
+    skip = CHECK_PARTS if "checks_s" in t else ()
+    return float(sum(v for k, v in t.items() if k.endswith("_s") and not k.endswith("per_s") and k not in skip
                      and isinstance(v, (int, float))))
+
+
+def _seconds(report: dict | None) -> float:
+    return project_seconds((report or {}).get("timing") or {})
 
 
 def _time(s: float) -> str:

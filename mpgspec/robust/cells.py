@@ -69,6 +69,13 @@ def run_target(prims: dict, job: TargetJob) -> tuple[list, dict, int, float]:
     return check_target(prims, prims[job.target], job.items, job.unc, job.settings, job.sc, job.rollout)
 
 
+def job_cost(job: TargetJob) -> float:
+    """About how many rollouts the job runs (its cells' scenarios and its own flow's): what orders
+    a merged map, the costliest first."""
+    cells = sum(len(_rows(tr, job.unc.cells)) for _a, tr in job.items)
+    return float((cells + 1) * job.sc.S)
+
+
 def failed_target(prims: dict, b: str, items: list, unc, error: str) -> tuple[list, dict]:
     """(edge records, own-flow record) of a target whose check raised: the error is the evidence of
     each of its cells and of its own flow, none robust-safe (as a rollout that blew up is unsafe)."""

@@ -29,13 +29,14 @@ from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
 from ..progress import of_project
 from ..oracle.executors import InProcess
+from ..oracle.joint import Map, together
 from ..oracle.tasks import Failed
-from .cells import TargetJob, failed_target, run_target
+from .cells import TargetJob, failed_target, job_cost, run_target
 from .library import prefetch
 from .rigid import RigidRobustRollout, uses_library
 from .rollout import RobustRollout, plant
 from .scenarios import Scenarios, scenarios, searched
-from .sequence import sequence_under_uncertainty
+from .sequence import uncertain_stage
 
 LABEL = "empirical"
 RECORD = 8
@@ -74,6 +75,14 @@ def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResul
     content hash of the closed loops, the system, the uncertainty, the sequence and the settings.
     executor (mpgspec.oracle.executors; in this process when omitted) runs the targets' checks.
     """
+    executor = executor or InProcess()
+    stage = robust_steps(cp, vg, progress, memo, executor.workers)
+    return together({"robust": stage}, executor, of_project(progress, cp.spec.name))["robust"]
+
+
+def robust_steps(cp, vg, progress=None, memo=None, workers: int = 1):
+    """robust_stage as a stage (mpgspec.oracle.joint): the targets' checks one map, then the
+    uncertain sequences (spread over `workers` items)."""
     spec, prims, settings, g = cp.spec, cp.prims, cp.settings, vg.graph
     unc = spec.project.uncertainty
     if unc is None:
@@ -90,8 +99,7 @@ def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResul
     sys = next(iter(prims.values())).system
     sc, jobs = target_jobs(spec, prims, settings, g)
     among = set(unc.nodes) if unc.nodes is not None else set(prims)
-    cb = of_project(progress, spec.name)
-    edges, nodes, n_roll, build_s = check_targets(jobs, prims, unc, executor, cb)
+    edges, nodes, n_roll, build_s = yield from targets_stage(jobs, prims, unc)
     rg = _robust_graph(g, edges, unc.nodes)
     scen = _scenario_record(unc, sc, among, edges, sys)
     t1 = time.perf_counter()
@@ -100,9 +108,9 @@ def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResul
         if progress:
             progress(spec.name, "sequence under uncertainty", 0, 3)
         w = spec.project.sequence.weight
-        seq = sequence_under_uncertainty(spec, prims, settings, {"graph": (g, lookup_table(g, w)),
+        seq = yield from uncertain_stage(spec, prims, settings, {"graph": (g, lookup_table(g, w)),
                                                                  "robust_graph": (rg, lookup_table(rg, w))},
-                                         unc.runs, unc.seed, executor, cb)
+                                         unc.runs, unc.seed, workers)
     timing = {"robust_s": time.perf_counter() - t0, "robust_build_s": build_s, "robust_rollouts": n_roll,
               "robust_sequence_s": time.perf_counter() - t1}
     edges.sort(key=lambda e: (e["from"], e["to"]))
@@ -187,7 +195,12 @@ def check_targets(jobs: list[TargetJob], prims: dict, unc, executor=None, progre
     """(edge records, own-flow records, rollouts run, seconds building rollouts) of the target jobs,
     run through the executor's map (in this process when None); a job that raised gets the records
     of failed_target, with its error as the evidence."""
-    done = (executor or InProcess()).map(run_target, jobs, progress, label="robust graph", shared=prims)
+    return together({"targets": targets_stage(jobs, prims, unc)}, executor or InProcess(), progress)["targets"]
+
+
+def targets_stage(jobs: list[TargetJob], prims: dict, unc):
+    """check_targets as a stage (mpgspec.oracle.joint): the targets one map, the costliest first."""
+    done = yield Map(run_target, jobs, "robust graph", prims, cost=[job_cost(job) for job in jobs])
     edges, nodes, n_roll, build_s = [], [], 0, 0.0
     for job, res in zip(jobs, done):
         if isinstance(res, Failed):

@@ -23,6 +23,8 @@ from ..compile.primitive import CompiledPrimitive
 from ..execute.crosscheck.executor import ExecutorPlan
 from ..oracle.flow import rk4
 from ..oracle.jit import compile_many, cse
+from ..oracle.executors import InProcess
+from ..oracle.joint import Map, together
 from ..oracle.tasks import Failed
 from ..spec.models import PrimitiveClass
 from .library import STEP_FLAGS
@@ -358,14 +360,22 @@ def sequence_under_uncertainty(spec, prims, settings, graphs: dict, runs: int, s
     fraction, the safe runs, the safe runs that end in the last goal and the first violations.
     With an executor of several workers the modes are spread over them (each builds the steppers;
     the draws depend on the seed only); a mode whose job raised records the error as its evidence."""
+    stage = uncertain_stage(spec, prims, settings, graphs, runs, seed, getattr(executor, "workers", 1))
+    return together({"sequence": stage}, executor or InProcess(), progress)["sequence"]
+
+
+def uncertain_stage(spec, prims, settings, graphs: dict, runs: int, seed: int, workers: int = 1):
+    """sequence_under_uncertainty as a stage (mpgspec.oracle.joint): the modes spread over up to
+    `workers` items of one map (in this process for one)."""
     modes = [("naive", None, {})] + [(m, g, table) for m, (g, table) in graphs.items()]
-    workers = max(1, min(getattr(executor, "workers", 1), len(modes)))
+    workers = max(1, min(workers, len(modes)))
     jobs = [ModeJob(_portable(spec) if workers > 1 else spec, settings, runs, seed, modes[k::workers])
             for k in range(workers)]
     if workers == 1:
         done = [run_modes(prims, jobs[0])]
     else:
-        done = executor.map(run_modes, jobs, progress, label="sequence under uncertainty", shared=prims)
+        done = yield Map(run_modes, jobs, "sequence under uncertainty", prims,
+                         cost=[float(len(job.modes) * runs) for job in jobs])
     out = {}
     for job, res in zip(jobs, done):
         out.update({m: _failed_mode(runs, res.error) for m, _, _ in job.modes} if isinstance(res, Failed) else res)

@@ -9,6 +9,8 @@ import casadi as ca
 import numpy as np
 
 from ...compile.primitive import CompiledPrimitive
+from ...oracle.executors import InProcess
+from ...oracle.joint import Map, run, together
 from ...oracle.tasks import Failed
 from ..sequence import SequenceRun, playback_samples
 from .executor import ExecutorPlan, StateExecutor
@@ -84,6 +86,16 @@ def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, Sequenc
     decides it: the run, the primitives' closed loops, the settings and the simulator's version.
     executor (optional): the runs not in the memo are replayed side by side through its map (each
     run alone in its process, so the comparison is the same wherever it runs)."""
+    stage = runs_stage(prims, runs, duration, settings, h_tolerance, robot, memo, plan,
+                       pooled=2 if executor is not None else None)
+    return run(stage, executor or InProcess())
+
+
+def runs_stage(prims: dict[str, CompiledPrimitive], runs: dict[str, SequenceRun], duration: float,
+               settings: CrossCheckSettings, h_tolerance: float = 0.0, robot: MujocoRobot | None = None,
+               memo=None, plan: ExecutorPlan | None = None, pooled: int | None = 1):
+    """crosscheck_runs as a stage (mpgspec.oracle.joint): the runs not in the memo are one map when
+    there are at least `pooled` of them (None: replayed in this process), the result returned."""
     system = next(iter(prims.values())).system
     robot = robot or build_robot(system, settings)
     res = CrossCheckResult(settings.simulator, settings, dict(robot.info))
@@ -92,9 +104,10 @@ def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, Sequenc
                          plan if m == "graph" else None) for m in modes} if memo is not None else {}
     known = {m: memo.get(keys[m]) for m in keys}
     todo = [m for m in modes if known.get(m) is None]
-    if executor is not None and len(todo) > 1:  # each worker builds the same MuJoCo model from the system
+    if pooled is not None and len(todo) >= pooled:  # each worker builds the same MuJoCo model from the system
         shared = (None, prims, {m: runs[m] for m in todo}, duration, settings, h_tolerance, plan)
-        done = executor.map(_replayed, todo, label=f"cross-check ({settings.simulator})", shared=shared)
+        done = yield Map(_replayed, todo, f"cross-check ({settings.simulator})", shared,
+                         cost=[_cost(runs[m], duration, plan if m == "graph" else None) for m in todo])
     else:
         done = [_replayed((robot, prims, runs, duration, settings, h_tolerance, plan), m) for m in todo]
     for m, out in zip(todo, done):
@@ -107,6 +120,12 @@ def crosscheck_runs(prims: dict[str, CompiledPrimitive], runs: dict[str, Sequenc
     return res
 
 
+def _cost(run: SequenceRun, duration: float, plan: ExecutorPlan | None = None) -> float:
+    """Seconds of simulated time a replay covers (twice with the executor on the simulator's state):
+    what orders a merged map."""
+    return _until(run, duration) + (duration if plan is not None else 0.0)
+
+
 def crosscheck_variants(prims: dict[str, CompiledPrimitive], run: SequenceRun, duration: float,
                         variants: list[tuple[str, CrossCheckSettings, dict]], h_tolerance: float = 0.0,
                         memo=None, executor=None, progress=None) -> list[dict]:
@@ -115,6 +134,15 @@ def crosscheck_variants(prims: dict[str, CompiledPrimitive], run: SequenceRun, d
     the largest CoM divergence. Each replay is kept in the memo as a cross-checked run is; the ones
     not in it run side by side through the executor's map (each in its own process; progress(what,
     done, total) as they finish)."""
+    stage = variants_stage(prims, run, duration, variants, h_tolerance, memo, pooled=executor is not None)
+    return together({"variants": stage}, executor or InProcess(), progress)["variants"]
+
+
+def variants_stage(prims: dict[str, CompiledPrimitive], run: SequenceRun, duration: float,
+                   variants: list[tuple[str, CrossCheckSettings, dict]], h_tolerance: float = 0.0,
+                   memo=None, pooled: bool = True):
+    """crosscheck_variants as a stage (mpgspec.oracle.joint): the replays not in the memo are one map
+    (pooled) or run in this process; the records returned."""
     system = next(iter(prims.values())).system
     keys = [_memo_key(memo, prims, run, duration, st, h_tolerance, build_robot(system, st))
             if memo is not None else None for _n, st, _c in variants]
@@ -123,8 +151,10 @@ def crosscheck_variants(prims: dict[str, CompiledPrimitive], run: SequenceRun, d
     items = [variants[i][1] for i in todo]
     shared = (prims, run, duration, h_tolerance)
     label = f"cross-check variants ({variants[0][1].simulator})" if variants else "cross-check variants"
-    got = executor.map(_variant, items, progress, label=label, shared=shared) if executor is not None else \
-        [_variant(shared, st) for st in items]
+    if pooled:
+        got = yield Map(_variant, items, label, shared, cost=[_cost(run, duration)] * len(items))
+    else:
+        got = [_variant(shared, st) for st in items]
     for i, r in zip(todo, got):
         if isinstance(r, Failed):
             raise RuntimeError(f"the replay of the graph run with {variants[i][0]} failed: {r.error}")
