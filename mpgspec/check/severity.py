@@ -22,8 +22,7 @@ def _checks_by_name(prims: dict[str, CompiledPrimitive], memo):
     known = {n: memo.get(k) for n, k in keys.items()}
     todo = [n for n in prims if known.get(n) is None]
     if todo:
-        done = yield Map(primitive_checks, todo, "assumptions (Definition 1)", prims,
-                         cost=[float(prims[n].system.nx) for n in todo])
+        done = yield Map(primitive_checks, todo, "assumptions (Definition 1)", prims)  # short: last in a merged map
         for n, res in zip(todo, done):
             if isinstance(res, Failed):
                 raise RuntimeError(f"the Definition 1 checks of {n}: {res.error}")

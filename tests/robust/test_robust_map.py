@@ -135,3 +135,23 @@ def test_a_sequence_mode_that_raises_is_its_own_evidence(built, serial, monkeypa
     monkeypatch.setattr(sequence, "run_modes", real)
     ref = sequence_under_uncertainty(cp.spec, cp.prims, cp.settings, graphs, 4, 11)["modes"]
     assert out["graph"] == ref["graph"] and out["naive"] != ref["naive"]
+
+
+def test_the_check_stage_runs_its_parts_side_by_side_each_as_alone(built, serial):
+    from mpgspec.check.severity import check_assumptions
+    from mpgspec.pipeline.stages import check_stage
+
+    cp, vg = built
+    ex = Recording()
+    ch = check_stage(cp, vg, executor=ex)
+    here, alone = json.loads(_plain(ch.robust)), json.loads(_plain(serial[0]))
+    for a in here["assertions"]:  # the check stage numbers them after the project's own assertions
+        a.pop("index")
+    for a in alone["assertions"]:
+        a.pop("index")
+    assert here == alone
+    assumed = check_assumptions(cp.prims, cp.spec.project.assumptions, None, cp.roa)
+    assert [a.to_dict() for a in ch.assumptions] == [a.to_dict() for a in assumed]
+    targets = len({e["to"] for e in serial[0].edges})
+    assert ("robust graph + assumptions (Definition 1)", targets + len(cp.prims)) in ex.maps  # one map for both
+    assert ch.timing["checks_s"] >= max(ch.timing["robust_s"], ch.timing["assumptions_s"])
