@@ -122,3 +122,16 @@ def test_characters_xml_cannot_hold_are_replaced_and_paths_are_uris():
     jsonschema.Draft4Validator(json.loads((SCHEMAS / "sarif-2.1.0.json").read_text())).validate(doc)
     assert doc["runs"][0]["results"][0]["locations"][0]["physicalLocation"]["artifactLocation"]["uri"] == \
         "my%20specs/project.yaml"
+
+
+def test_a_projects_time_counts_its_check_stage_once():
+    from mpgspec.report.ci import project_seconds
+
+    # the check stage's parts run side by side, each timed from the stage's start: checks_s is the whole
+    side_by_side = {"compile_s": 1.0, "roa_s": 2.0, "graph_s": 3.0, "traces_s": 0.5, "oracle_calls_per_s": 99.0,
+                    "plan_execute_s": 1.0, "crosscheck_s": 8.0, "robust_s": 9.0, "assumptions_s": 4.0,
+                    "checks_s": 9.5, "oracle_calls": 7}
+    assert project_seconds(side_by_side) == pytest.approx(1.0 + 2.0 + 3.0 + 0.5 + 9.5)
+    # a report from before (no checks_s): its parts ran one after the other
+    one_by_one = {k: v for k, v in side_by_side.items() if k != "checks_s"}
+    assert project_seconds(one_by_one) == pytest.approx(1.0 + 2.0 + 3.0 + 0.5 + 1.0 + 8.0 + 9.0 + 4.0)
