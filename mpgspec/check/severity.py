@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from ..compile.primitive import CompiledPrimitive
 from ..oracle.executors import InProcess
-from ..oracle.joint import Map, together
+from ..oracle.joint import Map, run
 from ..oracle.tasks import Failed
 from .assumptions import AssumptionCheck, check_primitive
 from .region_size import region_size
@@ -42,7 +42,7 @@ def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict, memo=
     executor (optional, in this process when omitted) runs the primitives' checks through its map,
     with progress(label, i, n)."""
     stage = assumptions_stage(prims, severity, memo, roa)
-    return together({"assumptions": stage}, executor or InProcess(), progress)["assumptions"]
+    return run(stage, executor or InProcess(), progress)
 
 
 def assumptions_stage(prims: dict[str, CompiledPrimitive], severity: dict, memo=None, roa: dict | None = None):

@@ -10,8 +10,7 @@ import hashlib
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
-from ..oracle.executors import InProcess
-from ..oracle.joint import Map, run
+from ..oracle.joint import Map
 from ..oracle.tasks import Failed
 from ..oracle.trace import prebuild, trace
 from ..settings import OracleSettings
@@ -86,21 +85,16 @@ def _traced(shared: tuple, item: tuple) -> dict:
 
 def traces_stage(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
                  pairs: list[tuple[str, str]], memo=None):
-    """(edge_traces, failure_traces) as one stage: their series traced in one map."""
+    """(edge traces, failure traces) as a stage: h and the E margin over time of every edge's
+    verified switch and of each pair without an edge from its closest attempt (memo:
+    mpgspec.oracle.cache.Memo, to keep traces between runs), traced in one map."""
     edges, failures = _edge_cells(g), _failure_cells(g, pairs)
     out = yield from _traces(g, prims, settings, edges + failures, memo)
     return out[:len(edges)], out[len(edges):]
 
 
-def failure_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
-                   pairs: list[tuple[str, str]], memo=None, executor=None) -> list[dict]:
-    """For pairs without an edge: h over time from the start point whose flow came closest to E
-    (memo: mpgspec.oracle.cache.Memo, to keep traces between runs; executor: where they are traced,
-    in this process when omitted)."""
-    return run(_traces(g, prims, settings, _failure_cells(g, pairs), memo), executor or InProcess())
-
-
 def _failure_cells(g: MotionPrimitiveGraph, pairs: list[tuple[str, str]]) -> list[tuple[str, str, int, int]]:
+    """For pairs without an edge: the start point whose flow came closest to E."""
     cells = []
     for a, b in pairs:
         tr = g.transitions.get((a, b))
@@ -113,14 +107,8 @@ def _failure_cells(g: MotionPrimitiveGraph, pairs: list[tuple[str, str]]) -> lis
     return cells
 
 
-def edge_traces(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
-                memo=None, executor=None) -> list[dict]:
-    """For every edge: h and the E margin over time of the verified switch from the first available t_A
-    (memo and executor as in failure_traces)."""
-    return run(_traces(g, prims, settings, _edge_cells(g), memo), executor or InProcess())
-
-
 def _edge_cells(g: MotionPrimitiveGraph) -> list[tuple[str, str, int, int]]:
+    """For every edge: the verified switch from the first available t_A."""
     cells = []
     for (a, b), tr in g.transitions.items():
         if tr.cls is TransitionClass.NONE:

@@ -173,12 +173,12 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
         return out
 
     xcs = crosscheck_settings(spec) if runs else None
-    parts = together({"crosscheck": timed("crosscheck_s", _crosscheck(cp, g, table, runs, xcs, progress, memo))
-                      if xcs is not None else _nothing(None),
-                      "robust": timed("robust_s", robust_steps(cp, vg, progress, memo, executor.workers)),
-                      "assumptions": timed("assumptions_s", assumptions_stage(prims, spec.project.assumptions, memo,
-                                                                             cp.roa))}, executor, cb)
-    xc, robust, assumed = parts["crosscheck"], parts["robust"], parts["assumptions"]
+    parts = {"robust": timed("robust_s", robust_steps(cp, vg, progress, memo, executor.workers)),
+             "assumptions": timed("assumptions_s", assumptions_stage(prims, spec.project.assumptions, memo, cp.roa))}
+    if xcs is not None:
+        parts["crosscheck"] = timed("crosscheck_s", _crosscheck(cp, g, table, runs, xcs, progress, memo))
+    done = together(parts, executor, cb)
+    xc, robust, assumed = done.get("crosscheck"), done["robust"], done["assumptions"]
     if xc is not None and xcs.require_agreement:
         checks += agreement_assertions(xc, start=len(checks))
     if robust is not None:
@@ -202,17 +202,10 @@ def _crosscheck(cp: CompiledProject, g: MotionPrimitiveGraph, table: dict, runs:
     variants = variants_of(spec, xcs) if "graph" in runs else []
     both = yield from concurrently({
         "runs": runs_stage(prims, runs, duration, xcs, settings.h_tolerance, memo=memo, plan=plan),
-        "variants": variants_stage(prims, runs["graph"], duration, variants, settings.h_tolerance, memo)
-        if variants else _nothing([])})
+        "variants": variants_stage(prims, runs.get("graph"), duration, variants, settings.h_tolerance, memo)})
     xc = both["runs"]
     xc.variants = both["variants"]
     return xc
-
-
-def _nothing(value):
-    """A stage that runs nothing and returns value."""
-    return value
-    yield  # noqa: unreachable - makes this a generator
 
 
 SEQUENCE_RECORD = 2

@@ -29,7 +29,7 @@ from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
 from ..progress import of_project
 from ..oracle.executors import InProcess
-from ..oracle.joint import Map, together
+from ..oracle.joint import Map, run
 from ..oracle.tasks import Failed
 from .cells import TargetJob, failed_target, job_cost, run_target
 from .library import prefetch
@@ -77,7 +77,7 @@ def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResul
     """
     executor = executor or InProcess()
     stage = robust_steps(cp, vg, progress, memo, executor.workers)
-    return together({"robust": stage}, executor, of_project(progress, cp.spec.name))["robust"]
+    return run(stage, executor, of_project(progress, cp.spec.name))
 
 
 def robust_steps(cp, vg, progress=None, memo=None, workers: int = 1):
@@ -195,7 +195,7 @@ def check_targets(jobs: list[TargetJob], prims: dict, unc, executor=None, progre
     """(edge records, own-flow records, rollouts run, seconds building rollouts) of the target jobs,
     run through the executor's map (in this process when None); a job that raised gets the records
     of failed_target, with its error as the evidence."""
-    return together({"targets": targets_stage(jobs, prims, unc)}, executor or InProcess(), progress)["targets"]
+    return run(targets_stage(jobs, prims, unc), executor or InProcess(), progress)
 
 
 def targets_stage(jobs: list[TargetJob], prims: dict, unc):

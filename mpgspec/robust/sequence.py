@@ -24,7 +24,7 @@ from ..execute.crosscheck.executor import ExecutorPlan
 from ..oracle.flow import rk4
 from ..oracle.jit import compile_many, cse
 from ..oracle.executors import InProcess
-from ..oracle.joint import Map, together
+from ..oracle.joint import Map, run
 from ..oracle.tasks import Failed
 from ..spec.models import PrimitiveClass
 from .library import STEP_FLAGS
@@ -361,7 +361,7 @@ def sequence_under_uncertainty(spec, prims, settings, graphs: dict, runs: int, s
     With an executor of several workers the modes are spread over them (each builds the steppers;
     the draws depend on the seed only); a mode whose job raised records the error as its evidence."""
     stage = uncertain_stage(spec, prims, settings, graphs, runs, seed, getattr(executor, "workers", 1))
-    return together({"sequence": stage}, executor or InProcess(), progress)["sequence"]
+    return run(stage, executor or InProcess(), progress)
 
 
 def uncertain_stage(spec, prims, settings, graphs: dict, runs: int, seed: int, workers: int = 1):

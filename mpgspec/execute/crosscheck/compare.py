@@ -10,7 +10,7 @@ import numpy as np
 
 from ...compile.primitive import CompiledPrimitive
 from ...oracle.executors import InProcess
-from ...oracle.joint import Map, run, together
+from ...oracle.joint import Map, run
 from ...oracle.tasks import Failed
 from ..sequence import SequenceRun, playback_samples
 from .executor import ExecutorPlan, StateExecutor
@@ -35,7 +35,7 @@ class CrossCheckResult:
     model: dict
     runs: dict[str, dict] = field(default_factory=dict)
     variants: list[dict] = field(default_factory=list)
-    """The graph run replayed under each of the project's variants (crosscheck_variants)."""
+    """The graph run replayed under each of the project's variants (variants_stage)."""
 
     @property
     def agree(self) -> bool:
@@ -126,23 +126,12 @@ def _cost(run: SequenceRun, duration: float, plan: ExecutorPlan | None = None) -
     return _until(run, duration) + (duration if plan is not None else 0.0)
 
 
-def crosscheck_variants(prims: dict[str, CompiledPrimitive], run: SequenceRun, duration: float,
-                        variants: list[tuple[str, CrossCheckSettings, dict]], h_tolerance: float = 0.0,
-                        memo=None, executor=None, progress=None) -> list[dict]:
-    """The graph run replayed under each variant (name, settings, what it replaces): its verdict
-    beside mpgspec's, its first violation, how many control updates violate, the least margins and
-    the largest CoM divergence. Each replay is kept in the memo as a cross-checked run is; the ones
-    not in it run side by side through the executor's map (each in its own process; progress(what,
-    done, total) as they finish)."""
-    stage = variants_stage(prims, run, duration, variants, h_tolerance, memo, pooled=executor is not None)
-    return together({"variants": stage}, executor or InProcess(), progress)["variants"]
-
-
 def variants_stage(prims: dict[str, CompiledPrimitive], run: SequenceRun, duration: float,
-                   variants: list[tuple[str, CrossCheckSettings, dict]], h_tolerance: float = 0.0,
-                   memo=None, pooled: bool = True):
-    """crosscheck_variants as a stage (mpgspec.oracle.joint): the replays not in the memo are one map
-    (pooled) or run in this process; the records returned."""
+                   variants: list[tuple[str, CrossCheckSettings, dict]], h_tolerance: float = 0.0, memo=None):
+    """The graph run replayed under each variant (name, settings, what it replaces), as a stage
+    (mpgspec.oracle.joint): its verdict beside mpgspec's, its first violation, how many control
+    updates violate, the least margins and the largest CoM divergence. Each replay is kept in the
+    memo as a cross-checked run is; the ones not in it are one map (each in its own process)."""
     system = next(iter(prims.values())).system
     keys = [_memo_key(memo, prims, run, duration, st, h_tolerance, build_robot(system, st))
             if memo is not None else None for _n, st, _c in variants]
@@ -151,10 +140,7 @@ def variants_stage(prims: dict[str, CompiledPrimitive], run: SequenceRun, durati
     items = [variants[i][1] for i in todo]
     shared = (prims, run, duration, h_tolerance)
     label = f"cross-check variants ({variants[0][1].simulator})" if variants else "cross-check variants"
-    if pooled:
-        got = yield Map(_variant, items, label, shared, cost=[_cost(run, duration)] * len(items))
-    else:
-        got = [_variant(shared, st) for st in items]
+    got = yield Map(_variant, items, label, shared, cost=[_cost(run, duration)] * len(items))
     for i, r in zip(todo, got):
         if isinstance(r, Failed):
             raise RuntimeError(f"the replay of the graph run with {variants[i][0]} failed: {r.error}")
