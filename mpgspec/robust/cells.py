@@ -79,13 +79,13 @@ def job_cost(job: TargetJob) -> float:
 def failed_target(prims: dict, b: str, items: list, unc, error: str) -> tuple[list, dict]:
     """(edge records, own-flow record) of a target whose check raised: the error is the evidence of
     each of its cells and of its own flow, none robust-safe (as a rollout that blew up is unsafe)."""
-    node = {"node": b, "t_B": [], "scenarios": 0, "robust_safe": False, "worst_margin": -math.inf,
+    node = {"node": b, "t_B": [], "scenarios": 0, "stopped": 0, "robust_safe": False, "worst_margin": -math.inf,
             "worst_case": {"error": error}}
     edges = []
     for a, tr in items:
         checked = [{"t_A": float(tr.t_A[i]), "t_B": float(tr.best_t_B[i]), "robust_safe": False,
                     "worst_margin": -math.inf, "worst_case": {"kind": "error", "error": error},
-                    "_ij": (i, int(np.argmin(np.abs(tr.t_B - tr.best_t_B[i])))), "starts_kept": 0}
+                    "_ij": (i, int(np.argmin(np.abs(tr.t_B - tr.best_t_B[i])))), "starts_kept": 0, "stopped": 0}
                    for i in _rows(tr, unc.cells)]
         edges.append(_edge_record(a, b, tr, checked, node, prims, unc))
     return edges, node
@@ -108,34 +108,49 @@ def _cells(prims: dict, items: list, unc) -> list[tuple]:
 
 def _worst_cases(rr, cells: list, sc: Scenarios, nsteps: np.ndarray, tol: float) -> tuple[list[dict], int]:
     """Per cell its worst scenario over every start (least (safe, margin)), and the rollouts run;
-    `all_safe` says whether every scenario from every start was safe."""
-    S, C = sc.S, len(cells)
+    `all_safe` says whether every scenario from every start was safe. A cell is one decision: once
+    one of its rollouts is unsafe the others stop undecided (`stopped` counts them) and its worst case
+    is the worst of those decided."""
+    S = sc.S
     D1 = sc.D1
-    worst = [None] * C
+    worst: list = [None] * len(cells)
     n_roll = 0
-    pairs = [(c, s) for c in range(C) for s in cells[c][4]]
-    per = max(1, ROLLOUTS // S)
-    for q0 in range(0, len(pairs), per):
-        chunk = pairs[q0:q0 + per]
+    for batch in _cell_batches([len(c[4]) for c in cells], max(1, ROLLOUTS // S)):
+        chunk = [(c, s) for c in batch for s in cells[c][4]]
         cs = np.repeat([c for c, _ in chunk], S)
         X0 = np.concatenate([s.x[None, :] + sc.ERR for _, s in chunk])
         T0 = np.array([cells[c][5] for c in cs])
         THb, D = np.tile(sc.TH, (len(chunk), 1)), np.tile(D1, (len(chunk), 1, 1))
-        Y, last = rr.run(X0, T0, THb, D, nsteps[cs], tol)
+        Y, last, cut = rr.run_groups(X0, T0, THb, D, nsteps[cs], tol, groups=cs)
         n_roll += len(X0)
+        judged: dict[int, list] = {c: [] for c in batch}
+        stopped = dict.fromkeys(batch, 0)
         for q, (c, s) in enumerate(chunk):
-            rs = range(q * S, (q + 1) * S)
-            res = {r: judge(Y[r, :-1], Y[r, -1], int(min(nsteps[c], last[r])), tol) for r in rs}
-            r = min(rs, key=lambda r: (res[r][0], res[r][1]))
-            ok = all(res[p][0] for p in rs)
-            w = worst[c]
-            if w is None or (res[r][0], res[r][1]) < (w["safe"], w["margin"]):
-                worst[c] = {"margin": res[r][1], "safe": res[r][0], "entry": res[r][2], "x0": X0[r],
-                            "t0": T0[r], "theta": THb[r], "D": D[r], "kind": sc.KIND[r % S], "err": sc.ERR[r % S],
-                            "start": s, "all_safe": ok and (w is None or w["all_safe"]), "Y": Y[r].copy()}
-            else:
-                w["all_safe"] = w["all_safe"] and ok
+            for r in range(q * S, (q + 1) * S):
+                if cut[r]:
+                    stopped[c] += 1
+                else:
+                    judged[c].append((judge(Y[r, :-1], Y[r, -1], int(min(nsteps[c], last[r])), tol), r, s))
+        for c in batch:  # the least (safe, margin), the first of equals
+            (safe, margin, entry), r, s = min(judged[c], key=lambda j: (j[0][0], j[0][1]))
+            worst[c] = {"margin": margin, "safe": safe, "entry": entry, "x0": X0[r], "t0": T0[r],
+                        "theta": THb[r], "D": D[r], "kind": sc.KIND[r % S], "err": sc.ERR[r % S], "start": s,
+                        "all_safe": not stopped[c] and all(j[0][0] for j in judged[c]), "Y": Y[r].copy(),
+                        "stopped": stopped[c]}
     return worst, n_roll
+
+
+def _cell_batches(pairs: list[int], per: int) -> list[list[int]]:
+    """Cells (by index, with their numbers of starts) in batches of about `per` (cell, start)
+    pairs, a cell never split: its rollouts stop together."""
+    batches, cur, size = [], [], 0
+    for c, k in enumerate(pairs):
+        if cur and size + k > per:
+            batches.append(cur)
+            cur, size = [], 0
+        cur.append(c)
+        size += k
+    return batches + ([cur] if cur else [])
 
 
 def _search(rr, worst: list[dict], sc: Scenarios, nsteps: np.ndarray, tol: float, rounds: int) -> int:
@@ -193,7 +208,7 @@ def _cell_records(prims: dict, B, cells: list, worst: list[dict], node: dict, sc
         per_edge.setdefault(a, []).append({"t_A": float(tr.t_A[i]), "t_B": tb,
                                            "robust_safe": bool(w["all_safe"]) and node["robust_safe"],
                                            "worst_margin": w["margin"], "worst_case": wc, "_ij": (i, j),
-                                           "starts_kept": len(starts) - 1})
+                                           "starts_kept": len(starts) - 1, "stopped": w["stopped"]})
     return per_edge
 
 
@@ -207,7 +222,8 @@ def _edge_record(a: str, b: str, tr: Transition, checked: list[dict], node: dict
             "worst_case": None if worst is None else {"t_A": worst["t_A"], "t_B": worst["t_B"],
                                                      **worst["worst_case"]},
             "cells": {"row": [int(c["_ij"][0]) for c in checked],  # t_A rows, at the nominal best t_B
-                      "robust_safe": [int(c["robust_safe"]) for c in checked], "worst_margin": margins}}
+                      "robust_safe": [int(c["robust_safe"]) for c in checked], "worst_margin": margins,
+                      "stopped": [int(c["stopped"]) for c in checked]}}
     if unc.start_in_roa is not None:
         kept = [c["starts_kept"] for c in checked]
         edge["cells"]["starts_kept"] = kept
@@ -249,14 +265,16 @@ def _node_check(B, rr, tbs: list[float], TH, ERR, D1, KIND, settings, tol, names
     X0 = np.concatenate([B.x_star(tb)[None, :] + ERR for tb in tbs])
     T0 = np.repeat(np.asarray(tbs, float), S)
     D = np.tile(D1, (len(tbs), 1, 1))
-    # s since switch-in: long ago (a flow settled in B), so events the setpoint's clocks record count
-    Y, last = rr.run(X0, T0, np.tile(TH, (len(tbs), 1)), D, ns, tol, until_entry=False, s0=SETTLED)
-    res = [judge_flow(Y[r, :-1], int(min(ns[r], last[r])), tol) for r in range(len(X0))]
-    r = min(range(len(X0)), key=lambda q: (res[q][0], res[q][1]))
+    # s since switch-in: long ago (a flow settled in B), so events the setpoint's clocks record count;
+    # one decision: once a scenario breaks C_B the others stop
+    Y, last, cut = rr.run_groups(X0, T0, np.tile(TH, (len(tbs), 1)), D, ns, tol, until_entry=False, s0=SETTLED,
+                                 groups=np.zeros(len(X0), int))
+    res = {q: judge_flow(Y[q, :-1], int(min(ns[q], last[q])), tol) for q in range(len(X0)) if not cut[q]}
+    r = min(res, key=lambda q: (res[q][0], res[q][1]))
     ok, low, k, j = res[r]
     binding = {"h": B.h_names[j], "value": float(low), "t": float(k * settings.dt)} if j is not None else None
-    return {"node": B.name, "t_B": [float(t) for t in tbs], "scenarios": len(X0),
-            "robust_safe": bool(all(x[0] for x in res)), "worst_margin": float(low),
+    return {"node": B.name, "t_B": [float(t) for t in tbs], "scenarios": len(X0), "stopped": int(cut.sum()),
+            "robust_safe": bool(not cut.any() and all(x[0] for x in res.values())), "worst_margin": float(low),
             "worst_case": {"t_B": float(T0[r]), "kind": KIND[r % S], "parameters": dict(zip(names, map(float, TH[r % S]))),
                            "disturbance": {u: [float(v) for v in D[r][i]] for i, u in enumerate(dist_names)},
                            "binding": binding}}

@@ -39,7 +39,7 @@ from .scenarios import Scenarios, scenarios, searched
 from .sequence import uncertain_stage
 
 LABEL = "empirical"
-RECORD = 8
+RECORD = 9
 """Layout of the memoised robust record (part of its key)."""
 SAMPLED = "empirical (sampled)"
 NOTE = ("falsification, not proof: a robust edge withstood every scenario tried (parameter-box corners, seeded "
@@ -245,7 +245,8 @@ def _scenario_record(unc, sc: Scenarios, among: set, edges: list[dict], sys) -> 
             if force is None else {"force": {"frame": force.frame, "bound": bound.tolist(),
                                              "duration": force.duration}},
             "nodes": sorted(among),
-            "seed": unc.seed, "cells_per_edge": unc.cells, "start_in_roa": None}
+            "seed": unc.seed, "cells_per_edge": unc.cells, "start_in_roa": None,
+            "stopped": sum(sum(e["cells"]["stopped"]) for e in edges)}
     if roa_starts is not None:
         scen["start_in_roa"] = {"level": SAMPLED, "samples": roa_starts.samples, "seed": roa_starts.seed,
                                 "drawn": sum(e["start_in_roa"]["drawn"] for e in edges),

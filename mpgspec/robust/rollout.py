@@ -204,6 +204,17 @@ class RobustRollout:
         or a non-finite value) or reaches its `limit` steps; its later samples are NaN. s0: the time
         since switch-in at the start (events recorded in the state's clocks count when it is large).
         """
+        Y, last, _ = self.run_groups(X0, T0, TH, D, limit, tol, until_entry, s0)
+        return Y, last
+
+    def run_groups(self, X0: np.ndarray, T0: np.ndarray, TH: np.ndarray, D: np.ndarray,
+                   limit: np.ndarray | None = None, tol: float = 0.0, until_entry: bool = True,
+                   s0: float = 0.0, groups: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """run, where rollouts with the same entry of `groups` (n,) are one decision (a cell's
+        scenarios: robust only if every one is safe): once one of them is unsafe (h < -tol or a
+        non-finite value), the others stop at the end of that chunk, undecided. Also returns which
+        rollouts were so stopped (n,) bool. A rollout's samples do not depend on the others in the
+        call; the chunks start at fixed steps, so what stops depends on its group only."""
         n, nh, N, L = len(X0), self.nh, self.N, self.CHUNK
         limit = np.full(n, N) if limit is None else np.minimum(np.asarray(limit, int), N)
         Y = np.full((n, nh + 1, N + 1), np.nan)
@@ -215,14 +226,25 @@ class RobustRollout:
         Z = np.vstack([X0.T, T0[None, :], S0, X0.T, self._th(TH, n), f0[nh + 1:]])
         D = np.concatenate([D, np.zeros((n, self.nd, 1))], axis=2)  # segment K: no disturbance
 
-        def hits(y, upto):  # decided within the samples up to index `upto` of y
+        def hits(y, upto):  # (decided, unsafe) within the samples up to index `upto` of y
             k = np.arange(y.shape[2])[None, :] <= upto[:, None]
-            hit = (y[:, :nh] < -tol).any(axis=1) | ~np.isfinite(y).all(axis=1)
-            if until_entry:
-                hit |= y[:, nh] > 0
-            return (hit & k).any(axis=1)
+            bad = ((y[:, :nh] < -tol).any(axis=1) | ~np.isfinite(y).all(axis=1)) & k
+            hit = bad | (y[:, nh] > 0) & k if until_entry else bad
+            return hit.any(axis=1), bad.any(axis=1)
 
-        active = np.flatnonzero(~hits(Y[:, :, :1], np.zeros(n, int)) & (limit > 0))
+        cut = np.zeros(n, bool)
+
+        def stop_groups(done, unsafe, idx):  # rollouts still running in a group that one just lost
+            if groups is None or not unsafe.any():
+                return done
+            lost = np.isin(groups[idx], groups[idx[unsafe]])
+            cut[idx[lost & ~done]] = True
+            return done | lost
+
+        groups = None if groups is None else np.asarray(groups)
+        h0, u0 = hits(Y[:, :, :1], np.zeros(n, int))
+        idx0 = np.arange(n)
+        active = idx0[~stop_groups(h0 | (limit <= 0), u0, idx0)]
         for c0 in range(0, N, L):
             if not active.size:
                 break
@@ -235,9 +257,9 @@ class RobustRollout:
             Y[active, :, c0 + 1: c0 + 1 + take] = Yc
             last[active] = c0 + take
             upto = limit[active] - c0 - 1  # index of the rollout's last sample within this chunk
-            done = hits(Yc, upto) | (upto <= take - 1)
-            active = active[~done]
-        return Y, last
+            hit, unsafe = hits(Yc, upto)
+            active = active[~stop_groups(hit | (upto <= take - 1), unsafe, active)]
+        return Y, last, cut
 
     def gradients(self, X0, T0, TH, D, rows, ks) -> np.ndarray:
         """d Y[row, k] / d D (n, nd, K) of n rollouts, one (row, k) sample each."""

@@ -246,3 +246,44 @@ def test_a_run_that_never_leaves_its_start_reaches_none_of_the_later_goals():
     assert runs.arrived[:, 0].tolist() == [True, False, True]  # stayed in Lie
     assert runs.arrived[:, 1].tolist() == [True, True, True]  # went to Walk and back
     assert (runs.safe & runs.arrived.all(axis=0)).tolist() == [False, True]
+
+
+def test_a_groups_rollouts_stop_once_one_of_them_is_unsafe(built):
+    """run_groups: the rollouts of a group that one member lost stop at the end of that chunk,
+    every sample computed equals the ungrouped run's, and a group no member lost runs as alone."""
+    cp, vg = built
+    prims, tol = cp.prims, cp.settings.h_tolerance
+    tr = vg.graph.edge("SwingUp", "Balance")
+    rr = type("Short", (RobustRollout,), {"CHUNK": 25})(prims["Balance"], plant(cp.spec, ["m"]), [0], 4, cp.settings,
+                                                          cp.settings.horizon)
+    x = prims["SwingUp"].x_star(float(tr.t_A[0]))
+    X0, T0 = np.tile(x, (4, 1)), np.full(4, float(tr.best_t_B[0]))
+    TH = np.array([[0.9], [1.2], [1.0], [0.9]])  # a heavy pendulum pushed hard leaves C; the rest enter E
+    D = np.array([[[-2.0] * 4], [[-2.0] * 4], [[0.0] * 4], [[0.0] * 4]])
+    Y0, last0 = rr.run(X0, T0, TH, D, tol=tol)
+    res = [judge(Y0[r, :-1], Y0[r, -1], int(last0[r]), tol) for r in range(4)]
+    assert [ok for ok, _, _ in res] == [True, False, True, True] and res[1][1] < -tol
+    assert last0[0] > last0[1]  # its partner runs on past the chunk that decided it
+    Y, last, cut = rr.run_groups(X0, T0, TH, D, tol=tol, groups=np.array([0, 0, 1, 1]))
+    assert cut.tolist() == [True, False, False, False]
+    assert last[0] == last[1] == last0[1] and last[2:].tolist() == last0[2:].tolist()
+    assert np.isnan(Y[0, :, last[0] + 1:]).all()
+    np.testing.assert_array_equal(Y[0, :, : last[0] + 1], Y0[0, :, : last[0] + 1])
+    np.testing.assert_array_equal(Y[1:], Y0[1:])
+
+
+def test_a_cells_scenarios_stop_once_one_is_unsafe_and_no_verdict_moves(built, rob, monkeypatch):
+    """With the stop, every cell's and own flow's verdict is the one every scenario run to its end
+    gives; a stopped cell's worst case is the worst of those decided, never worse than the full one."""
+    d = rob.to_dict()
+    full_run = RobustRollout.run_groups
+    monkeypatch.setattr(RobustRollout, "run_groups", lambda self, *a, groups=None, **k: full_run(self, *a, **k))
+    full = robust_stage(*built).to_dict()
+    assert sum(sum(e["cells"]["stopped"]) for e in d["edges"]) > 0
+    assert sum(sum(e["cells"]["stopped"]) for e in full["edges"]) == 0
+    for e, f in zip(d["edges"], full["edges"]):
+        assert (e["from"], e["to"], e["survives"]) == (f["from"], f["to"], f["survives"])
+        assert e["cells"]["robust_safe"] == f["cells"]["robust_safe"]
+        for m, mf, k in zip(e["cells"]["worst_margin"], f["cells"]["worst_margin"], e["cells"]["stopped"]):
+            assert mf <= m if k else mf == m
+    assert [n["robust_safe"] for n in d["nodes"]] == [n["robust_safe"] for n in full["nodes"]]

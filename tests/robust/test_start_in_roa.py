@@ -101,7 +101,8 @@ def test_boundary_of_E_A_breaks_an_edge_that_x_star_keeps_and_the_oracle_agrees(
     assert np.allclose(again[st["sample"]], x0, atol=1e-12)  # drawn again from its index
 
     # independently: the target's own oracle, nominal model, from that start at the t_B the plan uses
-    assert (np.array(swing.h(x0, t_B, 0, x0)).ravel() > 0).all()  # it starts inside C_B and leaves it later
+    # (the cell stops at its first unsafe scenario: this start may already lie outside C_B, as part of
+    # E_A's boundary does, or leave it later)
     ev = SafetyOracle(swing, cp.settings)(x0, t_B)
     assert ev.verdict != 1 and ev.status in ("unsafe", "inconclusive")
     assert SafetyOracle(swing, cp.settings)(hang.x_star(t_A), t_B).verdict == 1
