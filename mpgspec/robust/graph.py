@@ -27,6 +27,7 @@ import numpy as np
 from ..check.assertions import AssertionResult, evaluate_assertions
 from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
+from ..spec.uncertainty_refs import rigid_nominal
 from ..progress import of_project
 from ..oracle.executors import InProcess
 from ..oracle.joint import Map, run
@@ -173,7 +174,7 @@ def _setup(spec, sys, unc, settings) -> tuple[Scenarios, RolloutFactory]:
     force = dist.force if dist is not None else None
     K = dist.segments if dist is not None else 1
     if sys.is_rigid_body:
-        nominal_values = {"mass_scale": 1.0, "friction": float(sys.friction)}
+        nominal_values = rigid_nominal(sys)
         frame = force.frame if force is not None else sys.base_frames()[0]
         dist_names = [f"force_{a}" for a in "xyz"] if force is not None else []
         bound = np.asarray(force.bound, float) if force is not None else np.zeros(0)

@@ -204,6 +204,10 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     th, hold = z[2 * nx + 2:2 * nx + 2 + nth], z[2 * nx + 2 + nth:]
     k = th[names.index("mass_scale")] if "mass_scale" in names else 1.0
     mu = th[names.index("friction")] if "friction" in names else sys.friction
+    kt = th[names.index("torque_scale")] if "torque_scale" in names else None  # the torque delivered / commanded
+
+    def delivered(u):
+        return u if kt is None else kt * u
     F = d if nd else ca.DM.zeros(3)
     rows = no_slip_rows(prim)
     gated = prim.contacts.varies  # contact conditions bind while held
@@ -235,15 +239,15 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
         return ca.vertcat(*parts) if parts else ca.MX(0, 1)
 
     def f(xx, tt, ss):
-        return plant_fn(xx, control(xx, tt, ss, held)[1], k, F, tt)[0]
+        return plant_fn(xx, delivered(control(xx, tt, ss, held)[1]), k, F, tt)[0]
 
     ur0, u0 = control(x, t, s, held)
-    k1, lam0, c0 = plant_fn(x, u0, k, F, t)
+    k1, lam0, c0 = plant_fn(x, delivered(u0), k, F, t)
     te = dt - min(LEFT, dt / 2)  # the step's end seen from inside it, as switched_flow sees it
     x_end, _ = rk4(f, x, (t, s), dt, te, k1)
     ur1, u1 = control(x_end, t + te, s + te, held)
-    _, lam1, c1 = plant_fn(x_end, u1, k, F, t + te)
-    xn = jump(x_end, u0, t + dt, s + dt, k, F)
+    _, lam1, c1 = plant_fn(x_end, delivered(u1), k, F, t + te)
+    xn = jump(x_end, delivered(u0), t + dt, s + dt, k, F)
     act = active(prim, wrap(prim, t + dt / 2), x, s, xn, dt)
     hs = ca.fmin(h_of(x, t, s, ur0, lam0, c0), h_of(x_end, t + te, s + te, ur1, lam1, c1))
     if len(prim.h_names):

@@ -1,7 +1,8 @@
 """Spec model of model uncertainty and disturbances, for the robust graph (mpgspec.robust).
 
-Rigid-body systems take the parameters `mass_scale` (every link's mass and inertia times k) and
-`friction` (the feet's Coulomb coefficient), and a push `force` at a frame of the base."""
+Rigid-body systems take the parameters `mass_scale` (every link's mass and inertia times k),
+`friction` (the feet's Coulomb coefficient) and `torque_scale` (every actuator delivers k_tau times
+the torque its law commands), and a push `force` at a frame of the base."""
 from __future__ import annotations
 
 from typing import Annotated

@@ -13,8 +13,14 @@ def _hint(word: str, choices) -> str:
     return f"did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
 
 
-RIGID_PARAMETERS = ("mass_scale", "friction")
-"""Uncertain parameters of a rigid-body system: every link's mass and inertia times k, and mu."""
+RIGID_PARAMETERS = ("mass_scale", "friction", "torque_scale")
+"""Uncertain parameters of a rigid-body system: every link's mass and inertia times k, mu, and every
+actuator's torque times k_tau (the controllers command the nominal torque)."""
+
+
+def rigid_nominal(sys) -> dict[str, float]:
+    """The nominal value of each of RIGID_PARAMETERS for a rigid-body system (its spec or compiled)."""
+    return {"mass_scale": 1.0, "friction": float(sys.friction), "torque_scale": 1.0}
 
 
 def _err(errors, message, where, key, code, expected="", found="", hint=""):
@@ -39,7 +45,7 @@ def check_uncertainty(spec: ProjectSpec) -> None:
         raise SpecErrors(errors)
     rigid = kind == "rigid_body"
     if rigid:
-        params = {"mass_scale": 1.0, "friction": float(sys.friction)}
+        params = rigid_nominal(sys)
     else:
         params = dict(sys.parameters)
     for name, pr in unc.parameters.items():
