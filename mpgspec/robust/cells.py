@@ -113,43 +113,46 @@ def _worst_cases(rr, cells: list, sc: Scenarios, nsteps: np.ndarray, tol: float)
     is the worst of those decided."""
     S = sc.S
     D1 = sc.D1
-    worst: list = [None] * len(cells)
+    judged: dict[int, list] = {c: [] for c in range(len(cells))}
+    stopped = dict.fromkeys(range(len(cells)), 0)
     n_roll = 0
-    for batch in _cell_batches([len(c[4]) for c in cells], max(1, ROLLOUTS // S)):
-        chunk = [(c, s) for c in batch for s in cells[c][4]]
+    for chunk in _cell_batches([c[4] for c in cells], max(1, ROLLOUTS // S)):
         cs = np.repeat([c for c, _ in chunk], S)
         X0 = np.concatenate([s.x[None, :] + sc.ERR for _, s in chunk])
         T0 = np.array([cells[c][5] for c in cs])
         THb, D = np.tile(sc.TH, (len(chunk), 1)), np.tile(D1, (len(chunk), 1, 1))
         Y, last, cut = rr.run_groups(X0, T0, THb, D, nsteps[cs], tol, groups=cs)
         n_roll += len(X0)
-        judged: dict[int, list] = {c: [] for c in batch}
-        stopped = dict.fromkeys(batch, 0)
         for q, (c, s) in enumerate(chunk):
             for r in range(q * S, (q + 1) * S):
                 if cut[r]:
                     stopped[c] += 1
                 else:
-                    judged[c].append((judge(Y[r, :-1], Y[r, -1], int(min(nsteps[c], last[r])), tol), r, s))
-        for c in batch:  # the least (safe, margin), the first of equals
-            (safe, margin, entry), r, s = min(judged[c], key=lambda j: (j[0][0], j[0][1]))
-            worst[c] = {"margin": margin, "safe": safe, "entry": entry, "x0": X0[r], "t0": T0[r],
-                        "theta": THb[r], "D": D[r], "kind": sc.KIND[r % S], "err": sc.ERR[r % S], "start": s,
-                        "all_safe": not stopped[c] and all(j[0][0] for j in judged[c]), "Y": Y[r].copy(),
-                        "stopped": stopped[c]}
+                    res = judge(Y[r, :-1], Y[r, -1], int(min(nsteps[c], last[r])), tol)
+                    judged[c].append((res, {"x0": X0[r], "t0": T0[r], "theta": THb[r], "D": D[r], "kind": sc.KIND[r % S],
+                                            "err": sc.ERR[r % S], "start": s, "Y": Y[r].copy()}))
+    worst = []
+    for c in range(len(cells)):  # the least (safe, margin), the first of equals
+        (safe, margin, entry), w = min(judged[c], key=lambda j: (j[0][0], j[0][1]))
+        worst.append({"margin": margin, "safe": safe, "entry": entry, **w, "stopped": stopped[c],
+                      "all_safe": not stopped[c] and all(j[0][0] for j in judged[c])})
     return worst, n_roll
 
 
-def _cell_batches(pairs: list[int], per: int) -> list[list[int]]:
-    """Cells (by index, with their numbers of starts) in batches of about `per` (cell, start)
-    pairs, a cell never split: its rollouts stop together."""
-    batches, cur, size = [], [], 0
-    for c, k in enumerate(pairs):
-        if cur and size + k > per:
-            batches.append(cur)
-            cur, size = [], 0
-        cur.append(c)
-        size += k
+def _cell_batches(starts: list[list], per: int) -> list[list[tuple]]:
+    """The (cell, start) pairs in batches of at most `per`: a cell is never split with another (its
+    rollouts stop together); one with more than `per` starts is cut into pieces of `per` of its own.
+    So which rollouts run together, and stop together, depends on the cell alone."""
+    batches, cur = [], []
+    for c, ss in enumerate(starts):
+        pairs = [(c, s) for s in ss]
+        if len(cur) + len(pairs) > per:
+            batches += [cur] if cur else []
+            cur = []
+        if len(pairs) > per:
+            batches += [pairs[k:k + per] for k in range(0, len(pairs), per)]
+        else:
+            cur += pairs
     return batches + ([cur] if cur else [])
 
 

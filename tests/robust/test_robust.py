@@ -287,3 +287,18 @@ def test_a_cells_scenarios_stop_once_one_is_unsafe_and_no_verdict_moves(built, r
         for m, mf, k in zip(e["cells"]["worst_margin"], f["cells"]["worst_margin"], e["cells"]["stopped"]):
             assert mf <= m if k else mf == m
     assert [n["robust_safe"] for n in d["nodes"]] == [n["robust_safe"] for n in full["nodes"]]
+
+
+def test_cells_are_batched_whole_and_a_large_one_alone():
+    """_cell_batches: every (cell, start) pair once, at most `per` to a batch, a cell never shares a
+    batch once it is split, and how a cell is cut does not depend on the cells around it."""
+    from mpgspec.robust.cells import _cell_batches
+
+    starts = [list("ab"), list("cde"), list("fghijkl"), list("m")]
+    batches = _cell_batches(starts, 4)
+    assert [[c for c, _ in b] for b in batches] == [[0, 0], [1, 1, 1], [2] * 4, [2] * 3, [3]]
+    assert sorted(p for b in batches for p in b) == sorted((c, s) for c, ss in enumerate(starts) for s in ss)
+    alone = _cell_batches([list("fghijkl")], 4)
+    assert [b for b in batches if b[0][0] == 2] == [[(0 + 2, s) for _, s in b] for b in alone]
+    assert _cell_batches([list("ab"), list("cd"), list("e")], 4) == [[(0, "a"), (0, "b"), (1, "c"), (1, "d")],
+                                                                     [(2, "e")]]
