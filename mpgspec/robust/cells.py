@@ -107,14 +107,14 @@ def _cells(prims: dict, items: list, unc) -> list[tuple]:
 
 
 def _worst_cases(rr, cells: list, sc: Scenarios, nsteps: np.ndarray, tol: float) -> tuple[list[dict], int]:
-    """Per cell its worst scenario over every start (least (safe, margin)), and the rollouts run;
-    `all_safe` says whether every scenario from every start was safe. A cell is one decision: once
-    one of its rollouts is unsafe the others stop undecided (`stopped` counts them) and its worst case
-    is the worst of those decided."""
+    """Per cell its worst scenario over every start (least (safe, margin), the first of equals), and
+    the rollouts run; `all_safe` says whether every scenario from every start was safe. A cell is one
+    decision: once one of its rollouts is unsafe the others stop undecided (`stopped` counts them) and
+    its worst case is the worst of those decided."""
     S = sc.S
     D1 = sc.D1
-    judged: dict[int, list] = {c: [] for c in range(len(cells))}
-    stopped = dict.fromkeys(range(len(cells)), 0)
+    worst: list = [None] * len(cells)
+    all_safe, stopped = [True] * len(cells), [0] * len(cells)
     n_roll = 0
     for chunk in _cell_batches([c[4] for c in cells], max(1, ROLLOUTS // S)):
         cs = np.repeat([c for c, _ in chunk], S)
@@ -127,15 +127,16 @@ def _worst_cases(rr, cells: list, sc: Scenarios, nsteps: np.ndarray, tol: float)
             for r in range(q * S, (q + 1) * S):
                 if cut[r]:
                     stopped[c] += 1
-                else:
-                    res = judge(Y[r, :-1], Y[r, -1], int(min(nsteps[c], last[r])), tol)
-                    judged[c].append((res, {"x0": X0[r], "t0": T0[r], "theta": THb[r], "D": D[r], "kind": sc.KIND[r % S],
-                                            "err": sc.ERR[r % S], "start": s, "Y": Y[r].copy()}))
-    worst = []
-    for c in range(len(cells)):  # the least (safe, margin), the first of equals
-        (safe, margin, entry), w = min(judged[c], key=lambda j: (j[0][0], j[0][1]))
-        worst.append({"margin": margin, "safe": safe, "entry": entry, **w, "stopped": stopped[c],
-                      "all_safe": not stopped[c] and all(j[0][0] for j in judged[c])})
+                    continue
+                safe, margin, entry = judge(Y[r, :-1], Y[r, -1], int(min(nsteps[c], last[r])), tol)
+                all_safe[c] = all_safe[c] and safe
+                w = worst[c]
+                if w is None or (safe, margin) < (w["safe"], w["margin"]):  # only a new worst keeps its samples
+                    worst[c] = {"margin": margin, "safe": safe, "entry": entry, "x0": X0[r], "t0": T0[r],
+                                "theta": THb[r], "D": D[r], "kind": sc.KIND[r % S], "err": sc.ERR[r % S], "start": s,
+                                "Y": Y[r].copy()}
+    for c, w in enumerate(worst):
+        w.update(stopped=stopped[c], all_safe=all_safe[c] and not stopped[c])
     return worst, n_roll
 
 

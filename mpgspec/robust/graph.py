@@ -192,15 +192,10 @@ def _setup(spec, sys, unc, settings) -> tuple[Scenarios, RolloutFactory]:
     return Scenarios(names, TH, ERR, SG, KIND, bound, K, dist_names, list(sys.state_names)), rollout
 
 
-def check_targets(jobs: list[TargetJob], prims: dict, unc, executor=None, progress=None) -> tuple[list, list, int, float]:
-    """(edge records, own-flow records, rollouts run, seconds building rollouts) of the target jobs,
-    run through the executor's map (in this process when None); a job that raised gets the records
-    of failed_target, with its error as the evidence."""
-    return run(targets_stage(jobs, prims, unc), executor or InProcess(), progress)
-
-
 def targets_stage(jobs: list[TargetJob], prims: dict, unc):
-    """check_targets as a stage (mpgspec.oracle.joint): the targets one map, the costliest first."""
+    """(edge records, own-flow records, rollouts run, seconds building rollouts) of the target jobs as a
+    stage (mpgspec.oracle.joint): the targets one map, the costliest first; a job that raised gets the
+    records of failed_target, with its error as the evidence."""
     done = yield Map(run_target, jobs, "robust graph", prims, cost=[job_cost(job) for job in jobs])
     edges, nodes, n_roll, build_s = [], [], 0, 0.0
     for job, res in zip(jobs, done):

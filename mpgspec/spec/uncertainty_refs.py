@@ -13,13 +13,10 @@ def _hint(word: str, choices) -> str:
     return f"did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
 
 
-RIGID_PARAMETERS = ("mass_scale", "friction", "torque_scale")
-"""Uncertain parameters of a rigid-body system: every link's mass and inertia times k, mu, and every
-actuator's torque times k_tau (the controllers command the nominal torque)."""
-
-
 def rigid_nominal(sys) -> dict[str, float]:
-    """The nominal value of each of RIGID_PARAMETERS for a rigid-body system (its spec or compiled)."""
+    """The uncertain parameters of a rigid-body system (its spec or compiled) and their nominal values:
+    every link's mass and inertia times k, mu, and every actuator's torque times k_tau (the
+    controllers command the nominal torque)."""
     return {"mass_scale": 1.0, "friction": float(sys.friction), "torque_scale": 1.0}
 
 
