@@ -1,4 +1,4 @@
-"""Benchmark of a robust cell as one decision: its scenarios stop once one of them is unsafe.
+"""Benchmark of a robust cell as one decision: its scenarios run in waves and stop once one is unsafe.
 
     python bench/bench_robust_stop.py                      # Walk(in_place) and Stand, 3 rounds
     python bench/bench_robust_stop.py --targets 'Walk(fast)' --repeats 5
@@ -8,12 +8,15 @@ specs/a1's nominal graph is built first (its oracle calls from the result cache 
 there); then each target's robust check (mpgspec.robust.cells.run_target: its in-edges' cells
 under the 27 scenarios, the search, its own flow) runs in this process, in interleaved rounds:
 
-  stop   as verify runs it: a cell's (and an own flow's) rollouts stop once one of them is unsafe;
-  full   the baseline: every rollout runs until it is decided alone (entered E_B, left C_B, or
-         reached the horizon), as before the stop.
+  waves  as verify runs it: a cell's scenarios run in two waves (the box's corners without
+         disturbance, then the rest only if every one of those was safe), and a cell's (and an own
+         flow's) rollouts stop once one of them is unsafe;
+  stop   one wave: every scenario of a cell at once, stopping once one is unsafe;
+  full   the baseline: one wave, every rollout runs until it is decided alone (entered E_B, left
+         C_B, or reached the horizon).
 
-Rows: the median time of each and the median per-round ratio stop / full, the rollouts each ran to
-a decision, and whether every cell's and own flow's verdict is the same (it must be).
+Rows: the median time of each and the median per-round ratios, the rollouts started and stopped
+undecided, and whether every cell's and own flow's verdict is the same (it must be).
 Prints a table and replaces (or appends) the section "Robust cells stop once decided" of bench/RESULTS.md.
 """
 from __future__ import annotations
@@ -37,11 +40,13 @@ from mpgspec.pipeline.stages import build  # noqa: E402
 from mpgspec.robust.cells import run_target  # noqa: E402
 from mpgspec.robust.graph import target_jobs  # noqa: E402
 from mpgspec.robust.rollout import RobustRollout  # noqa: E402
+from mpgspec.robust.scenarios import Scenarios  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402
 
 SPEC = ROOT / "specs" / "a1" / "project.yaml"
 HEADING = "## Robust cells stop once decided"
 STOP = RobustRollout.run_groups
+WAVES = Scenarios.waves
 
 
 def _full(self, *a, groups=None, **k):
@@ -49,12 +54,22 @@ def _full(self, *a, groups=None, **k):
     return STOP(self, *a, **k)
 
 
-def check(prims, job, stop: bool):
-    RobustRollout.run_groups = STOP if stop else _full
+def _one_wave(self):
+    return [np.arange(self.S)]
+
+
+def check(prims, job, mode: str):
+    """run_target as `mode` runs it: 'waves' (verify's), 'stop' (one wave) or 'full'."""
+    RobustRollout.run_groups = _full if mode == "full" else STOP
+    Scenarios.waves = WAVES if mode == "waves" else _one_wave
     try:
         return run_target(prims, job)
     finally:
-        RobustRollout.run_groups = STOP
+        RobustRollout.run_groups, Scenarios.waves = STOP, WAVES
+
+
+def stopped(res) -> int:
+    return sum(sum(e["cells"]["stopped"]) for e in res[0]) + res[1]["stopped"]
 
 
 def verdicts(res) -> tuple:
@@ -75,22 +90,27 @@ def main(argv=None) -> int:
     _, jobs = target_jobs(spec, cp.prims, cp.settings, vg.graph)
     jobs = {j.target: j for j in jobs if j.target in args.targets}
     fns, facts = {}, {}
+    modes = ("waves", "stop", "full")
     for name, job in jobs.items():
-        a, b = check(cp.prims, job, True), check(cp.prims, job, False)  # builds the rollout once, and checks
-        stopped = sum(sum(e["cells"]["stopped"]) for e in a[0]) + a[1]["stopped"]
-        facts[name] = {"rollouts": a[2], "stopped": stopped, "same": verdicts(a) == verdicts(b)}
-        print(f"{name}: {a[2]} rollouts, {stopped} stopped; verdicts equal: {facts[name]['same']}", flush=True)
-        fns[f"stop {name}"] = lambda j=job: check(cp.prims, j, True)
-        fns[f"full {name}"] = lambda j=job: check(cp.prims, j, False)
+        res = {m: check(cp.prims, job, m) for m in modes}  # builds the rollout once, and checks
+        facts[name] = {m: (res[m][2], stopped(res[m])) for m in modes}
+        facts[name]["same"] = len({verdicts(r) for r in res.values()}) == 1
+        print(f"{name}: " + "; ".join(f"{m} {facts[name][m][0]} rollouts, {facts[name][m][1]} stopped" for m in modes)
+              + f"; verdicts equal: {facts[name]['same']}", flush=True)
+        for m in modes:
+            fns[f"{m} {name}"] = lambda j=job, m=m: check(cp.prims, j, m)
     times = rounds(fns, args.repeats)
     med = statistics.median
     rows = []
     for name, f in facts.items():
-        s, full = times[f"stop {name}"], times[f"full {name}"]
+        w, s, full = (times[f"{m} {name}"] for m in modes)
         rows += [(f"{name}: target check, every rollout to its own decision (full)", f"{med(full):.1f} s"),
-                 (f"{name}: target check, a cell's rollouts stop once one is unsafe", f"{med(s):.1f} s"),
-                 (f"**{name}: stop / full**", f"**{med_ratio(s, full):.2f}x**"),
-                 (f"{name}: rollouts stopped undecided / started", f"{f['stopped']} / {f['rollouts']}"),
+                 (f"{name}: one wave, a cell's rollouts stop once one is unsafe (stop)", f"{med(s):.1f} s"),
+                 (f"{name}: corners first, the rest only for a cell still safe (waves)", f"{med(w):.1f} s"),
+                 (f"**{name}: waves / stop**", f"**{med_ratio(w, s):.2f}x**"),
+                 (f"**{name}: waves / full**", f"**{med_ratio(w, full):.2f}x**"),
+                 (f"{name}: rollouts started / stopped undecided (waves)", f"{f['waves'][0]} / {f['waves'][1]}"),
+                 (f"{name}: rollouts started / stopped undecided (stop)", f"{f['stop'][0]} / {f['stop'][1]}"),
                  (f"{name}: every cell's and own flow's verdict equal", str(f["same"]))]
     table = markdown_table(rows)
     head = stamp(mach, "bench_robust_stop.py", False, args.repeats, time.perf_counter() - T0) + " specs/a1, one process."

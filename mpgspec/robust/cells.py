@@ -109,22 +109,27 @@ def _cells(prims: dict, items: list, unc) -> list[tuple]:
 def _worst_cases(rr, cells: list, sc: Scenarios, nsteps: np.ndarray, tol: float) -> tuple[list[dict], int]:
     """Per cell its worst scenario over every start (least (safe, margin), the first of equals), and
     the rollouts run; `all_safe` says whether every scenario from every start was safe. A cell is one
-    decision: once one of its rollouts is unsafe the others stop undecided (`stopped` counts them) and
-    its worst case is the worst of those decided."""
-    S = sc.S
-    D1 = sc.D1
+    decision: once one of its rollouts is unsafe the others stop undecided, and its scenarios run in
+    waves (sc.waves: the box's corners first), a wave only when every rollout of the ones before
+    was safe; `stopped` counts the rollouts so left undecided, and the worst case is the worst of
+    those decided."""
     worst: list = [None] * len(cells)
     all_safe, stopped = [True] * len(cells), [0] * len(cells)
     n_roll = 0
-    for chunk in _cell_batches([c[4] for c in cells], max(1, ROLLOUTS // S)):
-        cs = np.repeat([c for c, _ in chunk], S)
-        X0 = np.concatenate([s.x[None, :] + sc.ERR for _, s in chunk])
-        T0 = np.array([cells[c][5] for c in cs])
-        THb, D = np.tile(sc.TH, (len(chunk), 1)), np.tile(D1, (len(chunk), 1, 1))
-        Y, last, cut = rr.run_groups(X0, T0, THb, D, nsteps[cs], tol, groups=cs)
-        n_roll += len(X0)
-        for q, (c, s) in enumerate(chunk):
-            for r in range(q * S, (q + 1) * S):
+    for chunk in _cell_batches([c[4] for c in cells], max(1, ROLLOUTS // sc.S)):
+        for wave in sc.waves():
+            rows = [(c, s, k) for c, s in chunk if all_safe[c] for k in wave]
+            for c, _s in chunk:  # a cell already lost leaves this wave undecided
+                stopped[c] += 0 if all_safe[c] else len(wave)
+            if not rows:
+                continue
+            n_roll += len(rows)
+            cs = np.array([c for c, _, _ in rows])
+            X0 = np.array([s.x + sc.ERR[k] for _, s, k in rows])
+            T0 = np.array([cells[c][5] for c in cs])
+            TH, D = sc.TH[[k for *_, k in rows]], sc.D1[[k for *_, k in rows]]
+            Y, last, cut = rr.run_groups(X0, T0, TH, D, nsteps[cs], tol, groups=cs)
+            for r, (c, s, k) in enumerate(rows):
                 if cut[r]:
                     stopped[c] += 1
                     continue
@@ -133,7 +138,7 @@ def _worst_cases(rr, cells: list, sc: Scenarios, nsteps: np.ndarray, tol: float)
                 w = worst[c]
                 if w is None or (safe, margin) < (w["safe"], w["margin"]):  # only a new worst keeps its samples
                     worst[c] = {"margin": margin, "safe": safe, "entry": entry, "x0": X0[r], "t0": T0[r],
-                                "theta": THb[r], "D": D[r], "kind": sc.KIND[r % S], "err": sc.ERR[r % S], "start": s,
+                                "theta": TH[r], "D": D[r], "kind": sc.KIND[k], "err": sc.ERR[k], "start": s,
                                 "Y": Y[r].copy()}
     for c, w in enumerate(worst):
         w.update(stopped=stopped[c], all_safe=all_safe[c] and not stopped[c])

@@ -31,6 +31,15 @@ class Scenarios:
     def S(self) -> int:
         return len(self.TH)
 
+    def waves(self) -> list[np.ndarray]:
+        """The scenarios in the order a cell runs them: the box's corners without disturbance first
+        (where a cell's worst case lies most often), then the rest; a cell lost in the first wave
+        runs no second. A box without corners is one wave."""
+        first = np.array([k.startswith("corner") for k in self.KIND]) & (self.SG == 0)
+        if not first.any() or first.all():
+            return [np.arange(self.S)]
+        return [np.flatnonzero(first), np.flatnonzero(~first)]
+
     @property
     def D1(self) -> np.ndarray:
         """Each scenario's constant disturbance, (S, axes, K)."""

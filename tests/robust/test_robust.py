@@ -11,6 +11,7 @@ from mpgspec import api
 from mpgspec.errors import SpecErrors
 from mpgspec.robust.graph import robust_stage
 from mpgspec.robust.rollout import RobustRollout, judge, plant
+from mpgspec.robust.scenarios import Scenarios
 from mpgspec.spec.loader import load_project
 
 PEND = Path(__file__).resolve().parents[2] / "specs" / "pendulum"
@@ -273,11 +274,13 @@ def test_a_groups_rollouts_stop_once_one_of_them_is_unsafe(built):
 
 
 def test_a_cells_scenarios_stop_once_one_is_unsafe_and_no_verdict_moves(built, rob, monkeypatch):
-    """With the stop, every cell's and own flow's verdict is the one every scenario run to its end
-    gives; a stopped cell's worst case is the worst of those decided, never worse than the full one."""
+    """With the stop and the waves, every cell's and own flow's verdict is the one every scenario run
+    to its end gives; a stopped cell's worst case is the worst of those decided, never worse than the
+    full one."""
     d = rob.to_dict()
     full_run = RobustRollout.run_groups
     monkeypatch.setattr(RobustRollout, "run_groups", lambda self, *a, groups=None, **k: full_run(self, *a, **k))
+    monkeypatch.setattr(Scenarios, "waves", lambda self: [np.arange(self.S)])
     full = robust_stage(*built).to_dict()
     assert sum(sum(e["cells"]["stopped"]) for e in d["edges"]) > 0
     assert sum(sum(e["cells"]["stopped"]) for e in full["edges"]) == 0
@@ -287,6 +290,22 @@ def test_a_cells_scenarios_stop_once_one_is_unsafe_and_no_verdict_moves(built, r
         for m, mf, k in zip(e["cells"]["worst_margin"], f["cells"]["worst_margin"], e["cells"]["stopped"]):
             assert mf <= m if k else mf == m
     assert [n["robust_safe"] for n in d["nodes"]] == [n["robust_safe"] for n in full["nodes"]]
+
+
+def test_scenario_waves_run_the_undisturbed_corners_first():
+    """Scenarios.waves: the corners without disturbance, then every other scenario, each once; a box
+    without corners (or only corners) is one wave."""
+    kinds = ["nominal", "corner", "corner", "sample"]
+    kinds = kinds + [k + ", constant disturbance +bound" for k in kinds] + [k + ", constant disturbance -bound" for k in kinds]
+    sg = np.repeat([0.0, 1.0, -1.0], 4)
+    sc = Scenarios(["m"], np.zeros((12, 1)), np.zeros((12, 2)), sg, kinds, np.ones(1), 1, ["F"], ["x", "v"])
+    first, rest = sc.waves()
+    assert first.tolist() == [1, 2]
+    assert sorted(first.tolist() + rest.tolist()) == list(range(12))
+    alone = Scenarios([], np.zeros((3, 0)), np.zeros((3, 2)), np.array([0.0, 1, -1]),
+                      ["nominal", "nominal, constant disturbance +bound", "nominal, constant disturbance -bound"],
+                      np.ones(1), 1, ["F"], ["x", "v"])
+    assert [w.tolist() for w in alone.waves()] == [[0, 1, 2]]
 
 
 def test_cells_are_batched_whole_and_a_large_one_alone():
