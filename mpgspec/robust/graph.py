@@ -40,8 +40,8 @@ from .scenarios import Scenarios, scenarios, searched
 from .sequence import uncertain_stage
 
 LABEL = "empirical"
-RECORD = 9
-"""Layout of the memoised robust record (part of its key)."""
+RECORD = 10
+"""Layout of the memoised robust record and the rule that made it (part of its key): 10 runs a cell's scenarios in waves."""
 SAMPLED = "empirical (sampled)"
 NOTE = ("falsification, not proof: a robust edge withstood every scenario tried (parameter-box corners, seeded "
         "samples and an adversarial disturbance search); no certificate backs it")
