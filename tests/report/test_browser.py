@@ -3,6 +3,7 @@ exception, no horizontal overflow of the page, every section present. Skipped on
 Chromium binary is installed (MPGSPEC_CHROMIUM names one explicitly)."""
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 
@@ -261,3 +262,59 @@ def test_the_index_page_reads_at_both_widths(browser, tmp_path, width):
                      script="({w: innerWidth, sw: document.documentElement.scrollWidth, "
                             "rows: document.querySelectorAll('tr').length})")
     assert r["errors"] == [] and r["value"]["sw"] <= width and r["value"]["rows"] >= 3
+
+
+def _readme() -> str:
+    return " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())  # line breaks as spaces
+
+
+def _claim(pattern: str) -> tuple:
+    """The groups of the README's one match of `pattern` (whitespace-normalised); a claim that moved
+    or was reworded fails here, so that its number is checked again rather than silently dropped."""
+    found = re.findall(pattern, _readme())
+    assert len(found) == 1, f"the README should state this once: {pattern!r} (found {len(found)})"
+    return found[0] if isinstance(found[0], tuple) else (found[0],)
+
+
+def _as_written(value: float, text: str) -> bool:
+    """Whether `value` reads as `text` to the digits written (within half a unit of the last one)."""
+    digits = len(text.split(".")[1]) if "." in text else 0
+    return abs(value - float(text)) <= 0.5 * 10.0 ** -digits + 1e-9
+
+
+def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
+    """The README's A1 numbers are the report's: the edge table (every edge and class), the oracle
+    calls and edges, the radii of E it quotes and the naive run's first violations."""
+    _, report, _ = pages("a1")
+    assert report is not None
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    head = text.index("| from \\ to | Lie | Stand |")
+    lines = text[head:].split("\n\n")[0].splitlines()
+    cols = [c.strip() for c in lines[0].strip("|").split("|")][1:]
+    name = {c: (f"Walk({c})" if c in ("in_place", "slow", "medium", "fast") else c) for c in cols}
+    table = {}
+    for row in lines[2:]:
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        table.update({(cells[0], name[c]): int(v) for c, v in zip(cols, cells[1:]) if v})
+    assert table == {(e["from"], e["to"]): int(e["class"]) for e in report["edges"]}
+
+    calls, edges = _claim(r"builds the graph of the eight primitives \(([\d,]+) oracle calls, (\d+) edges")
+    assert int(calls.replace(",", "")) == report["timing"]["oracle_calls"]
+    assert int(edges) == len(report["edges"])
+    radius = {p["name"]: p["roa_radius"] for p in report["primitives"]}
+    walk_r = _claim(r"\(empirical: r = ([\d.]+) for every walk\)")[0]
+    assert all(_as_written(r, walk_r) for n, r in radius.items() if n.startswith("Walk("))
+    assert _as_written(radius["Lie"], _claim(r"outside E_Lie \(r = ([\d.]+)\)")[0])
+    assert _as_written(radius["Stand"], _claim(r"settles [\d.]+ \(in E's norm\) from its setpoint, outside E \(r = ([\d.]+)\)")[0])
+
+    firsts = {}
+    for v in report["sequence"]["runs"]["naive"]["violations"]:
+        firsts.setdefault(v["h"].split("[")[0], v)
+    t_tc, t_q, t_fc, f_fc = _claim(r"Walk\(fast\) hits `trunk_clearance` at ([\d.]+) s, then `q_min` of a calf at "
+                                   r"([\d.]+) s and the friction cone of FR_foot at ([\d.]+) s \((-[\d.]+) N\)")
+    assert _as_written(firsts["trunk_clearance"]["t"], t_tc) and _as_written(firsts["q_min"]["t"], t_q)
+    assert _as_written(firsts["friction_cone"]["t"], t_fc) and _as_written(firsts["friction_cone"]["value"], f_fc)
+    t_j, f_j = _claim(r"Walk\(fast\) -> Jump leaves the friction cone at ([\d.]+) s \((-[\d.]+) N\)")
+    jump = [v for v in report["sequence"]["runs"]["naive"]["violations"]
+            if v["primitive"] == "Jump" and v["h"].startswith("friction_cone")][0]
+    assert _as_written(jump["t"], t_j) and _as_written(jump["value"], f_j)
