@@ -91,6 +91,8 @@ class _Sim:
         self.root = 1 if robot.model.nbody > 1 else 0  # the robot's root link: its subtree is the robot
         self._vel = np.zeros(6)
         self.events: _Events | None = None
+        self._foot_of = {int(g): k for k, g in enumerate(robot.foot_geoms)}
+        self._trunk = {int(g) for g in robot.trunk_geoms}
 
     def set(self, x: np.ndarray) -> None:
         self.d.qpos[:], self.d.qvel[:] = self.robot.state.to_mujoco(x)
@@ -98,17 +100,21 @@ class _Sim:
 
     def touching(self) -> np.ndarray:
         """Whether each foot sphere touches the floor."""
-        d, r = self.d, self.robot
-        pairs = d.contact.geom[: d.ncon]
-        on = np.zeros(len(r.feet), bool)
-        for k, g in enumerate(r.foot_geoms):
-            on[k] = bool(np.any(((pairs[:, 0] == g) & (pairs[:, 1] == r.floor)) |
-                                ((pairs[:, 1] == g) & (pairs[:, 0] == r.floor))))
+        on = np.zeros(len(self.robot.feet), bool)
+        floor, foot_of = self.robot.floor, self._foot_of
+        for a, b in self._pairs():
+            k = foot_of.get(b if a == floor else a if b == floor else -1)
+            if k is not None:
+                on[k] = True
         return on
 
     def trunk_touching(self) -> bool:
-        pairs = self.d.contact.geom[: self.d.ncon]
-        return bool(np.isin(pairs, self.robot.trunk_geoms).any()) if len(self.robot.trunk_geoms) else False
+        return any(a in self._trunk or b in self._trunk for a, b in self._pairs())
+
+    def _pairs(self) -> list:
+        """The geom pairs in contact now (a few: read as a list, not as arrays)."""
+        n = self.d.ncon
+        return self.d.contact.geom[:n].tolist() if n else []
 
     def state(self) -> np.ndarray:
         extra = self.events.extra() if self.events is not None else None
