@@ -109,8 +109,8 @@ def main(argv=None) -> int:
                  (f"{name}: corners first, the rest only for a cell still safe (waves)", f"{med(w):.1f} s"),
                  (f"**{name}: waves / stop**", f"**{med_ratio(w, s):.2f}x**"),
                  (f"**{name}: waves / full**", f"**{med_ratio(w, full):.2f}x**"),
-                 (f"{name}: rollouts started / stopped undecided (waves)", f"{f['waves'][0]} / {f['waves'][1]}"),
-                 (f"{name}: rollouts started / stopped undecided (stop)", f"{f['stop'][0]} / {f['stop'][1]}"),
+                 (f"{name}: rollouts started / stopped undecided or never started (waves)", f"{f['waves'][0]} / {f['waves'][1]}"),
+                 (f"{name}: rollouts started / stopped undecided or never started (stop)", f"{f['stop'][0]} / {f['stop'][1]}"),
                  (f"{name}: every cell's and own flow's verdict equal", str(f["same"]))]
     table = markdown_table(rows)
     head = stamp(mach, "bench_robust_stop.py", False, args.repeats, time.perf_counter() - T0) + " specs/a1, one process."
