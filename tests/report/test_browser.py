@@ -318,3 +318,16 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
     jump = [v for v in report["sequence"]["runs"]["naive"]["violations"]
             if v["primitive"] == "Jump" and v["h"].startswith("friction_cone")][0]
     assert _as_written(jump["t"], t_j) and _as_written(jump["value"], f_j)
+
+    cc = report["crosscheck"]["runs"]
+    t_both, = _claim(r"The naive run agrees: unsafe in both at ([\d.]+) s on `trunk_clearance`")
+    first = cc["naive"]["mujoco"]["first_violation"]
+    assert cc["naive"]["agree"] and first["h"] == "trunk_clearance" and _as_written(first["t"], t_both)
+    gap, r_w = _claim(r"never comes closer to x\\\* than ([\d.]+) outside E \(r = ([\d.]+) in E's norm\)")
+    waiting = cc["graph"]["executor"]["waiting"]
+    assert waiting["primitive"] == "Walk(fast)" and _as_written(-waiting["best_roa_margin"], gap)
+    assert _as_written(radius["Walk(fast)"], r_w)
+    lag, = _claim(r"It is safe, reaches Stand and Walk\(fast\) within ([\d.]+) ms of mpgspec's run")
+    goals = {g["goal"]: g for g in cc["graph"]["executor"]["goals"] if g["t"] == 3.0}
+    assert cc["graph"]["executor"]["safe"] and abs(goals["Walk(fast)"]["arrived"] - goals["Walk(fast)"]["arrived_mpgspec"]) \
+        <= float(lag) / 1000 + 1e-9
