@@ -264,14 +264,10 @@ def test_the_index_page_reads_at_both_widths(browser, tmp_path, width):
     assert r["errors"] == [] and r["value"]["sw"] <= width and r["value"]["rows"] >= 3
 
 
-def _readme() -> str:
-    return " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())  # line breaks as spaces
-
-
-def _claim(pattern: str) -> tuple:
-    """The groups of the README's one match of `pattern` (whitespace-normalised); a claim that moved
-    or was reworded fails here, so that its number is checked again rather than silently dropped."""
-    found = re.findall(pattern, _readme())
+def _claim(pattern: str, readme: str) -> tuple:
+    """The groups of the one match of `pattern` in the README's text (whitespace-normalised); a claim
+    that moved or was reworded fails here, so that its number is checked again rather than silently dropped."""
+    found = re.findall(pattern, readme)
     assert len(found) == 1, f"the README should state this once: {pattern!r} (found {len(found)})"
     return found[0] if isinstance(found[0], tuple) else (found[0],)
 
@@ -288,6 +284,7 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
     _, report, _ = pages("a1")
     assert report is not None
     text = (ROOT / "README.md").read_text(encoding="utf-8")
+    readme = " ".join(text.split())  # line breaks as spaces
     head = text.index("| from \\ to | Lie | Stand |")
     lines = text[head:].split("\n\n")[0].splitlines()
     cols = [c.strip() for c in lines[0].strip("|").split("|")][1:]
@@ -298,36 +295,36 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
         table.update({(cells[0], name[c]): int(v) for c, v in zip(cols, cells[1:]) if v})
     assert table == {(e["from"], e["to"]): int(e["class"]) for e in report["edges"]}
 
-    calls, edges = _claim(r"builds the graph of the eight primitives \(([\d,]+) oracle calls, (\d+) edges")
+    calls, edges = _claim(r"builds the graph of the eight primitives \(([\d,]+) oracle calls, (\d+) edges", readme)
     assert int(calls.replace(",", "")) == report["timing"]["oracle_calls"]
     assert int(edges) == len(report["edges"])
     radius = {p["name"]: p["roa_radius"] for p in report["primitives"]}
-    walk_r = _claim(r"\(empirical: r = ([\d.]+) for every walk\)")[0]
+    walk_r = _claim(r"\(empirical: r = ([\d.]+) for every walk\)", readme)[0]
     assert all(_as_written(r, walk_r) for n, r in radius.items() if n.startswith("Walk("))
-    assert _as_written(radius["Lie"], _claim(r"outside E_Lie \(r = ([\d.]+)\)")[0])
-    assert _as_written(radius["Stand"], _claim(r"settles [\d.]+ \(in E's norm\) from its setpoint, outside E \(r = ([\d.]+)\)")[0])
+    assert _as_written(radius["Lie"], _claim(r"outside E_Lie \(r = ([\d.]+)\)", readme)[0])
+    assert _as_written(radius["Stand"], _claim(r"settles [\d.]+ \(in E's norm\) from its setpoint, outside E \(r = ([\d.]+)\)", readme)[0])
 
     firsts = {}
     for v in report["sequence"]["runs"]["naive"]["violations"]:
         firsts.setdefault(v["h"].split("[")[0], v)
     t_tc, t_q, t_fc, f_fc = _claim(r"Walk\(fast\) hits `trunk_clearance` at ([\d.]+) s, then `q_min` of a calf at "
-                                   r"([\d.]+) s and the friction cone of FR_foot at ([\d.]+) s \((-[\d.]+) N\)")
+                                   r"([\d.]+) s and the friction cone of FR_foot at ([\d.]+) s \((-[\d.]+) N\)", readme)
     assert _as_written(firsts["trunk_clearance"]["t"], t_tc) and _as_written(firsts["q_min"]["t"], t_q)
     assert _as_written(firsts["friction_cone"]["t"], t_fc) and _as_written(firsts["friction_cone"]["value"], f_fc)
-    t_j, f_j = _claim(r"Walk\(fast\) -> Jump leaves the friction cone at ([\d.]+) s \((-[\d.]+) N\)")
+    t_j, f_j = _claim(r"Walk\(fast\) -> Jump leaves the friction cone at ([\d.]+) s \((-[\d.]+) N\)", readme)
     jump = [v for v in report["sequence"]["runs"]["naive"]["violations"]
             if v["primitive"] == "Jump" and v["h"].startswith("friction_cone")][0]
     assert _as_written(jump["t"], t_j) and _as_written(jump["value"], f_j)
 
     cc = report["crosscheck"]["runs"]
-    t_both, = _claim(r"The naive run agrees: unsafe in both at ([\d.]+) s on `trunk_clearance`")
+    t_both, = _claim(r"The naive run agrees: unsafe in both at ([\d.]+) s on `trunk_clearance`", readme)
     first = cc["naive"]["mujoco"]["first_violation"]
     assert cc["naive"]["agree"] and first["h"] == "trunk_clearance" and _as_written(first["t"], t_both)
-    gap, r_w = _claim(r"never comes closer to x\\\* than ([\d.]+) outside E \(r = ([\d.]+) in E's norm\)")
+    gap, r_w = _claim(r"never comes closer to x\\\* than ([\d.]+) outside E \(r = ([\d.]+) in E's norm\)", readme)
     waiting = cc["graph"]["executor"]["waiting"]
     assert waiting["primitive"] == "Walk(fast)" and _as_written(-waiting["best_roa_margin"], gap)
     assert _as_written(radius["Walk(fast)"], r_w)
-    lag, = _claim(r"It is safe, reaches Stand and Walk\(fast\) within ([\d.]+) ms of mpgspec's run")
+    lag, = _claim(r"It is safe, reaches Stand and Walk\(fast\) within ([\d.]+) ms of mpgspec's run", readme)
     goals = {g["goal"]: g for g in cc["graph"]["executor"]["goals"] if g["t"] == 3.0}
     assert cc["graph"]["executor"]["safe"] and abs(goals["Walk(fast)"]["arrived"] - goals["Walk(fast)"]["arrived_mpgspec"]) \
         <= float(lag) / 1000 + 1e-9
