@@ -41,8 +41,8 @@ def check_target(prims: dict, B, items: list, unc, settings, sc: Scenarios, roll
     tol = settings.h_tolerance
     worst, n_roll = _worst_cases(rr, cells, sc, nsteps, tol)
     n_roll += _search(rr, worst, sc, nsteps, tol, unc.search if unc.disturbance is not None else 0)
-    node = _node_check(B, rr, _node_clocks(cells), sc.TH, sc.ERR, sc.D1, sc.KIND, settings, tol, sc.names,
-                       sc.dist_names)
+    decisive = any(w["all_safe"] for w in worst)  # else no edge into B depends on its own flow
+    node = _node_check(B, rr, _node_clocks(cells), sc, settings, tol, decisive)
     n_roll += node["scenarios"]
     per_edge = _cell_records(prims, B, cells, worst, node, sc, unc, settings)
     edges = [_edge_record(a, B.name, tr, per_edge.get(a, []), node, prims, unc) for a, tr in items]
@@ -215,7 +215,7 @@ def _cell_records(prims: dict, B, cells: list, worst: list[dict], node: dict, sc
         if unc.start_in_roa is not None:
             wc["start"] = _start_record(prims[a], float(tr.t_A[i]), w["start"], sc.state_names)
         per_edge.setdefault(a, []).append({"t_A": float(tr.t_A[i]), "t_B": tb,
-                                           "robust_safe": bool(w["all_safe"]) and node["robust_safe"],
+                                           "robust_safe": bool(w["all_safe"]) and bool(node["robust_safe"]),
                                            "worst_margin": w["margin"], "worst_case": wc, "_ij": (i, j),
                                            "starts_kept": len(starts) - 1, "stopped": w["stopped"]})
     return per_edge
@@ -263,12 +263,16 @@ def _binding(prim, Y: np.ndarray, margin: float, entry: int | None, tol: float, 
     return {"h": None, "roa_margin": float(margin)}
 
 
-def _node_check(B, rr, tbs: list[float], TH, ERR, D1, KIND, settings, tol, names, dist_names) -> dict:
+def _node_check(B, rr, tbs: list[float], sc: Scenarios, settings, tol, decisive: bool = True) -> dict:
     """Definition 1's premise under uncertainty: B's own flow from x_B*(t_B), at the clocks `tbs`
     its robust cells switch in at, stays in C_B for every scenario over the horizon (or the rest of a
     transient's domain), whether or not it settles in E_B. A robust cell checks the flow only up to
-    E_B; Theorem 1 also needs B to keep it safe from there."""
-    S = len(TH)
+    E_B; Theorem 1 also needs B to keep it safe from there. Not `decisive` (no cell into B withstood
+    its scenarios, so no edge depends on this check): the first wave only (sc.waves: the box's
+    corners), `robust_safe` None when it was safe (the rest, `not_run`, would decide nothing)."""
+    waves = sc.waves()
+    run = np.arange(sc.S) if decisive or len(waves) == 1 else waves[0]
+    TH, ERR, D1, S = sc.TH[run], sc.ERR[run], sc.D1[run], len(run)
     hz = B.horizons(settings.horizon, tbs)
     ns = np.repeat(np.minimum(np.ceil(hz / settings.dt - 1e-9).astype(int), rr.N), S)
     X0 = np.concatenate([B.x_star(tb)[None, :] + ERR for tb in tbs])
@@ -282,10 +286,13 @@ def _node_check(B, rr, tbs: list[float], TH, ERR, D1, KIND, settings, tol, names
     r = min(res, key=lambda q: (res[q][0], res[q][1]))
     ok, low, k, j = res[r]
     binding = {"h": B.h_names[j], "value": float(low), "t": float(k * settings.dt)} if j is not None else None
+    safe = not cut.any() and all(x[0] for x in res.values())
+    not_run = (sc.S - S) * len(tbs)
+    kind = sc.KIND[int(run[r % S])]
     return {"node": B.name, "t_B": [float(t) for t in tbs], "scenarios": len(X0), "stopped": int(cut.sum()),
-            "robust_safe": bool(not cut.any() and all(x[0] for x in res.values())), "worst_margin": float(low),
-            "worst_case": {"t_B": float(T0[r]), "kind": KIND[r % S], "parameters": dict(zip(names, map(float, TH[r % S]))),
-                           "disturbance": {u: [float(v) for v in D[r][i]] for i, u in enumerate(dist_names)},
+            "not_run": not_run, "robust_safe": (None if safe and not_run else bool(safe)), "worst_margin": float(low),
+            "worst_case": {"t_B": float(T0[r]), "kind": kind, "parameters": dict(zip(sc.names, map(float, TH[r % S]))),
+                           "disturbance": {u: [float(v) for v in D[r][i]] for i, u in enumerate(sc.dist_names)},
                            "binding": binding}}
 
 

@@ -40,8 +40,9 @@ from .scenarios import Scenarios, scenarios, searched
 from .sequence import uncertain_stage
 
 LABEL = "empirical"
-RECORD = 10
-"""Layout of the memoised robust record and the rule that made it (part of its key): 10 runs a cell's scenarios in waves."""
+RECORD = 11
+"""Layout of the memoised robust record and the rule that made it (part of its key): 10 runs a cell's scenarios in
+waves; 11 runs a target's own flow past its first wave only when an edge into it depends on it."""
 SAMPLED = "empirical (sampled)"
 NOTE = ("falsification, not proof: a robust edge withstood every scenario tried (parameter-box corners, seeded "
         "samples and an adversarial disturbance search); no certificate backs it")
@@ -102,7 +103,7 @@ def robust_steps(cp, vg, progress=None, memo=None, workers: int = 1):
     among = set(unc.nodes) if unc.nodes is not None else set(prims)
     edges, nodes, n_roll, build_s = yield from targets_stage(jobs, prims, unc)
     rg = _robust_graph(g, edges, unc.nodes)
-    scen = _scenario_record(unc, sc, among, edges, sys)
+    scen = _scenario_record(unc, sc, among, edges, nodes, sys)
     t1 = time.perf_counter()
     seq = None
     if spec.project.sequence is not None and unc.runs > 0:
@@ -228,7 +229,7 @@ def _by_target(g: MotionPrimitiveGraph, among: set) -> dict[str, list]:
     return by_target
 
 
-def _scenario_record(unc, sc: Scenarios, among: set, edges: list[dict], sys) -> dict:
+def _scenario_record(unc, sc: Scenarios, among: set, edges: list[dict], nodes: list[dict], sys) -> dict:
     """The report's account of the scenarios every cell ran."""
     dist, roa_starts = unc.disturbance, unc.start_in_roa
     force = dist.force if dist is not None else None
@@ -242,7 +243,8 @@ def _scenario_record(unc, sc: Scenarios, among: set, edges: list[dict], sys) -> 
                                              "duration": force.duration}},
             "nodes": sorted(among),
             "seed": unc.seed, "cells_per_edge": unc.cells, "start_in_roa": None,
-            "stopped": sum(sum(e["cells"]["stopped"]) for e in edges)}
+            "stopped": sum(sum(e["cells"]["stopped"]) for e in edges),
+            "own_flow_not_run": sum(n.get("not_run", 0) for n in nodes)}
     if roa_starts is not None:
         scen["start_in_roa"] = {"level": SAMPLED, "samples": roa_starts.samples, "seed": roa_starts.seed,
                                 "drawn": sum(e["start_in_roa"]["drawn"] for e in edges),

@@ -292,6 +292,30 @@ def test_a_cells_scenarios_stop_once_one_is_unsafe_and_no_verdict_moves(built, r
     assert [n["robust_safe"] for n in d["nodes"]] == [n["robust_safe"] for n in full["nodes"]]
 
 
+def test_an_own_flow_no_edge_depends_on_runs_its_first_wave_only(built):
+    """A target none of whose cells withstood its scenarios: no edge into it depends on its own flow,
+    so the flow runs the first wave (the box's undisturbed corners) only and is undecided when that
+    was safe; run in full it is safe, with a least h no larger than the first wave's."""
+    from mpgspec.robust.cells import _node_check
+    from mpgspec.robust.graph import target_jobs
+
+    cp, vg = built
+    sc, jobs = target_jobs(cp.spec, cp.prims, cp.settings, vg.graph)
+    job = next(j for j in jobs if j.target == "Balance")
+    B, tol = cp.prims["Balance"], cp.settings.h_tolerance
+    rr = job.rollout(B, cp.settings.horizon)
+    tbs = [0.0, 0.5]
+    first = sc.waves()[0]
+    assert 0 < len(first) < sc.S
+    part = _node_check(B, rr, tbs, sc, cp.settings, tol, decisive=False)
+    whole = _node_check(B, rr, tbs, sc, cp.settings, tol, decisive=True)
+    assert whole["robust_safe"] is True and whole["not_run"] == 0 and whole["scenarios"] == sc.S * len(tbs)
+    assert part["robust_safe"] is None and part["scenarios"] == len(first) * len(tbs)
+    assert part["not_run"] == (sc.S - len(first)) * len(tbs)
+    assert whole["worst_margin"] <= part["worst_margin"]
+    assert part["worst_case"]["kind"].startswith("corner") and "disturbance" not in part["worst_case"]["kind"]
+
+
 def test_scenario_waves_run_the_undisturbed_corners_first():
     """Scenarios.waves: the corners without disturbance, then every other scenario, each once; a box
     without corners (or only corners) is one wave."""
