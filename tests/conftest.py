@@ -26,25 +26,31 @@ from mpgspec.spec.loader import load_project
 SPECS = Path(__file__).parents[1] / "specs"
 A1 = SPECS / "a1" / "project.yaml"
 A1_GROUP = "a1"
-A1_MODULES = ("tests/gait/", "tests/rigidbody/", "tests/robust/test_robust_events.py", "tests/oracle/test_looplib.py")
-"""The modules (by path prefix) whose tests use a1_project: one unit of work, so the A1 is compiled
-once per run (a module here that does not use it only runs on the same worker)."""
+A1_MODULES = ("tests/gait/", "tests/rigidbody/", "tests/robust/test_robust_events.py", "tests/oracle/test_looplib.py",
+              "tests/report/test_browser.py")
+"""The modules (by path prefix) whose tests use a1_project, and the page check, whose A1 verify then
+finds the A1's loop, jump and robot libraries in the compile cache: one unit of work, so the A1 is
+compiled once per run (a module here that does not use a1_project only runs on the same worker)."""
 
 COST = {
-    "tests/test_anymal_project.py": 460, "tests/robust/test_robust_rigid.py": 420,
-    "tests/oracle/test_adversarial.py": 390, "tests/report/test_browser.py": 360,
-    "tests/oracle/test_executors.py": 210, "tests/gait/test_walk.py": 180, "tests/robust/test_robust_events.py": 150,
-    "tests/execute/test_crosscheck.py": 135, "tests/gait/test_walk_edges.py": 80, "tests/robust/test_robust.py": 60,
-    "tests/rigidbody/test_a1_project.py": 55, "tests/oracle/test_soundness.py": 45,
-    "tests/oracle/test_event_windows.py": 45, "tests/oracle/test_held_control.py": 42,
-    "tests/test_example_specs.py": 42, "tests/oracle/test_backend_plugin.py": 40,
-    "tests/rigidbody/test_contact_events.py": 40, "tests/graph/test_trace_memo.py": 37,
-    "tests/robust/test_robust_map.py": 36, "tests/gait/test_jump_land.py": 35, "tests/spec/test_fuzz.py": 31,
-    "tests/test_cli.py": 30, "tests/rigidbody/test_roa_contact_manifold.py": 22, "tests/test_cli_channels.py": 19,
-    "tests/verifiers/test_roa_level_set.py": 18, "tests/compile/test_task_pd.py": 13,
-    "tests/oracle/test_executor_map.py": 12, "tests/oracle/test_jit.py": 11,
+    "tests/report/test_browser.py": 185, "tests/oracle/test_executors.py": 121, "tests/test_anymal_project.py": 93,
+    "tests/oracle/test_adversarial.py": 87, "tests/gait/test_walk.py": 59, "tests/robust/test_robust_events.py": 56,
+    "tests/oracle/test_event_windows.py": 48, "tests/oracle/test_pieces.py": 46, "tests/test_cli.py": 45,
+    "tests/oracle/test_cache_integrity.py": 36, "tests/robust/test_robust_rigid.py": 33,
+    "tests/robust/test_robust_map.py": 33, "tests/oracle/test_looplib.py": 28, "tests/robust/test_robust.py": 27,
+    "tests/gait/test_jump_land.py": 26, "tests/validated/test_validated_adversarial.py": 26,
+    "tests/test_cli_channels.py": 24, "tests/verifiers/test_roa_level_set.py": 23,
+    "tests/execute/test_crosscheck.py": 22, "tests/gait/test_walk_edges.py": 21,
+    "tests/execute/test_crosscheck_variants.py": 20, "tests/rigidbody/test_robot_library.py": 19,
+    "tests/validated/test_validated_oracle.py": 19, "tests/oracle/test_executor_map.py": 16,
+    "tests/rigidbody/test_contact_events.py": 15, "tests/rigidbody/test_a1_project.py": 15,
+    "tests/oracle/test_soundness.py": 14, "tests/oracle/test_backend_plugin.py": 14,
+    "tests/rigidbody/test_robust_loop_parts.py": 14, "tests/report/test_report_fuzz.py": 13,
+    "tests/oracle/test_held_control.py": 12, "tests/graph/test_trace_memo.py": 12, "tests/spec/test_fuzz.py": 12,
+    "tests/verifiers/test_roa_executor.py": 10,
 }
-"""Seconds per module in a cold run of the whole suite on 2 shared cores (only their order matters)."""
+"""Seconds per module (pytest --durations) in a cold run of the whole suite on 2 cores, those of 10 s or more
+(only their order matters)."""
 
 
 @pytest.fixture(scope="session")
