@@ -90,3 +90,21 @@ def test_small_loops_have_no_library(a1_project):
     prims = compile_project(load_project(Path(__file__).parents[2] / "specs" / "pendulum" / "project.yaml"))
     assert not any(looplib.is_large(p) for p in prims.values())
     assert all(looplib.is_large(p) for p in a1_project[1].values())
+
+
+def test_walks_share_one_jump_library_and_the_plain_loop_is_loop_g_without_guards(a1_project):
+    """Primitives whose jumps are the same Function (the walks' scheduled touchdowns) link one jump
+    library; a guarded loop's plain `loop` is a call into `loop_g` and gives its first outputs."""
+    _spec, prims, _ = a1_project
+    a, b = (dataclasses.replace(prims[n], cache={}) for n in (NAME, "Walk(fast)"))
+    la, lb = looplib.attach(a), looplib.attach(b)
+    jumps = [[p for p in lib.paths if p.name.startswith("jump_")] for lib in (la, lb)]
+    assert len(jumps[0]) == 1 and jumps[0] == jumps[1]
+    assert set(la.paths) - set(jumps[0]) != set(lb.paths) - set(jumps[1])  # each its own loop
+    x, t = a.x_star(0.1), 0.1
+    x_sw = x + 1e-3
+    plain, guarded = la.get("loop")(x, t, 0.2, x_sw), la.get("loop_g")(x, t, 0.2, x_sw)
+    assert len(plain) == 4 and len(guarded) == 5
+    for u, v in zip(plain, guarded):
+        np.testing.assert_array_equal(np.asarray(u), np.asarray(v))
+    assert np.isfinite(np.asarray(plain[0])).all()
