@@ -14,6 +14,7 @@ that raises (or whose worker dies) is that item's Failed result, never the end o
 from __future__ import annotations
 
 import sys
+import weakref
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 
@@ -230,33 +231,47 @@ def _dask_run(task: Task, prims: dict, settings: OracleSettings) -> list[OracleE
 
 
 class DaskExecutor:
-    """Tasks on a Dask cluster: `address` of a running scheduler, or a LocalCluster of `workers` processes."""
+    """Tasks on a Dask cluster: `address` of a running scheduler, or a LocalCluster of `workers`
+    processes, started on first use and kept for every later map (a verify runs a map per stage:
+    starting a cluster for each cost seconds apiece) until close(), garbage collection or exit."""
 
     def __init__(self, address: str | None = None, workers: int = 2):
         self.address = address
         self.workers = max(1, int(workers))
+        self._local = None  # (client, finalizer) of the LocalCluster started here
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "_local": None}  # a copy elsewhere starts its own cluster
 
     @contextmanager
     def _client(self):
-        """A client of the scheduler at `address`, or of a LocalCluster started (and closed) here."""
+        """A client of the scheduler at `address` (opened and closed here), or of this executor's
+        LocalCluster (started on first use)."""
         try:
             from dask.distributed import Client, LocalCluster
         except ImportError as err:  # pragma: no cover - depends on the installation
             raise UsageError("Dask is not installed; install mpgspec with the 'dask' extra: "
                              "pip install 'mpgspec[dask]'") from err
-        cluster = None
         if self.address is None:
-            cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=40)
-        client = Client(cluster if cluster is not None else self.address)
+            if self._local is None:
+                cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=":0", silence_logs=40)  # any free port: clusters side by side
+                client = Client(cluster)
+                self._local = (client, weakref.finalize(self, _close_local, client, cluster))
+            yield self._local[0]
+            return
+        client = Client(self.address)
         try:
-            if cluster is None:
-                self.workers = max(1, len(client.scheduler_info().get("workers", {})))
+            self.workers = max(1, len(client.scheduler_info().get("workers", {})))
             yield client
         finally:
             client.close()
-            if cluster is not None:
-                cluster.close()
+
+    def close(self) -> None:
+        """Stop the LocalCluster this executor started, if any."""
+        if self._local is not None:
+            self._local[1]()
+            self._local = None
 
     def run(self, prims, settings, tasks, progress=None):
         with self._client() as client:
@@ -274,6 +289,11 @@ class DaskExecutor:
             futures = client.map(call, [fn] * len(items), items, shared=remote, pure=False)
             return _gather(futures, progress, f"{label} on Dask ({self.workers} workers)",
                            Failed.of)
+
+
+def _close_local(client, cluster) -> None:
+    client.close()
+    cluster.close()
 
 
 def _gather(futures: list, progress, what: str, on_error=None) -> list:

@@ -79,3 +79,20 @@ def test_a_dying_worker_is_its_items_failure_not_the_end_of_the_run():
 def test_make_executor_gives_a_map_on_every_kind():
     for ex in (make_executor(1), make_executor(2), make_executor(2, cache=True)):
         assert ex.map(_square_late_first, [3, 2]) == [9, 4]
+
+
+def test_a_local_dask_cluster_serves_every_map_until_closed():
+    """A DaskExecutor without an address starts its LocalCluster on the first map and keeps it for the
+    next ones (a verify maps once per stage); close() stops it, and a copy starts its own."""
+    pytest.importorskip("dask.distributed")
+    import pickle
+
+    ex = DaskExecutor(workers=2)
+    assert ex.map(_square_late_first, [1, 2]) == [1, 4]
+    client = ex._local[0]
+    assert ex.map(_scaled, [3], shared={"scale": 2}) == [6] and ex._local[0] is client
+    assert pickle.loads(pickle.dumps(ex))._local is None
+    ex.close()
+    assert ex._local is None and client.status == "closed"
+    assert ex.map(_square_late_first, [3]) == [9] and ex._local[0] is not client
+    ex.close()
