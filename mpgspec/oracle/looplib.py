@@ -146,18 +146,19 @@ for the plain loop of a guarded primitive and puts the jump in a library of its 
 
 
 def _units(prim: CompiledPrimitive, flags: tuple[str, ...]) -> list[tuple[str, tuple[str, ...]]]:
-    """(name, kinds) of the primitive's libraries: its loop's, its jump's (the same for the primitives of
-    a robot that share contact events or a schedule's touchdowns: compiled once for them) and, when
-    large (x*(t) looked up in a gait's table), its RoA margin's, apart because E is sized after the
-    loop is compiled. A name is
-    the hash of the Functions its parts are built from, the kinds, the flags, LAYOUT and CasADi's
-    version: a process that finds a library compiled loads it without building its parts."""
+    """(name, kinds) of the primitive's libraries: its loop's, its jump's (the same for the primitives
+    of a robot that share contact events or a schedule's touchdowns: compiled once for them) and,
+    when large (x*(t) looked up in a gait's table), its RoA margin's, apart because E is sized after
+    the loop is compiled. A name is the hash of the Functions its parts are built from, the kinds,
+    the flags, LAYOUT and CasADi's version: a process that finds a library compiled loads it without
+    building its parts."""
     key = ("looplib_units", flags)
     if key not in prim.cache:
         kinds = (("loop",) if prim.sampled is None else ("loop_u", "solve")) + (("loop_g",) if guarded(prim) else ())
         sources = [prim.loop_raw or prim.loop, prim.f_cl, prim.loop_u] + \
             ([prim.sampled.solve] if prim.sampled is not None else []) + ([prim.guards.fn] if guarded(prim) else [])
-        units = [(_name("loop", sources, kinds, flags), kinds), (_name("jump", [jump_of(prim)], ("jump",), flags), ("jump",))]
+        units = [(_name("loop", sources, kinds, flags), kinds),
+                 (_name("jump", [jump_of(prim)], ("jump",), flags), ("jump",))]
         if not prim.roa_margin.is_a("SXFunction") or prim.roa_margin.n_nodes() > INLINE_NODES:
             units.append((_name("margin", [prim.roa_margin], ("roa_margin",), flags), ("roa_margin",)))
         prim.cache[key] = units
