@@ -116,8 +116,9 @@ def _worst_cases(rr, cells: list, sc: Scenarios, nsteps: np.ndarray, tol: float)
     worst: list = [None] * len(cells)
     all_safe, stopped = [True] * len(cells), [0] * len(cells)
     n_roll = 0
+    waves, D1 = sc.waves(), sc.D1  # the same for every batch
     for chunk in _cell_batches([c[4] for c in cells], max(1, ROLLOUTS // sc.S)):
-        for wave in sc.waves():
+        for wave in waves:
             rows = [(c, s, k) for c, s in chunk if all_safe[c] for k in wave]
             for c, _s in chunk:  # a cell already lost leaves this wave undecided
                 stopped[c] += 0 if all_safe[c] else len(wave)
@@ -127,7 +128,8 @@ def _worst_cases(rr, cells: list, sc: Scenarios, nsteps: np.ndarray, tol: float)
             cs = np.array([c for c, _, _ in rows])
             X0 = np.array([s.x + sc.ERR[k] for _, s, k in rows])
             T0 = np.array([cells[c][5] for c in cs])
-            TH, D = sc.TH[[k for *_, k in rows]], sc.D1[[k for *_, k in rows]]
+            ks = [k for *_, k in rows]
+            TH, D = sc.TH[ks], D1[ks]
             Y, last, cut = rr.run_groups(X0, T0, TH, D, nsteps[cs], tol, groups=cs)
             for r, (c, s, k) in enumerate(rows):
                 if cut[r]:
@@ -270,8 +272,7 @@ def _node_check(B, rr, tbs: list[float], sc: Scenarios, settings, tol, decisive:
     E_B; Theorem 1 also needs B to keep it safe from there. Not `decisive` (no cell into B withstood
     its scenarios, so no edge depends on this check): the first wave only (sc.waves: the box's
     corners), `robust_safe` None when it was safe (the rest, `not_run`, would decide nothing)."""
-    waves = sc.waves()
-    run = np.arange(sc.S) if decisive or len(waves) == 1 else waves[0]
+    run = np.arange(sc.S) if decisive else sc.waves()[0]  # a box of one wave: every scenario
     TH, ERR, D1, S = sc.TH[run], sc.ERR[run], sc.D1[run], len(run)
     hz = B.horizons(settings.horizon, tbs)
     ns = np.repeat(np.minimum(np.ceil(hz / settings.dt - 1e-9).astype(int), rr.N), S)
