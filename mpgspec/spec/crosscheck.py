@@ -16,7 +16,7 @@ def whole_steps(rate: float, timestep: float) -> bool:
 
 
 class ContactModel(Strict):
-    """MuJoCo's soft contact between the feet and the floor (solref, elliptic cones)."""
+    """MuJoCo's soft contact between the feet and the floor (solref, friction cone, friction)."""
 
     timeconst: Number = Field(default=5e-4, gt=0, description="time constant of the contact's spring-damper "
                               "(MuJoCo solref[0]), seconds; at least twice the timestep")
@@ -25,6 +25,11 @@ class ContactModel(Strict):
                              "cones); above 1 the friction is stiffer")
     noslip_iterations: int = Field(default=0, ge=0, le=100, description="iterations of MuJoCo's NoSlip "
                                    "post-processing (0: off)")
+    cone: Literal["elliptic", "pyramidal"] = Field(default="elliptic", description="MuJoCo's friction cone: "
+                                                   "elliptic (the exact Coulomb cone) or pyramidal (its "
+                                                   "linearisation)")
+    friction: Number | None = Field(default=None, gt=0, le=5, description="the floor's friction coefficient "
+                                    "(default: the system's friction, the one mpgspec's safe set assumes)")
 
 
 class VariantContact(Strict):
@@ -34,6 +39,8 @@ class VariantContact(Strict):
     dampratio: Number | None = Field(default=None, gt=0, description="as contact.dampratio")
     impratio: Number | None = Field(default=None, ge=1, description="as contact.impratio")
     noslip_iterations: int | None = Field(default=None, ge=0, le=100, description="as contact.noslip_iterations")
+    cone: Literal["elliptic", "pyramidal"] | None = Field(default=None, description="as contact.cone")
+    friction: Number | None = Field(default=None, gt=0, le=5, description="as contact.friction")
 
 
 class Variant(Strict):
@@ -46,6 +53,8 @@ class Variant(Strict):
     timestep: Number | None = Field(default=None, gt=0, description="as timestep")
     integrator: Literal["euler", "implicitfast", "rk4"] | None = Field(default=None, description="as integrator")
     foot_radius: Number | None = Field(default=None, gt=0, description="as foot_radius")
+    armature: Number | None = Field(default=None, ge=0, le=10, description="as armature")
+    torque_scale: Number | None = Field(default=None, gt=0, le=2, description="as torque_scale")
     contact: VariantContact | None = Field(default=None, description="contact parameters it replaces")
 
 
@@ -65,6 +74,12 @@ class CrossCheck(Strict):
     settle: Number = Field(default=0.2, ge=0, le=10, description="seconds the start primitive's law holds the "
                            "start state (clock frozen) before t = 0, so the soft contacts carry the weight")
     contact: ContactModel = Field(default_factory=ContactModel, description="contact parameters")
+    armature: Number | None = Field(default=None, ge=0, le=10, description="rotor armature (the motors' "
+                                    "reflected inertia) of every actuated joint in the simulator, kg m^2; "
+                                    "default: the model's, as in mpgspec's dynamics (the URDF's, usually none)")
+    torque_scale: Number = Field(default=1.0, gt=0, le=2, description="the motors deliver this multiple of the "
+                                 "commanded torque, within the torque limit (an actuation error: 0.9 and 1.1 "
+                                 "for +-10 %)")
     runs: list[Literal["naive", "graph"]] = Field(default=["naive", "graph"], min_length=1,
                                                   description="which sequence runs to replay")
     require_agreement: bool = Field(default=False, description="fail the project when the simulator's safety "

@@ -1,4 +1,5 @@
-"""`crosscheck.variants`: the graph run replayed again under other contact models and control rates.
+"""`crosscheck.variants`: the graph run replayed again under other contact models, control rates and
+model errors (the floor's friction, the motors' torque).
 On the A1's Lie/Stand project, a variant that replaces a setting by its own value replays exactly
 as the cross-check's graph run does; at 200 Hz control the PD laws lose the A1 in MuJoCo (a front
 foot lifts in Lie), which is a disagreement: a warning, a JUnit case, and with `require_agreement`
@@ -9,6 +10,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
@@ -34,24 +36,32 @@ def _variants(tmp_path, variants, **more):
 
 @pytest.mark.slow
 def test_variants_replay_the_graph_run_under_other_settings(tmp_path):
-    path = _variants(tmp_path, [{"name": "same", "integrator": "implicitfast"}, {"control_rate": 200}],
+    path = _variants(tmp_path, [{"name": "same", "integrator": "implicitfast"}, {"control_rate": 200},
+                                {"name": "half torque", "torque_scale": 0.5}, {"name": "ice", "contact": {"friction": 0.05}}],
                      require_agreement=True)
     res = api.verify(path, out_dir=tmp_path / "reports")["a1"]
     report = json.loads(Path(res.files["json"]).read_text())
     validate_report(report)
     xc = report["crosscheck"]
-    graph, (same, slow) = xc["runs"]["graph"], xc["variants"]
+    graph, (same, slow, weak, ice) = xc["runs"]["graph"], xc["variants"]
     assert same["name"] == "same" and same["replaces"] == {"integrator": "implicitfast"}
     assert same["mujoco"] == graph["mujoco"] and same["agree"] == graph["agree"] is True
     assert slow["name"] == "control_rate 200" and slow["replaces"] == {"control_rate": 200.0}
     assert not slow["agree"] and not slow["mujoco"]["safe"] and slow["mujoco"]["violation_samples"] > 0
     assert not xc["agree"]
+    # model errors mpgspec does not hold: motors at half the torque asked let Stand sag onto a calf's
+    # joint limit as it takes the load; on ice (mu 0.05) the held feet slide
+    assert weak["replaces"] == {"torque_scale": 0.5} and not weak["agree"] and not weak["mujoco"]["safe"]
+    assert weak["mujoco"]["first_violation"]["h"].startswith("q_min[")
+    assert ice["replaces"] == {"friction": 0.05} and not ice["agree"] and not ice["mujoco"]["safe"]
+    assert ice["mujoco"]["first_violation"]["h"].startswith("foot_still[")
     # the disagreement is a finding everywhere findings are counted, and fails the run when required
     found = [d for d in disagreements(report) if d.get("variant") == "control_rate 200"]
     assert len(found) == 1 and "finds the graph run unsafe" in found[0]["text"]
     assert res.status == "fail"
     failed = [a for a in report["assertions"] if a["status"] == "fail"]
-    assert [a["description"] for a in failed] == ["graph run agrees in mujoco with control_rate 200"]
+    assert [a["description"] for a in failed] == [f"graph run agrees in mujoco with {n}"
+                                                  for n in ("control_rate 200", "half torque", "ice")]
     xml = junit([res])
     assert 'name="graph run with control_rate 200"' in xml and 'name="graph run with same"' in xml
     html = Path(res.files["html"]).read_text()
@@ -77,3 +87,39 @@ def test_variants_need_distinct_names(tmp_path):
                                           {"name": "soft", "contact": {"timeconst": 0.002}}]))
     (e,) = err.value.errors
     assert "variant names must differ; soft" in str(e) and e.key == "crosscheck.variants" and e.location.line > 0
+
+
+def test_a_variant_replaces_the_cone_the_floors_friction_and_the_armature(tmp_path):
+    """Models beyond the contact's stiffness: the friction cone, the floor's friction (the uncertainty
+    range's ends), a rotor armature mpgspec does not model and motors that deliver 90 % of the torque
+    asked each change the MuJoCo model they name, and only it."""
+    import mujoco
+
+    from mpgspec.api import compile_project
+    from mpgspec.execute.crosscheck.mjcf import build_robot
+
+    spec = load_project(_variants(tmp_path, [{"name": "pyramidal", "contact": {"cone": "pyramidal"}},
+                                             {"contact": {"friction": 0.4}}, {"armature": 0.01},
+                                             {"name": "weak motors", "torque_scale": 0.9}]))
+    base = settings_of(spec)
+    assert (base.cone, base.friction, base.armature) == ("elliptic", None, None)
+    (n1, pyr, c1), (n2, low, c2), (n3, bare, c3), (n4, weak, c4) = variants_of(spec, base)
+    assert (n1, c1, pyr.cone) == ("pyramidal", {"cone": "pyramidal"}, "pyramidal")
+    assert (n2, c2, low.friction) == ("friction 0.4", {"friction": 0.4}, 0.4)
+    assert (n3, c3, bare.armature) == ("armature 0.01", {"armature": 0.01}, 0.01)
+    assert (n4, c4, weak.torque_scale, base.torque_scale) == ("weak motors", {"torque_scale": 0.9}, 0.9, 1.0)
+    system = compile_project(spec)["Lie"].system
+    models = {k: build_robot(system, st) for k, st in (("base", base), ("pyr", pyr), ("low", low), ("bare", bare),
+                                                       ("weak", weak))}
+    m = {k: r.model for k, r in models.items()}
+    assert m["base"].opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and m["pyr"].opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
+    feet = models["low"].foot_geoms
+    assert np.allclose(m["base"].geom_friction[feet, 0], 0.6) and np.allclose(m["low"].geom_friction[feet, 0], 0.4)
+    assert m["low"].geom_friction[models["low"].floor, 0] == 0.4
+    legs = slice(6, None)  # the free joint's six dofs carry none; the A1's URDF gives its joints none
+    assert not m["base"].dof_armature.any() and np.allclose(m["bare"].dof_armature[legs], 0.01)
+    assert not m["bare"].dof_armature[:6].any()
+    assert np.allclose(m["base"].actuator_gainprm[:, 0], 1.0) and np.allclose(m["weak"].actuator_gainprm[:, 0], 0.9)
+    assert np.array_equal(m["weak"].actuator_forcerange, m["base"].actuator_forcerange)  # the limit still binds
+    for k in ("pyr", "low", "bare", "weak"):  # nothing else moved
+        assert m[k].nbody == m["base"].nbody and np.array_equal(m[k].body_mass, m["base"].body_mass)

@@ -7,7 +7,9 @@ floating base), one motor per actuated joint with the spec's torque limit, a sph
 welded to the root (the trunk), and a floor `foot_radius` below z = 0 with the spec's friction,
 so that a contact frame at z = 0, where mpgspec holds a foot, is a sphere touching the floor.
 Robot geoms collide with the floor only. Joint damping and friction are zero and the armature is
-pinocchio's, as in mpgspec's dynamics.
+pinocchio's, as in mpgspec's dynamics, unless the settings give another (a model error: the motors'
+reflected inertia); the friction cone (elliptic or pyramidal) and the floor's friction are the
+settings' (by default the spec's friction).
 """
 from __future__ import annotations
 
@@ -109,10 +111,11 @@ def build_robot(system, settings: CrossCheckSettings) -> MujocoRobot:
     opt.gravity = np.asarray(m.gravity, float)
     opt.integrator = {"euler": mujoco.mjtIntegrator.mjINT_EULER, "rk4": mujoco.mjtIntegrator.mjINT_RK4,
                       "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST}[settings.integrator]
-    opt.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    opt.cone = {"elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC, "pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL}[settings.cone]
     opt.impratio = settings.impratio
     opt.noslip_iterations = settings.noslip_iterations
-    mu, r = float(system.friction), settings.foot_radius
+    mu = float(system.friction if settings.friction is None else settings.friction)
+    r = settings.foot_radius
     contact = {"contype": ROBOT, "conaffinity": FLOOR, "condim": 3, "friction": [mu, 0.0, 0.0],
                "solref": [settings.timeconst, settings.dampratio], "mass": 0.0}
     spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1], pos=[0, 0, -r],
@@ -137,11 +140,11 @@ def build_robot(system, settings: CrossCheckSettings) -> MujocoRobot:
     for j in m.joint_names:
         sj = spec.joint(j)
         sj.damping = np.zeros_like(sj.damping) if np.ndim(sj.damping) else 0.0  # a polynomial since MuJoCo 4
-        sj.frictionloss, sj.armature = 0.0, float(armature[j])
+        sj.frictionloss, sj.armature = 0.0, float(armature[j] if settings.armature is None else settings.armature)
     for i, j in enumerate(m.joint_names):
         lo, hi = float(system.u_lo[i]), float(system.u_hi[i])
         act = spec.add_actuator(name=f"motor_{j}", target=j, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        act.gainprm[0] = 1.0
+        act.gainprm[0] = settings.torque_scale  # the torque delivered per torque commanded
         if np.isfinite(lo) and np.isfinite(hi):
             act.ctrlrange, act.ctrllimited = [lo, hi], mujoco.mjtLimited.mjLIMITED_TRUE
             act.forcerange, act.forcelimited = [lo, hi], mujoco.mjtLimited.mjLIMITED_TRUE

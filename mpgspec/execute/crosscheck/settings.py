@@ -8,7 +8,9 @@ from dataclasses import asdict, dataclass, replace
 class CrossCheckSettings:
     """How runs are replayed: MuJoCo steps of `timestep`, the control law evaluated `control_rate`
     times per second and held in between, the feet spheres of `foot_radius` on a floor that far
-    below z = 0, contacts of time constant `timeconst` (see mpgspec.spec.crosscheck)."""
+    below z = 0, contacts of time constant `timeconst` with a `cone` friction cone of coefficient `friction`
+(None: the system's), rotor armature `armature` on every actuated joint (None: the model's), motors
+that deliver `torque_scale` times the commanded torque (see mpgspec.spec.crosscheck)."""
 
     simulator: str = "mujoco"
     control_rate: float = 1000.0
@@ -20,6 +22,10 @@ class CrossCheckSettings:
     dampratio: float = 1.0
     impratio: float = 1.0
     noslip_iterations: int = 0
+    cone: str = "elliptic"
+    friction: float | None = None
+    armature: float | None = None
+    torque_scale: float = 1.0
     runs: tuple[str, ...] = ("naive", "graph")
     require_agreement: bool = False
 
@@ -30,7 +36,10 @@ class CrossCheckSettings:
         return cls(simulator=cfg.simulator, control_rate=float(cfg.control_rate), timestep=float(cfg.timestep),
                    integrator=cfg.integrator, foot_radius=float(cfg.foot_radius), settle=float(cfg.settle),
                    timeconst=float(c.timeconst), dampratio=float(c.dampratio), impratio=float(c.impratio),
-                   noslip_iterations=int(c.noslip_iterations), runs=tuple(cfg.runs),
+                   noslip_iterations=int(c.noslip_iterations), cone=c.cone,
+                   friction=None if c.friction is None else float(c.friction), armature=None if cfg.armature is None else float(cfg.armature),
+                   torque_scale=float(cfg.torque_scale),
+                   runs=tuple(cfg.runs),
                    require_agreement=bool(cfg.require_agreement))
 
     @property
@@ -90,10 +99,10 @@ def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSet
         where, key = spec.locate(("crosscheck", "variants", i)), f"crosscheck.variants[{i}]"
         if not changed:
             raise SpecError("a cross-check variant replaces none of the cross-check's settings", location=where,
-                            key=key, expected="control_rate, timestep, integrator, foot_radius or contact",
+                            key=key, expected="control_rate, timestep, integrator, foot_radius, armature, torque_scale or contact",
                             found="only a name" if v.name else "nothing", code="MPG103")
-        st = base.replace(runs=("graph",), **{k: (float(x) if k not in ("integrator", "noslip_iterations") else x)
-                                              for k, x in changed.items()})
+        st = base.replace(runs=("graph",), **{k: (x if k in ("integrator", "noslip_iterations", "cone")
+                                                  else float(x)) for k, x in changed.items()})
         if not whole_steps(st.control_rate, st.timestep):
             raise SpecError("a variant's control period must be a whole number of timesteps", location=where,
                             key=key, expected=f"1/control_rate a multiple of the timestep ({st.timestep:g} s)",
