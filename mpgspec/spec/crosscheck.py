@@ -9,6 +9,12 @@ from .base import Strict
 from .system import Number
 
 
+def whole_periods(latency: float, rate: float) -> bool:
+    """Whether a latency is a whole number (0 or more) of control periods 1/rate."""
+    n = latency * rate
+    return abs(n - round(n)) <= 1e-6 * max(1.0, n)
+
+
 def whole_steps(rate: float, timestep: float) -> bool:
     """Whether a control period 1/rate is a whole number (at least 1) of simulator steps."""
     n = 1.0 / (rate * timestep)
@@ -55,6 +61,8 @@ class Variant(Strict):
     foot_radius: Number | None = Field(default=None, gt=0, description="as foot_radius")
     armature: Number | None = Field(default=None, ge=0, le=10, description="as armature")
     torque_scale: Number | None = Field(default=None, gt=0, le=2, description="as torque_scale")
+    latency: Number | None = Field(default=None, ge=0, le=0.1, description="as latency")
+    velocity_noise: Number | None = Field(default=None, ge=0, le=10, description="as velocity_noise")
     contact: VariantContact | None = Field(default=None, description="contact parameters it replaces")
 
 
@@ -80,6 +88,12 @@ class CrossCheck(Strict):
     torque_scale: Number = Field(default=1.0, gt=0, le=2, description="the motors deliver this multiple of the "
                                  "commanded torque, within the torque limit (an actuation error: 0.9 and 1.1 "
                                  "for +-10 %)")
+    latency: Number = Field(default=0.0, ge=0, le=0.1, description="seconds between a state and the control "
+                            "update that reads it (a whole number of control periods): the law sees the "
+                            "state this old")
+    velocity_noise: Number = Field(default=0.0, ge=0, le=10, description="the base's linear velocity as the law "
+                                   "sees it is off by up to this much (m/s) in each axis, uniformly at random at "
+                                   "every control update (a seeded draw: a replay is repeatable)")
     runs: list[Literal["naive", "graph"]] = Field(default=["naive", "graph"], min_length=1,
                                                   description="which sequence runs to replay")
     require_agreement: bool = Field(default=False, description="fail the project when the simulator's safety "
@@ -94,6 +108,14 @@ class CrossCheck(Strict):
         rate = info.data.get("control_rate")
         if rate is not None and not whole_steps(rate, v):
             raise ValueError(f"1/control_rate ({1 / rate:g} s) must be a whole number of timesteps ({v:g} s)")
+        return v
+
+    @field_validator("latency")
+    @classmethod
+    def _whole_periods(cls, v, info: ValidationInfo):
+        rate = info.data.get("control_rate")
+        if rate is not None and not whole_periods(v, rate):
+            raise ValueError(f"latency ({v:g} s) must be a whole number of control periods ({1 / rate:g} s)")
         return v
 
     @field_validator("variants")

@@ -37,13 +37,14 @@ def _variants(tmp_path, variants, **more):
 @pytest.mark.slow
 def test_variants_replay_the_graph_run_under_other_settings(tmp_path):
     path = _variants(tmp_path, [{"name": "same", "integrator": "implicitfast"}, {"control_rate": 200},
-                                {"name": "half torque", "torque_scale": 0.5}, {"name": "ice", "contact": {"friction": 0.05}}],
+                                {"name": "half torque", "torque_scale": 0.5}, {"name": "ice", "contact": {"friction": 0.05}},
+                                {"name": "late", "latency": 0.01}, {"name": "noisy", "velocity_noise": 0.05}],
                      require_agreement=True)
     res = api.verify(path, out_dir=tmp_path / "reports")["a1"]
     report = json.loads(Path(res.files["json"]).read_text())
     validate_report(report)
     xc = report["crosscheck"]
-    graph, (same, slow, weak, ice) = xc["runs"]["graph"], xc["variants"]
+    graph, (same, slow, weak, ice, late, noisy) = xc["runs"]["graph"], xc["variants"]
     assert same["name"] == "same" and same["replaces"] == {"integrator": "implicitfast"}
     assert same["mujoco"] == graph["mujoco"] and same["agree"] == graph["agree"] is True
     assert slow["name"] == "control_rate 200" and slow["replaces"] == {"control_rate": 200.0}
@@ -55,13 +56,18 @@ def test_variants_replay_the_graph_run_under_other_settings(tmp_path):
     assert weak["mujoco"]["first_violation"]["h"].startswith("q_min[")
     assert ice["replaces"] == {"friction": 0.05} and not ice["agree"] and not ice["mujoco"]["safe"]
     assert ice["mujoco"]["first_violation"]["h"].startswith("foot_still[")
+    # sensing: the PD laws read the state 10 ms late and lose the robot in Lie (a foot's friction cone);
+    # the base's velocity seen off by up to 0.05 m/s is withstood, though the run differs from the graph run's
+    assert late["replaces"] == {"latency": 0.01} and not late["agree"]
+    assert late["mujoco"]["first_violation"]["primitive"] == "Lie"
+    assert noisy["agree"] and noisy["mujoco"]["safe"] and noisy["com_divergence"] != same["com_divergence"]
     # the disagreement is a finding everywhere findings are counted, and fails the run when required
     found = [d for d in disagreements(report) if d.get("variant") == "control_rate 200"]
     assert len(found) == 1 and "finds the graph run unsafe" in found[0]["text"]
     assert res.status == "fail"
     failed = [a for a in report["assertions"] if a["status"] == "fail"]
     assert [a["description"] for a in failed] == [f"graph run agrees in mujoco with {n}"
-                                                  for n in ("control_rate 200", "half torque", "ice")]
+                                                  for n in ("control_rate 200", "half torque", "ice", "late")]
     xml = junit([res])
     assert 'name="graph run with control_rate 200"' in xml and 'name="graph run with same"' in xml
     html = Path(res.files["html"]).read_text()
@@ -72,6 +78,7 @@ def test_variants_replay_the_graph_run_under_other_settings(tmp_path):
     ({"name": "nothing"}, "MPG103", "replaces none"),
     ({"control_rate": 3000}, "MPG104", "whole number"),
     ({"contact": {"timeconst": 0.00015}}, "MPG104", "softer"),
+    ({"latency": 0.0015}, "MPG104", "latency"),
 ])
 def test_a_variant_mujoco_cannot_run_is_a_located_spec_error(tmp_path, variant, code, word):
     spec = load_project(_variants(tmp_path, [{"control_rate": 500}, variant]))
@@ -123,3 +130,26 @@ def test_a_variant_replaces_the_cone_the_floors_friction_and_the_armature(tmp_pa
     assert np.array_equal(m["weak"].actuator_forcerange, m["base"].actuator_forcerange)  # the limit still binds
     for k in ("pyr", "low", "bare", "weak"):  # nothing else moved
         assert m[k].nbody == m["base"].nbody and np.array_equal(m[k].body_mass, m["base"].body_mass)
+
+
+def test_the_law_sees_the_state_late_and_the_base_velocity_noisy():
+    """_Sensing: the state `delay` control updates old (the oldest there is before that), the floating
+    base's linear velocity (v[0:3], after the nq configuration entries) off by at most the noise and
+    nothing else moved; the same draws in every replay; the simulator's own state when neither is set."""
+    from mpgspec.execute.crosscheck.replay import _Sensing
+    from mpgspec.execute.crosscheck.settings import CrossCheckSettings
+
+    class SM:  # the part of a StateMap _Sensing reads: the A1's 19 configuration entries, a floating base
+        nq, floating = 19, True
+
+    xs = [np.full(37, float(k)) for k in range(6)]
+    late = _Sensing(CrossCheckSettings(latency=0.002), SM)
+    assert [late(x)[0] for x in xs] == [0, 0, 0, 1, 2, 3]
+    noisy = [_Sensing(CrossCheckSettings(velocity_noise=0.05), SM) for _ in range(2)]
+    a, b = [np.array([s(x) for x in xs]) for s in noisy]
+    assert np.array_equal(a, b)
+    d = a - np.array(xs)
+    assert np.abs(d[:, 19:22]).max() <= 0.05 and np.abs(d[:, 19:22]).min() > 0
+    assert not np.delete(d, np.s_[19:22], axis=1).any()
+    plain = _Sensing(CrossCheckSettings(), SM)
+    assert not plain.on and plain(xs[2]) is xs[2]

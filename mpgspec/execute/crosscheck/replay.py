@@ -10,6 +10,8 @@ returns it. At a switch the primitive's clock starts at the switch's clock, s at
 MuJoCo's state.
 Before t = 0 the start primitive's law holds the start state x*(t0) for `settle` seconds with its
 clock frozen, so that the soft contacts carry the weight when the run begins.
+With sensing errors (settings `latency`, `velocity_noise`) the law, the switch state x_sw and the
+executor read the state as sensed, while h is judged on the simulator's own state.
 """
 from __future__ import annotations
 
@@ -167,13 +169,15 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
     out.switches.append({"t": 0.0, "from": None, "to": p.name, "clock": clock0, "roa_margin": None})
     contact = {"max_penetration": 0.0, "max_slip_speed": 0.0, "slip_at": None, "lift_off": None,
                "trunk_contact": None}
-    queue, sw = ([] if decide is not None else list(switches[1:])), (p, clock0, 0.0, x)
+    sense = _Sensing(settings, robot.state)
+    queue, sw = ([] if decide is not None else list(switches[1:])), (p, clock0, 0.0, sense(x))
     law = _Law(p, rate, out_failures)  # the run starts from the settled state: a fresh solve
     for k in range(n):
         t = T[k]
         x = sim.state()
-        if decide is not None and np.isfinite(x).all():
-            made = decide(float(t), x, sw[1] + (t - sw[2]))
+        seen = sense(x) if k else sw[3]
+        if decide is not None and np.isfinite(seen).all():
+            made = decide(float(t), seen, sw[1] + (t - sw[2]))
             if made is not None:
                 queue.append(made)
         while queue and queue[0]["t"] <= t + 0.5 / rate:
@@ -182,14 +186,14 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
             margin = float(np.asarray(left.roa_margin(x, c_left), float).ravel()[0])
             out.switches.append({"t": float(t), "from": left.name, "to": s["to"], "clock": float(s["clock"]),
                                  "roa_margin": margin if np.isfinite(margin) else None})
-            sw = (prims[s["to"]], float(s["clock"]), t, x.copy())
+            sw = (prims[s["to"]], float(s["clock"]), t, seen.copy())
             law = _Law(sw[0], rate, out_failures)
         p, c0, t_sw, x_sw = sw
         clock = c0 + (t - t_sw)
         if not np.isfinite(x).all():
             out.safe, out.failed = False, f"non-finite state at t = {t:.3f} s in {p.name}"
             break
-        hv, u = law(x, clock, t - t_sw, x_sw)
+        hv, u = law(x, clock, t - t_sw, x_sw, seen if sense.on else None)
         X[k], C[k] = x, sim.d.subtree_com[sim.root]
         out.active.append(p.name)
         act = hv < INACTIVE / 2
@@ -206,6 +210,31 @@ def replay(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], switches: li
     return out
 
 
+SENSING_SEED = 0
+"""Seed of the velocity-noise draws: a replay under noise is the same every time."""
+
+
+class _Sensing:
+    """The state the law sees: the simulator's `delay` control updates ago, its base's linear velocity
+    off by a uniform draw of up to `velocity_noise` per axis (the simulator's state itself when
+    neither is set)."""
+
+    def __init__(self, settings: CrossCheckSettings, sm):
+        self.on, self.delay, self.noise = settings.sensed, settings.delay, settings.velocity_noise
+        self.rng = np.random.default_rng(SENSING_SEED)
+        self.past: list[np.ndarray] = []
+        self.v_base = slice(sm.nq, sm.nq + 3) if sm.floating else slice(0, 0)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        if not self.on:
+            return x
+        self.past = (self.past + [x.copy()])[-(self.delay + 1):]
+        seen = self.past[0].copy()
+        if self.noise > 0:
+            seen[self.v_base] += self.rng.uniform(-self.noise, self.noise, seen[self.v_base].size)
+        return seen
+
+
 class _Law:
     """The active primitive's law from its switch-in: a sampled law solved every `every` control
     updates from the previous solve's warm start and held in between (through its loop library, as
@@ -219,15 +248,21 @@ class _Law:
             self.every = max(1, int(round(period * rate))) if period else 1
             self.w, self.u, self.k = np.zeros(p.sampled.nw), None, 0
 
-    def __call__(self, x, clock: float, s: float, x_sw) -> tuple[np.ndarray, np.ndarray]:
+    def __call__(self, x, clock: float, s: float, x_sw, seen=None) -> tuple[np.ndarray, np.ndarray]:
+        """(h at x, u): with `seen`, the law reads that state instead of x. A sampled law's h is then
+        the loop's at x under the input solved from `seen`; any other law's h is the loop's at x
+        (the input-dependent h, such as the friction cone, read the input the law asks at x)."""
         if self.held is None:
-            return _evaluate(self.p, x, clock, s, x_sw)
+            if seen is None:
+                return _evaluate(self.p, x, clock, s, x_sw)
+            return _evaluate(self.p, x, clock, s, x_sw)[0], _evaluate(self.p, seen, clock, s, x_sw)[1]
         solve, open_loop = self.held
         if self.k % self.every == 0:
+            at = x if seen is None else seen
             try:
-                self.u, self.w = solve(x, clock, s, x_sw, self.w)
+                self.u, self.w = solve(at, clock, s, x_sw, self.w)
             except RuntimeError:  # the compiled solver reports no convergence: its last iterate, from the VM
-                u, w = self.p.sampled.solve(x, clock, s, x_sw, self.w)
+                u, w = self.p.sampled.solve(at, clock, s, x_sw, self.w)
                 self.u, self.w = np.asarray(u, float).ravel(), np.asarray(w, float).ravel()
                 self.failures[self.p.name] = self.failures.get(self.p.name, 0) + 1
         self.k += 1

@@ -10,7 +10,8 @@ class CrossCheckSettings:
     times per second and held in between, the feet spheres of `foot_radius` on a floor that far
     below z = 0, contacts of time constant `timeconst` with a `cone` friction cone of coefficient `friction`
 (None: the system's), rotor armature `armature` on every actuated joint (None: the model's), motors
-that deliver `torque_scale` times the commanded torque (see mpgspec.spec.crosscheck)."""
+that deliver `torque_scale` times the commanded torque, a law that sees the state `latency` seconds
+late and the base's velocity off by up to `velocity_noise` (see mpgspec.spec.crosscheck)."""
 
     simulator: str = "mujoco"
     control_rate: float = 1000.0
@@ -26,6 +27,8 @@ that deliver `torque_scale` times the commanded torque (see mpgspec.spec.crossch
     friction: float | None = None
     armature: float | None = None
     torque_scale: float = 1.0
+    latency: float = 0.0
+    velocity_noise: float = 0.0
     runs: tuple[str, ...] = ("naive", "graph")
     require_agreement: bool = False
 
@@ -38,9 +41,20 @@ that deliver `torque_scale` times the commanded torque (see mpgspec.spec.crossch
                    timeconst=float(c.timeconst), dampratio=float(c.dampratio), impratio=float(c.impratio),
                    noslip_iterations=int(c.noslip_iterations), cone=c.cone,
                    friction=None if c.friction is None else float(c.friction), armature=None if cfg.armature is None else float(cfg.armature),
-                   torque_scale=float(cfg.torque_scale),
+                   torque_scale=float(cfg.torque_scale), latency=float(cfg.latency),
+                   velocity_noise=float(cfg.velocity_noise),
                    runs=tuple(cfg.runs),
                    require_agreement=bool(cfg.require_agreement))
+
+    @property
+    def delay(self) -> int:
+        """Control periods between a state and the update that reads it."""
+        return int(round(self.latency * self.control_rate))
+
+    @property
+    def sensed(self) -> bool:
+        """Whether the law sees another state than the simulator's (latency or velocity noise)."""
+        return self.delay > 0 or self.velocity_noise > 0
 
     @property
     def substeps(self) -> int:
@@ -89,7 +103,7 @@ def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSet
     SpecError for a variant MuJoCo cannot run (a control period that is not a whole number of steps,
     a contact softer than two steps can resolve, nothing replaced)."""
     from ...errors import SpecError
-    from ...spec.crosscheck import whole_steps
+    from ...spec.crosscheck import whole_periods, whole_steps
 
     cfg = spec.project.crosscheck
     out = []
@@ -99,7 +113,7 @@ def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSet
         where, key = spec.locate(("crosscheck", "variants", i)), f"crosscheck.variants[{i}]"
         if not changed:
             raise SpecError("a cross-check variant replaces none of the cross-check's settings", location=where,
-                            key=key, expected="control_rate, timestep, integrator, foot_radius, armature, torque_scale or contact",
+                            key=key, expected="control_rate, timestep, integrator, foot_radius, armature, torque_scale, latency, velocity_noise or contact",
                             found="only a name" if v.name else "nothing", code="MPG103")
         st = base.replace(runs=("graph",), **{k: (x if k in ("integrator", "noslip_iterations", "cone")
                                                   else float(x)) for k, x in changed.items()})
@@ -107,6 +121,10 @@ def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSet
             raise SpecError("a variant's control period must be a whole number of timesteps", location=where,
                             key=key, expected=f"1/control_rate a multiple of the timestep ({st.timestep:g} s)",
                             found=f"1/control_rate = {1 / st.control_rate:g} s", code="MPG104")
+        if not whole_periods(st.latency, st.control_rate):
+            raise SpecError("a variant's latency must be a whole number of control periods", location=where, key=key,
+                            expected=f"latency a multiple of 1/control_rate ({1 / st.control_rate:g} s)",
+                            found=f"latency = {st.latency:g} s", code="MPG104")
         if st.timeconst < 2 * st.timestep:
             raise SpecError("a variant's contact is softer than MuJoCo resolves", location=where, key=key,
                             expected=f"contact.timeconst at least twice the timestep ({2 * st.timestep:g} s)",
