@@ -151,3 +151,22 @@ def test_the_law_sees_the_state_late_and_the_base_velocity_noisy():
     assert not np.delete(d, np.s_[19:22], axis=1).any()
     plain = _Sensing(CrossCheckSettings(), SM)
     assert not plain.on and plain(xs[2]) is xs[2]
+
+
+@pytest.mark.parametrize("where", ["crosscheck", "variant"])
+def test_velocity_noise_on_a_fixed_base_is_a_located_spec_error(tmp_path, where):
+    """The noise acts on the floating base's velocity: on a fixed base it would silently do nothing."""
+    import yaml
+
+    noisy = {"velocity_noise": 0.05}
+    path = _variants(tmp_path, [noisy] if where == "variant" else [{"control_rate": 500}],
+                     **({} if where == "variant" else noisy))
+    doc = yaml.safe_load(path.read_text())
+    doc["system"]["floating_base"] = False
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    spec = load_project(path)
+    with pytest.raises(SpecError) as err:
+        variants_of(spec, settings_of(spec))
+    e = err.value
+    assert e.code == "MPG104" and "fixed" in str(e) and e.location.line > 0
+    assert e.key == ("crosscheck.variants[0]" if where == "variant" else "crosscheck.velocity_noise")

@@ -94,7 +94,18 @@ def settings_of(spec, force: bool = False) -> CrossCheckSettings | None:
         raise SpecError("the cross-check needs the mujoco package", location=where, key=key,
                         expected="mujoco installed", found="not installed", code="MPG121",
                         hint='pip install "mpgspec[xcheck]"')
-    return CrossCheckSettings.from_spec(cfg) if cfg is not None else CrossCheckSettings()
+    st = CrossCheckSettings.from_spec(cfg) if cfg is not None else CrossCheckSettings()
+    if st.velocity_noise > 0 and not getattr(spec.system, "floating_base", True):
+        raise _no_base(spec.locate(("crosscheck", "velocity_noise")), "crosscheck.velocity_noise", st.velocity_noise)
+    return st
+
+
+def _no_base(where, key: str, noise: float):
+    from ...errors import SpecError
+
+    return SpecError("velocity noise acts on the floating base's velocity, and the robot's base is fixed",
+                     location=where, key=key, expected="velocity_noise 0 (or a floating_base system)",
+                     found=f"velocity_noise {noise:g} with floating_base: false", code="MPG104")
 
 
 def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSettings, dict]]:
@@ -125,6 +136,8 @@ def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSet
             raise SpecError("a variant's latency must be a whole number of control periods", location=where, key=key,
                             expected=f"latency a multiple of 1/control_rate ({1 / st.control_rate:g} s)",
                             found=f"latency = {st.latency:g} s", code="MPG104")
+        if st.velocity_noise > 0 and not getattr(spec.system, "floating_base", True):
+            raise _no_base(where, key, st.velocity_noise)
         if st.timeconst < 2 * st.timestep:
             raise SpecError("a variant's contact is softer than MuJoCo resolves", location=where, key=key,
                             expected=f"contact.timeconst at least twice the timestep ({2 * st.timestep:g} s)",
