@@ -31,7 +31,8 @@ CODES: dict[str, tuple[str, str]] = {
     "MPG107": ("unknown uncertainty reference", "The `uncertainty` block names a parameter, input or state the "
                "system does not have."),
     "MPG108": ("a feature needs something the spec lacks", "E.g. a window anchored on a contact event needs "
-               "contact events in the state; the MuJoCo cross-check needs a `sequence`. The hint says what to add."),
+               "contact events in the state; the MuJoCo cross-check needs a `sequence`, its velocity noise a "
+               "floating base. The hint says what to add."),
     "MPG109": ("robot model not loadable", "The URDF of a rigid-body system cannot be read or built by Pinocchio "
                "(missing file, malformed XML, unsupported joint). The message gives the model's own error."),
     "MPG110": ("gait table missing or stale", "A trot primitive's gait table (written by `mpgspec gait`) is absent, "

@@ -168,5 +168,5 @@ def test_velocity_noise_on_a_fixed_base_is_a_located_spec_error(tmp_path, where)
     with pytest.raises(SpecError) as err:
         variants_of(spec, settings_of(spec))
     e = err.value
-    assert e.code == "MPG104" and "fixed" in str(e) and e.location.line > 0
+    assert e.code == "MPG108" and "fixed" in str(e) and e.location.line > 0
     assert e.key == ("crosscheck.variants[0]" if where == "variant" else "crosscheck.velocity_noise")

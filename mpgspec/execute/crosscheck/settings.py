@@ -105,7 +105,8 @@ def _no_base(where, key: str, noise: float):
 
     return SpecError("velocity noise acts on the floating base's velocity, and the robot's base is fixed",
                      location=where, key=key, expected="velocity_noise 0 (or a floating_base system)",
-                     found=f"velocity_noise {noise:g} with floating_base: false", code="MPG104")
+                     found=f"velocity_noise {noise:g} with floating_base: false", code="MPG108",
+                     hint="noise on a fixed-base robot's sensing is not modelled: leave velocity_noise out")
 
 
 def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSettings, dict]]:
