@@ -8,10 +8,11 @@ from dataclasses import asdict, dataclass, replace
 class CrossCheckSettings:
     """How runs are replayed: MuJoCo steps of `timestep`, the control law evaluated `control_rate`
     times per second and held in between, the feet spheres of `foot_radius` on a floor that far
-    below z = 0, contacts of time constant `timeconst` with a `cone` friction cone of coefficient `friction`
-(None: the system's), rotor armature `armature` on every actuated joint (None: the model's), motors
-that deliver `torque_scale` times the commanded torque, a law that sees the state `latency` seconds
-late and the base's velocity off by up to `velocity_noise` (see mpgspec.spec.crosscheck)."""
+    below z = 0, contacts of time constant `timeconst` with a `cone` friction cone of coefficient
+    `friction` (None: the system's), rotor armature `armature` on every actuated joint (None: the
+    model's), motors that deliver `torque_scale` times the commanded torque, a law that sees the state
+    `latency` seconds late and the base's velocity off by up to `velocity_noise` (see
+    mpgspec.spec.crosscheck)."""
 
     simulator: str = "mujoco"
     control_rate: float = 1000.0
@@ -40,10 +41,10 @@ late and the base's velocity off by up to `velocity_noise` (see mpgspec.spec.cro
                    integrator=cfg.integrator, foot_radius=float(cfg.foot_radius), settle=float(cfg.settle),
                    timeconst=float(c.timeconst), dampratio=float(c.dampratio), impratio=float(c.impratio),
                    noslip_iterations=int(c.noslip_iterations), cone=c.cone,
-                   friction=None if c.friction is None else float(c.friction), armature=None if cfg.armature is None else float(cfg.armature),
+                   friction=None if c.friction is None else float(c.friction),
+                   armature=None if cfg.armature is None else float(cfg.armature),
                    torque_scale=float(cfg.torque_scale), latency=float(cfg.latency),
-                   velocity_noise=float(cfg.velocity_noise),
-                   runs=tuple(cfg.runs),
+                   velocity_noise=float(cfg.velocity_noise), runs=tuple(cfg.runs),
                    require_agreement=bool(cfg.require_agreement))
 
     @property
@@ -125,7 +126,8 @@ def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSet
         where, key = spec.locate(("crosscheck", "variants", i)), f"crosscheck.variants[{i}]"
         if not changed:
             raise SpecError("a cross-check variant replaces none of the cross-check's settings", location=where,
-                            key=key, expected="control_rate, timestep, integrator, foot_radius, armature, torque_scale, latency, velocity_noise or contact",
+                            key=key, expected="control_rate, timestep, integrator, foot_radius, armature, "
+                            "torque_scale, latency, velocity_noise or contact",
                             found="only a name" if v.name else "nothing", code="MPG103")
         st = base.replace(runs=("graph",), **{k: (x if k in ("integrator", "noslip_iterations", "cone")
                                                   else float(x)) for k, x in changed.items()})
