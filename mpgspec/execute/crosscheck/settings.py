@@ -116,7 +116,9 @@ def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSet
     SpecError for a variant MuJoCo cannot run (a control period that is not a whole number of steps,
     a contact softer than two steps can resolve, nothing replaced)."""
     from ...errors import SpecError
-    from ...spec.crosscheck import whole_periods, whole_steps
+    from ...spec.crosscheck import Variant, whole_periods, whole_steps
+
+    replaceable = [k for k in Variant.model_fields if k not in ("name", "contact")]  # what a variant can name
 
     cfg = spec.project.crosscheck
     out = []
@@ -126,8 +128,7 @@ def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSet
         where, key = spec.locate(("crosscheck", "variants", i)), f"crosscheck.variants[{i}]"
         if not changed:
             raise SpecError("a cross-check variant replaces none of the cross-check's settings", location=where,
-                            key=key, expected="control_rate, timestep, integrator, foot_radius, armature, "
-                            "torque_scale, latency, velocity_noise or contact",
+                            key=key, expected=", ".join(replaceable) + " or contact",
                             found="only a name" if v.name else "nothing", code="MPG103")
         st = base.replace(runs=("graph",), **{k: (x if k in ("integrator", "noslip_iterations", "cone")
                                                   else float(x)) for k, x in changed.items()})
