@@ -9,7 +9,11 @@ oracle runs it. Each step is the oracle's (RK4 with the last stage just before t
 a law or contact mode switching there is not yet on, then the jump); a step's sample is the lesser of h at its two ends, with every safety function
 masked outside its window as the oracle masks it. The no-slip safety functions take the plant's
 ground forces and the scenario's friction coefficient mu; every other safety function is the
-compiled one.
+compiled one. With velocity errors (velocity_error_x/y/z) the law reads the floating base's
+linear velocity with the scenario's error added (in the state and in the switch state x_sw it
+holds), while the plant and h run on the true ones; a
+law that is not sampled gives its input-dependent h (torque requests) for the input it asks at the
+true state.
 """
 from __future__ import annotations
 
@@ -23,6 +27,7 @@ from ..compile.rigidbody.system import no_slip
 from ..oracle import looplib
 from ..oracle.flow import LEFT, active, jump_of, rk4, solve_or_keep, wrap
 from ..oracle.jit import cse, cse_sx
+from ..spec.uncertainty_refs import VELOCITY_ERRORS
 from .library import (GRADIENT_FLAGS, STEP_FLAGS, RobotLibrary, library_jump, library_plant, library_schedule_jump, robot_library,
                       step_library)
 from .rollout import RobustRollout
@@ -208,6 +213,9 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
 
     def delivered(u):
         return u if kt is None else kt * u
+
+    def seen(xx):  # the state the law reads
+        return sensed(sys, names, th, xx)
     F = d if nd else ca.DM.zeros(3)
     rows = no_slip_rows(prim)
     gated = prim.contacts.varies  # contact conditions bind while held
@@ -220,7 +228,7 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     def control(xx, tt, ss, u_held):  # (u_raw, u) at a state; a sampled law holds its input
         if law is not None:
             return u_held, saturate(u_held, sys.u_lo, sys.u_hi)
-        return ctrl(xx, tt, ss, xsw)
+        return ctrl(seen(xx), tt, ss, seen(xsw))
 
     def raw_h(xx, tt, ss, ur):  # the safety functions the plant does not replace, unwindowed
         return loop(xx, tt, ss, xsw, ur) if law is not None else loop(xx, tt, ss, xsw)
@@ -252,15 +260,27 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     hs = ca.fmin(h_of(x, t, s, ur0, lam0, c0), h_of(x_end, t + te, s + te, ur1, lam1, c1))
     if len(prim.h_names):
         hs = ca.if_else(act, hs, INACTIVE)
-    hold_next = _hold_next(law, hold, xn, t + dt, s + dt, xsw, held, dt) if law is not None else ca.MX(0, 1)
+    hold_next = _hold_next(law, hold, seen(xn), t + dt, s + dt, seen(xsw), held, dt) if law is not None else ca.MX(0, 1)
     out = ca.vertcat(hs, margin(xn, t + dt))
     step = cse(ca.Function("robust_rigid_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th, hold_next), out]))
     # the first sample: h at the step's start, windowed at that instant
     h_start = h_of(x, t, s, ur0, lam0, c0)
     if len(prim.h_names):
         h_start = ca.if_else(active(prim, wrap(prim, t), x, s, x, 0.0), h_start, INACTIVE)
-    first = _first(law, sys.nx, margin, ca.Function("o", [z, d], [h_start]), nth, nd)
+    first = _first(law, sys.nx, margin, ca.Function("o", [z, d], [h_start]), nth, nd,
+                   lambda x0, th0: sensed(sys, names, th0, x0))
     return step, first, nth, nd, nhold
+
+
+def sensed(sys, names: list[str], th, x):
+    """x as the laws read it: the floating base's linear velocity (the state's first three velocity
+    entries, in the base frame) plus the velocity errors among the parameters `names` (values th)."""
+    axes = [names.index(n) if n in names else None for n in VELOCITY_ERRORS]
+    if all(a is None for a in axes):
+        return x
+    nq = sys.model.pin_model.nq
+    err = ca.vertcat(*[th[a] if a is not None else 0 for a in axes])
+    return ca.vertcat(x[:nq], x[nq:nq + 3] + err, x[nq + 3:])
 
 
 def _hold_next(law, hold, xn, t, s, xsw, held, dt: float):
@@ -276,13 +296,14 @@ def _hold_next(law, hold, xn, t, s, xsw, held, dt: float):
     return ca.vertcat(c_next, u_next, w_next)
 
 
-def _first(law, nx: int, margin: ca.Function, h_start: ca.Function, nth: int, nd: int) -> ca.Function:
+def _first(law, nx: int, margin: ca.Function, h_start: ca.Function, nth: int, nd: int, seen) -> ca.Function:
     """(x0, t0, s0, theta0, d0) -> ([h; RoA margin] at switch-in, the hold's entries then), h_start
-    (z, d) -> h evaluated on z0 = [x0; t0; s0; x0; theta0; hold0]; a sampled law is solved at once."""
+    (z, d) -> h evaluated on z0 = [x0; t0; s0; x0; theta0; hold0]; a sampled law is solved at once,
+    from the state it reads, seen(x0, theta0), which is also the switch state it reads."""
     x0, t0, s0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("s0")
     th0, d0 = ca.MX.sym("th0", nth), ca.MX.sym("d0", nd)
     if law is not None:
-        u_0, w0 = law.solve(x0, t0, s0, x0, ca.DM.zeros(law.nw))
+        u_0, w0 = law.solve(seen(x0, th0), t0, s0, seen(x0, th0), ca.DM.zeros(law.nw))
         hold0 = ca.vertcat(0, u_0, w0)
     else:
         hold0 = ca.MX(0, 1)

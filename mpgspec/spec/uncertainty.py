@@ -1,8 +1,9 @@
 """Spec model of model uncertainty and disturbances, for the robust graph (mpgspec.robust).
 
 Rigid-body systems take the parameters `mass_scale` (every link's mass and inertia times k),
-`friction` (the feet's Coulomb coefficient) and `torque_scale` (every actuator delivers k_tau times
-the torque its law commands), and a push `force` at a frame of the base."""
+`friction` (the feet's Coulomb coefficient), `torque_scale` (every actuator delivers k_tau times
+the torque its law commands) and `velocity_error_x/y/z` (the laws read a floating base's linear
+velocity with this error added, m/s), and a push `force` at a frame of the base."""
 from __future__ import annotations
 
 from typing import Annotated

@@ -13,11 +13,17 @@ def _hint(word: str, choices) -> str:
     return f"did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
 
 
+VELOCITY_ERRORS = ("velocity_error_x", "velocity_error_y", "velocity_error_z")
+"""Sensing errors of a floating base: the laws read its linear velocity (in the base frame, as the
+state holds it) with this error (m/s) added on one axis; the plant and every h keep the true state."""
+
+
 def rigid_nominal(sys) -> dict[str, float]:
     """The uncertain parameters of a rigid-body system (its spec or compiled) and their nominal values:
-    every link's mass and inertia times k, mu, and every actuator's torque times k_tau (the
-    controllers command the nominal torque)."""
-    return {"mass_scale": 1.0, "friction": float(sys.friction), "torque_scale": 1.0}
+    every link's mass and inertia times k, mu, every actuator's torque times k_tau (the
+    controllers command the nominal torque) and the errors of the base velocity the laws read."""
+    return {"mass_scale": 1.0, "friction": float(sys.friction), "torque_scale": 1.0,
+            **{name: 0.0 for name in VELOCITY_ERRORS}}
 
 
 def _err(errors, message, where, key, code, expected="", found="", hint=""):
@@ -57,7 +63,11 @@ def check_uncertainty(spec: ProjectSpec) -> None:
         elif not pr.range[0] <= params[name] <= pr.range[1]:
             _err(errors, "the system's value lies outside the range", loc("parameters", name, "range"),
                  f"parameters.{name}.range", "MPG104", f"a range containing {params[name]:g}", f"{list(pr.range)}")
-        elif pr.range[0] <= 0 and rigid:
+        elif name in VELOCITY_ERRORS and rigid and not getattr(sys, "floating_base", True):
+            _err(errors, "a velocity error acts on the floating base's velocity, and the robot's base is fixed",
+                 loc("parameters", name), f"parameters.{name}", "MPG108", "a floating_base system",
+                 "floating_base: false", "sensing errors of a fixed-base robot are not modelled: leave it out")
+        elif pr.range[0] <= 0 and rigid and name not in VELOCITY_ERRORS:
             _err(errors, f"{name} must stay positive", loc("parameters", name, "range"),
                  f"parameters.{name}.range", "MPG104", "a range above 0", f"{list(pr.range)}")
     dist = unc.disturbance

@@ -162,6 +162,54 @@ def test_torque_scale_with_the_same_mass_scale_is_the_nominal_flow(built):
     assert np.abs(Y[2, others] - Y[0, others]).max() > 1e-3  # 8 % more torque alone moves the flow
 
 
+def test_a_velocity_error_moves_what_the_law_reads_not_the_plant(built):
+    """The law reads the base's linear velocity with the error added: Stand's ID-QP solved from x0
+    with the error is the one solved from the state shifted by it, while h and the RoA margin are
+    judged on the true state; an error of 0 is the rollout without the parameter."""
+    cp, _ = built
+    stand, lie = cp.prims["Stand"], cp.prims["Lie"]
+    names = ["mass_scale", "friction", "velocity_error_x", "velocity_error_y"]
+    rr = RigidRobustRollout(stand, names, "trunk", False, 1, cp.settings, 1.0)
+    plain = RigidRobustRollout(stand, names[:2], "trunk", False, 1, cp.settings, 1.0)
+    sys = stand.system
+    x0 = lie.x_star(0.0)
+    vx = sys.model.nq  # the base's linear velocity x in the state
+    shifted = x0.copy()
+    shifted[vx] += 0.05
+    shifted[vx + 1] -= 0.02
+
+    def first(r, x, th):
+        y = np.array(r.first(x, 0.0, 0.0, th, np.zeros((0, 1)))).ravel()
+        return y[: r.nh + 1], y[r.nh + 2: r.nh + 2 + sys.nu]  # [h; margin], the held input
+
+    (hm_err, u_err), (hm_shift, u_shift) = first(rr, x0, [1, 0.6, 0.05, -0.02]), first(rr, shifted, [1, 0.6, 0, 0])
+    hm_true, u_true = first(plain, x0, [1, 0.6])
+    np.testing.assert_allclose(u_err, u_shift, rtol=0, atol=1e-9)
+    assert np.abs(u_err - u_true).max() > 1e-3  # the ID-QP damps the velocity it reads
+    assert hm_err[-1] == pytest.approx(hm_true[-1], abs=1e-12) and hm_shift[-1] != pytest.approx(hm_true[-1], abs=1e-6)
+    X0 = np.tile(x0, (3, 1))
+    TH = np.array([[1, 0.6, 0, 0], [1, 0.6, 0.05, 0], [1, 0.6, -0.05, 0]])
+    Y, last = rr.run(X0, np.zeros(3), TH, np.zeros((3, 0, 1)), np.full(3, rr.N), tol=1e9, until_entry=False)
+    Y0, _ = plain.run(x0[None], np.zeros(1), np.array([[1, 0.6]]), np.zeros((1, 0, 1)), np.full(1, plain.N), tol=1e9,
+                      until_entry=False)
+    np.testing.assert_allclose(Y[0], Y0[0], rtol=0, atol=1e-9)
+    assert np.abs(Y[1] - Y[0]).max() > 1e-3 and np.abs(Y[2] - Y[0]).max() > 1e-3
+
+
+def test_a_velocity_error_on_a_fixed_base_is_a_located_spec_error(tmp_path):
+    import yaml
+
+    path = _a1_with(tmp_path, BASE + "  parameters: {velocity_error_x: {range: [-0.05, 0.05]}}\n")
+    doc = yaml.safe_load(path.read_text())
+    doc["system"]["floating_base"] = False
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    with pytest.raises(SpecErrors) as ei:
+        check_uncertainty(load_project(path))
+    err = ei.value.errors[0]
+    assert err.code == "MPG108" and err.key == "uncertainty.parameters.velocity_error_x" and err.location.line > 0
+    assert "fixed" in err.message
+
+
 def test_a1_robust_lie_stand_reports_worst_cases(built):
     rob = robust_stage(*built)
     d = rob.to_dict()
