@@ -51,7 +51,7 @@ UNRESOLVED = 1e30
 def _with_guards(prim: CompiledPrimitive) -> ca.Function:
     """(x, t, s, x_sw) -> (xdot, g): a small loop and its guards sharing their subexpressions."""
     a = prim.f_cl.sx_in()
-    return ca.Function("f_and_g", a, [prim.f_cl(*a), prim.guards.fn(*a)])
+    return cse(ca.Function("f_and_g", a, [prim.f_cl(*a), prim.guards.fn(*a)]))
 
 
 def inline(f, *args) -> list:

@@ -15,6 +15,7 @@ import pytest
 from mpgspec import api
 from mpgspec.oracle.cache import CachedExecutor, ResultStore
 from mpgspec.oracle.executors import DaskExecutor, InProcess, ProcessPool, split
+from mpgspec.spec.loader import load_project
 
 ROOT = Path(__file__).parents[2]
 
@@ -55,10 +56,36 @@ def test_process_pool_gives_the_same_report(pendulum_serial):
     assert report_text(res) == pendulum_serial
 
 
-def test_dask_local_cluster_gives_the_same_report(pendulum_serial):
+def test_dask_local_cluster_gives_the_same_report(pendulum_serial, tmp_path, monkeypatch):
+    """...and its workers, which receive the closed loops pickled, generate the same C code as this
+    process did for the serial run: every library they ask for is found compiled."""
     pytest.importorskip("dask.distributed")
+    log = tmp_path / "jit.log"
+    monkeypatch.setenv("MPGSPEC_JIT_LOG", str(log))
     res = api.verify([ROOT / "specs" / "pendulum"], out_dir=None, executor=DaskExecutor(workers=2))
     assert report_text(res) == pendulum_serial
+    asked = [json.loads(line) for line in log.read_text().splitlines()]
+    assert asked and [r["name"] for r in asked if not r["hit"]] == []
+
+
+def test_a_closed_loop_shipped_to_a_worker_generates_the_same_code():
+    """A pickled closed loop (what a Dask worker receives) builds the oracle's chunks from the same
+    C code as the original, so a worker finds them in the compile cache instead of compiling again."""
+    import pickle
+
+    import casadi as ca
+
+    from mpgspec.oracle.judged import _judged_function
+
+    prims = api.compile_project(load_project(ROOT / "specs" / "pendulum" / "project.yaml"))
+
+    def code(prim) -> str:
+        cg = ca.CodeGenerator("chunk.c", {"with_header": False})
+        cg.add(_judged_function(prim, 0.01, 8, 64, 1e-3, 0.0, True)[0])
+        return cg.dump()
+
+    for name, prim in prims.items():
+        assert code(pickle.loads(pickle.dumps(prim))) == code(prim), name
 
 
 def test_cache_replays_every_call_and_reruns_only_the_edited_primitive(tmp_path, pendulum_serial):
