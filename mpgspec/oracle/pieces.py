@@ -246,15 +246,17 @@ class _Parts:
     def _clock_bisect(self, t, s, h, last, r, half):
         """The upper end of the bracket of the first clock guard crossing in (0, last] after
         CLOCK_BISECTIONS bisections (in the half of the step where it lies)."""
-        if "bisect" not in self._fns:
-            T, S, H, L, HF = (ca.SX.sym(n) for n in ("t", "s", "h", "last", "half"))
-            R = ca.SX.sym("r", r.shape[0])
-            lo, hi = ca.if_else(HF, 0, H / 2), ca.if_else(HF, H / 2, L)
-            for _ in range(CLOCK_BISECTIONS):
-                mid = (lo + hi) / 2
-                c = _crossed(R, [self.Gc(T + mid, S + mid)])
-                lo, hi = ca.if_else(c, lo, mid), ca.if_else(c, mid, hi)
-            self._fns["bisect"] = ca.Function("clock_bisect", [T, S, H, L, R, HF], [hi])
+        if "bisect" not in self._fns:  # one bisection, folded: a loop in C, not CLOCK_BISECTIONS copies
+            b, P = ca.SX.sym("b", 2), ca.SX.sym("p", 2 + r.shape[0])  # [lo, hi]; [t, s, r]
+            lo, hi = b[0], b[1]
+            mid = (lo + hi) / 2
+            c = _crossed(P[2:], [self.Gc(P[0] + mid, P[1] + mid)])
+            one = ca.Function("clock_bisection", [b, P], [ca.vertcat(ca.if_else(c, lo, mid), ca.if_else(c, mid, hi))])
+            T, S, H, L, HF = (ca.MX.sym(n) for n in ("t", "s", "h", "last", "half"))
+            R = ca.MX.sym("r", r.shape[0])
+            b0 = ca.vertcat(ca.if_else(HF, 0, H / 2), ca.if_else(HF, H / 2, L))
+            bn = one.fold(CLOCK_BISECTIONS)(b0, ca.repmat(ca.vertcat(T, S, R), 1, CLOCK_BISECTIONS))
+            self._fns["bisect"] = ca.Function("clock_bisect", [T, S, H, L, R, HF], [bn[1]])
         return self._fns["bisect"](t, s, h, last, r, half)
 
     def clock_start(self, t, s, h):
