@@ -68,8 +68,11 @@ def run_side(tree: Path, paths: list[str], jobs: int | None, work: Path) -> dict
         proc = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True)
         side[f"{which}_s"] = time.perf_counter() - t
         side[f"{which}_exit"] = proc.returncode
-        if proc.returncode not in (0, 1):
-            print(proc.stderr[-2000:], file=sys.stderr)
+        (work / f"{which}.log").write_text(proc.stdout + proc.stderr)  # kept with --keep
+        if proc.returncode != 0:  # 1: a failed check (the lines naming it), else a crash
+            lines = (proc.stdout + proc.stderr).splitlines()
+            print("\n".join([ln for ln in lines if "FAIL" in ln or "error" in ln.lower()][:20] or lines[-20:]),
+                  file=sys.stderr)
         if which == "cold":
             side["phases"] = _phases(out)
             side["gcc"] = _gcc(log)
@@ -139,7 +142,8 @@ def main(argv=None) -> int:
     ap.add_argument("paths", nargs="*", default=["specs/"])
     ap.add_argument("--baseline", metavar="REF", help="a commit to run first, for ratios")
     ap.add_argument("-j", "--jobs", type=int, help="passed to mpgspec verify")
-    ap.add_argument("--keep", metavar="DIR", help="copy each side's reports to DIR/<side>/ (to compare verdicts)")
+    ap.add_argument("--keep", metavar="DIR", help="copy each side's reports and its runs' output (cold.log, warm.log) "
+                                                  "to DIR/<side>/ (to compare verdicts)")
     ap.add_argument("--no-write", action="store_true", help="do not touch bench/RESULTS.md")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
@@ -157,6 +161,8 @@ def main(argv=None) -> int:
                 for side, sub in (("baseline", "b"), ("now", "a")):
                     if (tmp / sub / "reports").exists():
                         shutil.copytree(tmp / sub / "reports", Path(args.keep) / side, dirs_exist_ok=True)
+                    for log in (tmp / sub).glob("*.log"):  # the cold and warm runs' output
+                        shutil.copy(log, Path(args.keep) / side / log.name)
         finally:
             if args.baseline:
                 subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tmp / "baseline")],
