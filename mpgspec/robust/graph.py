@@ -27,7 +27,7 @@ import numpy as np
 from ..check.assertions import AssertionResult, evaluate_assertions
 from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
-from ..spec.uncertainty_refs import rigid_nominal
+from ..spec.uncertainty_refs import latency_steps, rigid_nominal
 from ..progress import of_project
 from ..oracle.executors import InProcess
 from ..oracle.joint import Map, run
@@ -160,11 +160,12 @@ class RolloutFactory:
     P: object = None
     dist_idx: tuple = ()
     gradient: bool = True  # the push gradient is built (the adversarial search runs)
+    latency: int = 0  # oracle steps between the state a law reads and its input reaching the plant (rigid bodies)
 
     def __call__(self, B, horizon):
         if self.rigid:
             return RigidRobustRollout(B, list(self.names), self.frame, self.push, self.K, self.settings, horizon,
-                                      self.duration, self.gradient)
+                                      self.duration, self.gradient, self.latency)
         return RobustRollout(B, self.P, list(self.dist_idx), self.K, self.settings, horizon, gradient=self.gradient)
 
 
@@ -180,7 +181,8 @@ def _setup(spec, sys, unc, settings) -> tuple[Scenarios, RolloutFactory]:
         dist_names = [f"force_{a}" for a in "xyz"] if force is not None else []
         bound = np.asarray(force.bound, float) if force is not None else np.zeros(0)
         rollout = RolloutFactory(settings, K, tuple(names), True, frame, force is not None,
-                                 force.duration if force is not None else None, gradient=searched(unc))
+                                 force.duration if force is not None else None, gradient=searched(unc),
+                                 latency=latency_steps(spec, settings.dt))
     else:
         nominal_values = dict(sys.parameters)
         dist_idx = [sys.input_names.index(u) for u in dist.inputs] if dist is not None else []
@@ -235,7 +237,7 @@ def _scenario_record(unc, sc: Scenarios, among: set, edges: list[dict], nodes: l
     force = dist.force if dist is not None else None
     bound = sc.bound
     scen = {"per_cell": sc.S, "corners": sc.KIND.count("corner"), "samples": unc.samples,
-            "search_rounds": unc.search, "disturbance_segments": sc.K,
+            "search_rounds": unc.search, "disturbance_segments": sc.K, "latency": float(unc.latency),
             "parameters": {n: list(unc.parameters[n].range) for n in sc.names},
             "initial_state": dict(unc.initial_state),
             "disturbance": None if dist is None else {"inputs": list(dist.inputs), "bound": bound.tolist()}

@@ -93,20 +93,21 @@ def no_slip_rows(prim: CompiledPrimitive) -> dict[int, tuple[int, int]]:
 
 class RigidRobustRollout(RobustRollout):
     """RobustRollout of a rigid-body target: theta holds the named parameters (mass_scale,
-    friction), d the push's world force (3 entries, or none)."""
+    friction, ...), d the push's world force (3 entries, or none); latency in whole steps."""
 
     GRAD_FLAGS = GRADIENT_FLAGS
 
     def __init__(self, prim: CompiledPrimitive, names: list[str], frame: str, push: bool, segments: int,
-                 settings, horizon: float, duration: float | None = None, gradient: bool = True):
-        self.names, self.push, self.frame = list(names), push, frame
+                 settings, horizon: float, duration: float | None = None, gradient: bool = True, latency: int = 0):
+        self.names, self.push, self.frame, self.latency = list(names), push, frame, latency
         self.lib = library_for(prim, settings)
         self.libs = (self.lib.path,) if self.lib is not None else ()
         self.plant_fn = robust_plant(prim, frame, self.lib)
         super().__init__(prim, self.plant_fn, [], segments, settings, horizon, duration, gradient)
 
     def _loop(self, prim, plant_fn, dist_inputs, dt):
-        parts, path = compiled_step(prim, plant_fn, self.names, self.frame, self.push, self.settings, self.lib)
+        parts, path = compiled_step(prim, plant_fn, self.names, self.frame, self.push, self.settings, self.lib,
+                                    latency=self.latency)
         self.libs += (path,) if path is not None else ()
         return parts
 
@@ -118,7 +119,7 @@ class RigidRobustRollout(RobustRollout):
             return self._step, self._first
         lib = library_for(self.prim, self.settings, reverse=True)
         parts, path = compiled_step(self.prim, robust_plant(self.prim, self.frame, lib), self.names, self.frame,
-                                    self.push, self.settings, lib, reverse=True)
+                                    self.push, self.settings, lib, reverse=True, latency=self.latency)
         if lib is not None:
             self.libs += (lib.path,)
         if path is not None:
@@ -127,7 +128,7 @@ class RigidRobustRollout(RobustRollout):
 
 
 def compiled_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str], frame: str, push: bool, settings,
-                  lib: RobotLibrary | None, reverse: bool = False) -> tuple[tuple, Path | None]:
+                  lib: RobotLibrary | None, reverse: bool = False, latency: int = 0) -> tuple[tuple, Path | None]:
     """(rigid_step's parts with step and first from shared_step, the step library's path or None):
     with the robot's library the step calls the primitive's loop library where it has one
     (loop_parts); if the step library fails, the step is built again with everything inlined.
@@ -135,10 +136,10 @@ def compiled_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[st
     when a search needs it; the rollouts and the sequence stepper share the forward one)."""
     reverse = reverse and push and prim.sampled is None
     called, paths = loop_parts(prim, lib, reverse)
-    parts = rigid_step(prim, plant_fn, names, frame, push, settings.dt, lib, called)
+    parts = rigid_step(prim, plant_fn, names, frame, push, settings.dt, lib, called, latency)
     step, first, path = shared_step(parts, lib, settings, reverse, paths)
     if path is None and called:
-        parts = rigid_step(prim, plant_fn, names, frame, push, settings.dt, lib)
+        parts = rigid_step(prim, plant_fn, names, frame, push, settings.dt, lib, latency=latency)
         step, first = parts[:2]
     return (step, first, *parts[2:]), path
 
@@ -189,11 +190,15 @@ def robust_h(prim: CompiledPrimitive, rows: dict) -> tuple[ca.Function, list[int
 
 
 def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str], frame: str, push: bool, dt: float,
-               lib: RobotLibrary | None = None, called: dict | None = None):
+               lib: RobotLibrary | None = None, called: dict | None = None, latency: int = 0):
     """(step (z, d) -> (z next, [h; RoA margin]), first (x0, t0, s0, theta, d) -> ([h; margin], hold), nth,
     nd, hold size) of one oracle step on the perturbed plant, z = [x; t; s; x_sw; theta; hold]; lib:
     the robot's library the plant and the contact events are called from (inlined without); called:
-    compiled parts (loop_parts: solve, roa_margin) called instead of the primitive's own."""
+    compiled parts (loop_parts: solve, roa_margin) called instead of the primitive's own.
+
+    latency (whole steps): the plant receives, held over each step, the input the law asked at the
+    start of the step `latency` steps earlier (a sampled law: the input it held then); the hold ends
+    with those inputs, oldest first, and starts with the law's input at switch-in in every slot."""
     sys = prim.system
     nx, nu = sys.nx, sys.nu
     nth, nd = len(names), 3 if push else 0
@@ -203,7 +208,8 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
         law = replace(law, solve=called["solve"])
     margin = called.get("roa_margin", prim.roa_margin)
     nw = law.nw if law is not None else 0
-    nhold = 1 + nu + nw if law is not None else 0
+    nlaw = 1 + nu + nw if law is not None else 0
+    nhold = nlaw + latency * nu
     z, d = ca.MX.sym("z", 2 * nx + 2 + nth + nhold), ca.MX.sym("d", nd)
     x, t, s, xsw = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2]
     th, hold = z[2 * nx + 2:2 * nx + 2 + nth], z[2 * nx + 2 + nth:]
@@ -224,8 +230,12 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     h_fn, kept = robust_h(prim, rows)
     ctrl, loop = cse_sx(prim.control), cse_sx(h_fn)
     held = hold[1:1 + nu] if law is not None else None
+    fifo = hold[nlaw:]  # the inputs asked and not yet applied, oldest first (latency)
+    applied = fifo[:nu] if latency else None
 
     def control(xx, tt, ss, u_held):  # (u_raw, u) at a state; a sampled law holds its input
+        if latency:  # the input asked `latency` steps ago, held over the step
+            return applied, saturate(applied, sys.u_lo, sys.u_hi)
         if law is not None:
             return u_held, saturate(u_held, sys.u_lo, sys.u_hi)
         return ctrl(seen(xx), tt, ss, seen(xsw))
@@ -260,15 +270,26 @@ def rigid_step(prim: CompiledPrimitive, plant_fn: ca.Function, names: list[str],
     hs = ca.fmin(h_of(x, t, s, ur0, lam0, c0), h_of(x_end, t + te, s + te, ur1, lam1, c1))
     if len(prim.h_names):
         hs = ca.if_else(act, hs, INACTIVE)
-    hold_next = _hold_next(law, hold, seen(xn), t + dt, s + dt, seen(xsw), held, dt) if law is not None else ca.MX(0, 1)
+    hold_next = _hold_next(law, hold[:nlaw], seen(xn), t + dt, s + dt, seen(xsw), held, dt) if law is not None \
+        else ca.MX(0, 1)
+    if latency:  # this step's request joins the queue
+        asked = held if law is not None else ctrl(seen(x), t, s, seen(xsw))[0]
+        hold_next = ca.vertcat(hold_next, fifo[nu:], asked)
     out = ca.vertcat(hs, margin(xn, t + dt))
     step = cse(ca.Function("robust_rigid_step", [z, d], [ca.vertcat(xn, t + dt, s + dt, xsw, th, hold_next), out]))
     # the first sample: h at the step's start, windowed at that instant
     h_start = h_of(x, t, s, ur0, lam0, c0)
     if len(prim.h_names):
         h_start = ca.if_else(active(prim, wrap(prim, t), x, s, x, 0.0), h_start, INACTIVE)
+    def queue(x0, t0, s0, th0, u_0):  # the latency queue at switch-in: the law's request then, in every slot
+        if not latency:
+            return ca.MX(0, 1)
+        x_seen = sensed(sys, names, th0, x0)
+        asked = u_0 if law is not None else ctrl(x_seen, t0, s0, x_seen)[0]
+        return ca.repmat(asked, latency, 1)
+
     first = _first(law, sys.nx, margin, ca.Function("o", [z, d], [h_start]), nth, nd,
-                   lambda x0, th0: sensed(sys, names, th0, x0))
+                   lambda x0, th0: sensed(sys, names, th0, x0), queue)
     return step, first, nth, nd, nhold
 
 
@@ -296,17 +317,18 @@ def _hold_next(law, hold, xn, t, s, xsw, held, dt: float):
     return ca.vertcat(c_next, u_next, w_next)
 
 
-def _first(law, nx: int, margin: ca.Function, h_start: ca.Function, nth: int, nd: int, seen) -> ca.Function:
+def _first(law, nx: int, margin: ca.Function, h_start: ca.Function, nth: int, nd: int, seen, queue) -> ca.Function:
     """(x0, t0, s0, theta0, d0) -> ([h; RoA margin] at switch-in, the hold's entries then), h_start
     (z, d) -> h evaluated on z0 = [x0; t0; s0; x0; theta0; hold0]; a sampled law is solved at once,
-    from the state it reads, seen(x0, theta0), which is also the switch state it reads."""
+    from the state it reads, seen(x0, theta0), which is also the switch state it reads; queue(x0, t0, s0,
+    theta0, u0) -> the latency queue's entries at switch-in, after the law's hold."""
     x0, t0, s0 = ca.MX.sym("x0", nx), ca.MX.sym("t0"), ca.MX.sym("s0")
     th0, d0 = ca.MX.sym("th0", nth), ca.MX.sym("d0", nd)
     if law is not None:
         u_0, w0 = law.solve(seen(x0, th0), t0, s0, seen(x0, th0), ca.DM.zeros(law.nw))
-        hold0 = ca.vertcat(0, u_0, w0)
+        hold0 = ca.vertcat(0, u_0, w0, queue(x0, t0, s0, th0, u_0))
     else:
-        hold0 = ca.MX(0, 1)
+        hold0 = queue(x0, t0, s0, th0, None)
     out0 = h_start(ca.vertcat(x0, t0, s0, x0, th0, hold0), d0 if nd else ca.MX(0, 1))
     return ca.Function("robust_rigid_first", [x0, t0, s0, th0, d0], [ca.vertcat(out0, margin(x0, t0)),
                                                                  hold0])

@@ -302,6 +302,7 @@ def _compiled(built: dict, rigid: bool, settings) -> dict[str, _Stepper]:
 def steppers(spec, prims, settings) -> tuple[dict[str, _Stepper], list[str], int, np.ndarray]:
     """Each primitive's step on the perturbed plant (mapped over the runs it is given), the uncertain
     parameters' names, the disturbance's size and bound."""
+    from ..spec.uncertainty_refs import latency_steps
     from .rigid import compiled_step, library_for, robust_plant
     from .rollout import plant
 
@@ -314,7 +315,7 @@ def steppers(spec, prims, settings) -> tuple[dict[str, _Stepper], list[str], int
         for name, p in prims.items():
             lib = library_for(p, settings)
             parts, path = compiled_step(p, robust_plant(p, frame, lib), names, frame, force is not None, settings,
-                                        lib)
+                                        lib, latency=latency_steps(spec, settings.dt))
             step, first = parts[:2]
             (built if path is None else shared)[name] = (step, first)
         out = {**_compiled(built, True, settings),

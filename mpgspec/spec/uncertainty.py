@@ -3,7 +3,8 @@
 Rigid-body systems take the parameters `mass_scale` (every link's mass and inertia times k),
 `friction` (the feet's Coulomb coefficient), `torque_scale` (every actuator delivers k_tau times
 the torque its law commands) and `velocity_error_x/y/z` (the laws read a floating base's linear
-velocity with this error added, m/s), and a push `force` at a frame of the base."""
+velocity with this error added, m/s), a push `force` at a frame of the base and a `latency` between
+the state a law reads and the plant receiving its input."""
 from __future__ import annotations
 
 from typing import Annotated
@@ -109,6 +110,9 @@ class Uncertainty(Strict):
     budget: int = Field(default=1_000_000, ge=1, le=100_000_000,
                         description="most robust rollouts the stage may run, checked before it starts: edges among the "
                                     "nodes x cells x scenarios per cell x start states x (1 + search)")
+    latency: NonNegative = Field(default=0.0, description="seconds between the state a rigid body's laws read and "
+                                                          "the plant receiving their input: a whole number of oracle "
+                                                          "steps; each law's input is then held over a step")
     start_in_roa: StartInRoA | None = Field(
         default=None, description="also start each cell from seeded samples of the boundary of the source's region "
                                   "of attraction E_A (projected onto its contact manifold for rigid bodies)")

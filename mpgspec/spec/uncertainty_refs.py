@@ -18,6 +18,19 @@ VELOCITY_ERRORS = ("velocity_error_x", "velocity_error_y", "velocity_error_z")
 state holds it) with this error (m/s) added on one axis; the plant and every h keep the true state."""
 
 
+def latency_steps(spec: ProjectSpec, dt: float) -> int:
+    """uncertainty.latency in oracle steps of dt; a latency that is not a whole number of them is a
+    located spec error."""
+    lat = float(spec.project.uncertainty.latency)
+    n = int(round(lat / dt))
+    if abs(n * dt - lat) > 1e-9 * max(1.0, lat):
+        raise SpecError("the latency must be a whole number of oracle steps", location=spec.locate(("uncertainty", "latency")),
+                        key="uncertainty.latency", expected=f"a multiple of the oracle step {dt:g} s",
+                        found=f"{lat:g} s ({lat / dt:.3g} steps)", code="MPG104",
+                        hint="round the latency to whole steps, or set the oracle's dt to a divisor of it")
+    return n
+
+
 def rigid_nominal(sys) -> dict[str, float]:
     """The uncertain parameters of a rigid-body system (its spec or compiled) and their nominal values:
     every link's mass and inertia times k, mu, every actuator's torque times k_tau (the
@@ -70,6 +83,14 @@ def check_uncertainty(spec: ProjectSpec) -> None:
         elif pr.range[0] <= 0 and rigid and name not in VELOCITY_ERRORS:
             _err(errors, f"{name} must stay positive", loc("parameters", name, "range"),
                  f"parameters.{name}.range", "MPG104", "a range above 0", f"{list(pr.range)}")
+    if unc.latency and not rigid:
+        _err(errors, "latency is modelled for rigid bodies", loc("latency"), "latency", "MPG104",
+             "a rigid_body system (or no latency)", f"a {kind} system")
+    elif unc.latency:
+        try:
+            latency_steps(spec, spec.project.oracle.dt)
+        except SpecError as e:
+            errors.append(e)
     dist = unc.disturbance
     if dist is not None and dist.force is not None and not rigid:
         _err(errors, "a force disturbance needs a rigid-body system", loc("disturbance", "force"),

@@ -196,6 +196,56 @@ def test_a_velocity_error_moves_what_the_law_reads_not_the_plant(built):
     assert np.abs(Y[1] - Y[0]).max() > 1e-3 and np.abs(Y[2] - Y[0]).max() > 1e-3
 
 
+@pytest.mark.parametrize("target", ["Lie", "Stand"])  # a continuous PD law and a sampled ID-QP
+def test_latency_queues_the_laws_requests_and_the_plant_receives_the_oldest(built, target):
+    """With a latency of 2 steps the hold ends with the two requests not yet applied: at switch-in the
+    law's request there, twice; each step appends the request at its start (the sampled law: the
+    input it holds) and applies the queue's head, held over the step."""
+    cp, _ = built
+    prim = cp.prims[target]
+    sys = prim.system
+    source = cp.prims["Stand" if target == "Lie" else "Lie"]
+    names = ["mass_scale", "friction"]
+    rr = RigidRobustRollout(prim, names, "trunk", False, 1, cp.settings, 1.0, latency=2)
+    plain = RigidRobustRollout(prim, names, "trunk", False, 1, cp.settings, 1.0)
+    assert rr.nhold == plain.nhold + 2 * sys.nu
+    x0, th = source.x_star(0.0), [1.0, 0.6]
+    nl = plain.nhold
+
+    def asked(x, t, s, hold):  # the request at a state: the sampled law's held input, else k(x)
+        if prim.sampled is not None:
+            return np.array(hold[1:1 + sys.nu]).ravel()
+        return np.array(prim.control(x, t, s, x0)[0]).ravel()
+
+    _, hold0 = rr._first(x0, 0.0, 0.0, th, np.zeros(0))
+    hold0 = np.array(hold0).ravel()
+    u0 = asked(x0, 0.0, 0.0, hold0)
+    np.testing.assert_allclose(hold0[nl:], np.concatenate([u0, u0]), rtol=0, atol=1e-12)
+    z = np.concatenate([x0, [0.0, 0.0], x0, th, hold0])
+    nx = sys.nx
+    for k in range(3):
+        before = z
+        z = np.array(rr._step(z, np.zeros(0))[0]).ravel()
+        q_before, q_after = before[2 * nx + 4 + nl:], z[2 * nx + 4 + nl:]
+        request = asked(before[:nx], before[nx], before[nx + 1], before[2 * nx + 4:])
+        np.testing.assert_allclose(q_after, np.concatenate([q_before[sys.nu:], request]), rtol=0, atol=1e-9)
+    # the plant's flow differs from the one without latency
+    Y, _ = rr.run(x0[None], np.zeros(1), np.array([th]), np.zeros((1, 0, 1)), np.full(1, rr.N), tol=1e9,
+                  until_entry=False)
+    Y0, _ = plain.run(x0[None], np.zeros(1), np.array([th]), np.zeros((1, 0, 1)), np.full(1, plain.N), tol=1e9,
+                      until_entry=False)
+    assert np.abs(Y - Y0).max() > 1e-4
+
+
+@pytest.mark.parametrize("latency, found", [(0.0015, "1.5 steps"), (0.0005, "0.5 steps")])
+def test_a_latency_that_is_not_whole_steps_is_a_located_spec_error(tmp_path, latency, found):
+    path = _a1_with(tmp_path, BASE + f"  latency: {latency}\n  parameters: {{friction: {{range: [0.4, 0.8]}}}}\n")
+    with pytest.raises(SpecErrors) as ei:
+        check_uncertainty(load_project(path))
+    err = ei.value.errors[0]
+    assert err.code == "MPG104" and err.key == "uncertainty.latency" and err.location.line > 0 and found in err.found
+
+
 def test_a_velocity_error_on_a_fixed_base_is_a_located_spec_error(tmp_path):
     import yaml
 
