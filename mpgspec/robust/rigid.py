@@ -11,9 +11,9 @@ masked outside its window as the oracle masks it. The no-slip safety functions t
 ground forces and the scenario's friction coefficient mu; every other safety function is the
 compiled one. With velocity errors (velocity_error_x/y/z) the law reads the floating base's
 linear velocity with the scenario's error added (in the state and in the switch state x_sw it
-holds), while the plant and h run on the true ones; a
-law that is not sampled gives its input-dependent h (torque requests) for the input it asks at the
-true state.
+holds), while the plant and h run on the true ones; a law that is not sampled gives its
+input-dependent h (torque requests) for the input it asks at the true state. With a latency the
+plant receives each law's input that many steps after the state it read, held over each step.
 """
 from __future__ import annotations
 
