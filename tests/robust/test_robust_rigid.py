@@ -237,6 +237,26 @@ def test_latency_queues_the_laws_requests_and_the_plant_receives_the_oldest(buil
     assert np.abs(Y - Y0).max() > 1e-4
 
 
+def test_the_robust_stage_runs_lie_and_stand_with_one_step_of_latency(built):
+    """The stage takes the latency from the spec to every target's rollouts and reports it: Lie's PD
+    and Stand's ID-QP each withstand one step of delay on the nominal plant (worst margin the feet's
+    1 mm contact tolerance), as on the whole A1 (README)."""
+    cp, vg = built
+    unc = cp.spec.project.uncertainty.model_copy(update={
+        "latency": 0.001, "parameters": {}, "disturbance": None, "cells": 2, "runs": 0, "assertions": []})
+    spec = dataclasses.replace(cp.spec, project=cp.spec.project.model_copy(update={"uncertainty": unc}))
+    from mpgspec.robust.graph import target_jobs
+
+    _, jobs = target_jobs(spec, cp.prims, cp.settings, vg.graph)
+    assert jobs and {job.rollout.latency for job in jobs} == {1}  # whole oracle steps (dt = 1 ms)
+    d = robust_stage(dataclasses.replace(cp, spec=spec), vg).to_dict()
+    assert d["scenarios"]["latency"] == 0.001 and d["scenarios"]["per_cell"] == 1
+    edges = {(e["from"], e["to"]): e for e in d["edges"]}
+    assert set(edges) == {("Lie", "Stand"), ("Stand", "Lie")}
+    for e in edges.values():
+        assert e["survives"] and e["worst_margin"] == pytest.approx(0.001, abs=1e-6), e
+
+
 @pytest.mark.parametrize("latency, found", [(0.0015, "1.5 steps"), (0.0005, "0.5 steps")])
 def test_a_latency_that_is_not_whole_steps_is_a_located_spec_error(tmp_path, latency, found):
     path = _a1_with(tmp_path, BASE + f"  latency: {latency}\n  parameters: {{friction: {{range: [0.4, 0.8]}}}}\n")
