@@ -4,6 +4,7 @@ from __future__ import annotations
 import difflib
 
 from ..errors import SpecError, SpecErrors
+from .crosscheck import whole_periods
 from .loader import ProjectSpec
 from .project import RequireEdge, node_refs
 
@@ -22,13 +23,12 @@ def latency_steps(spec: ProjectSpec, dt: float) -> int:
     """uncertainty.latency in oracle steps of dt; a latency that is not a whole number of them is a
     located spec error."""
     lat = float(spec.project.uncertainty.latency)
-    n = int(round(lat / dt))
-    if abs(n * dt - lat) > 1e-9 * max(1.0, lat):
+    if not whole_periods(lat, 1.0 / dt):
         raise SpecError("the latency must be a whole number of oracle steps", location=spec.locate(("uncertainty", "latency")),
                         key="uncertainty.latency", expected=f"a multiple of the oracle step {dt:g} s",
                         found=f"{lat:g} s ({lat / dt:.3g} steps)", code="MPG104",
                         hint="round the latency to whole steps, or set the oracle's dt to a divisor of it")
-    return n
+    return int(round(lat / dt))
 
 
 def rigid_nominal(sys) -> dict[str, float]:
