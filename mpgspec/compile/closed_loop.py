@@ -59,6 +59,9 @@ class CompiledPrimitive:
     loop_u: ca.Function | None = None  # (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): the open loop under a
     # given input, every safety function active (as loop_raw); set with `sampled`
     guards: Guards = field(default_factory=Guards)  # where f_cl switches or kinks (compile/guards.py)
+    open_loop: ca.Function | None = None  # loop_u's signature for every law (loop_u itself when sampled): h under
+    # an input the law did not ask at x (a law reading a delayed or noisy state); made of loop_raw's expressions,
+    # so not part of the digest
     grid_phase: float = 0.0  # clock of a periodic primitive's first grid sample (spec: grid.phase)
     cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
 

@@ -166,7 +166,8 @@ def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, cl
     jump = plan_jump(cm.plan, sys, clock.t)
     f_cl, control, h, loop_fn = _close_loop(ident, args, u_raw, f_u, h_u, sys)
     loop_raw = _close_loop(ident + "_raw", args, u_raw, f_u, h_all, sys)[3] if windowed else loop_fn
-    loop_u = _open_loop(ident, args, f_u, h_all, sys) if ctx.sampled is not None else None
+    open_loop = _open_loop(ident, args, f_u, h_all, sys)
+    loop_u = open_loop if ctx.sampled is not None else None
     W = _roa_metric(inst, sys)
     radius = float(p.roa.radius) if p.roa.radius is not None else 0.0  # 0 until a verifier sizes E
     info = {**ctx.info, "roa_W": W.tolist()}  # the report's record
@@ -179,7 +180,7 @@ def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, cl
         radius=radius, f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, W=W, info=info,
         contacts=cm.plan, jump=jump, loop=loop_fn, loop_raw=loop_raw, windows=windows,
         boundaries=_boundaries(windows, cm.plan, clock.period, clock.domain),
-        hybrid=sys.events or cm.schedule is not None, sampled=ctx.sampled, loop_u=loop_u,
+        hybrid=sys.events or cm.schedule is not None, sampled=ctx.sampled, loop_u=loop_u, open_loop=open_loop,
         guards=_guards(f_cl, control, sys, ctx.sampled),
     )
 

@@ -311,6 +311,23 @@ def held_law(prim: CompiledPrimitive) -> tuple[NumericFunction, NumericFunction]
     return prim.cache["looplib_held"]
 
 
+def open_law(prim: CompiledPrimitive) -> NumericFunction | None:
+    """(x, t, s, x_sw, u) -> (h with its windows, u saturated): the loop under an input the law did not
+    ask at x, for a law that is not sampled (held_law's open loop serves one that is); None for a
+    primitive built without `open_loop`. What the safety functions read when the law acts on a
+    delayed or noisy state while the plant is at x: the ground forces under the input applied. In
+    CasADi's virtual machine (about 0.1 ms per call on the A1): only sensing errors call it."""
+    if prim.open_loop is None:
+        return None
+    if "looplib_open" not in prim.cache:
+        ol = prim.open_loop
+        sym = ca.SX.sym if ol.is_a("SXFunction") else ca.MX.sym
+        a = [sym(n, *ol.sparsity_in(i).shape) for i, n in enumerate(("x", "t", "s", "x_sw", "u"))]
+        _xdot, h_all, _u_raw, u = ol.call(a)
+        prim.cache["looplib_open"] = numeric(ca.Function("open_law", a, [windowed(prim, h_all, a[0], a[1], a[2]), u]))
+    return prim.cache["looplib_open"]
+
+
 def law(prim: CompiledPrimitive) -> NumericFunction | None:
     """(x, t, s, x_sw) -> (h with its windows, u) through the attached library's loop (None without
     one): what prim.loop gives the cross-check, evaluated in compiled code on numpy buffers."""

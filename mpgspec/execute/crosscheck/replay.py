@@ -11,7 +11,8 @@ MuJoCo's state.
 Before t = 0 the start primitive's law holds the start state x*(t0) for `settle` seconds with its
 clock frozen, so that the soft contacts carry the weight when the run begins.
 With sensing errors (settings `latency`, `velocity_noise`) the law, the switch state x_sw and the
-executor read the state as sensed, while h is judged on the simulator's own state.
+executor read the state as sensed, while h is judged on the simulator's own state under the input
+the law asked from the sensed one (looplib.open_law: the ground forces of the input applied).
 """
 from __future__ import annotations
 
@@ -243,19 +244,24 @@ class _Law:
     def __init__(self, p: CompiledPrimitive, rate: float, failures: dict):
         self.p, self.failures = p, failures
         self.held = looplib.held_law(p)
+        self.open = looplib.open_law(p) if self.held is None else None
         if self.held is not None:
             period = p.sampled.period
             self.every = max(1, int(round(period * rate))) if period else 1
             self.w, self.u, self.k = np.zeros(p.sampled.nw), None, 0
 
     def __call__(self, x, clock: float, s: float, x_sw, seen=None) -> tuple[np.ndarray, np.ndarray]:
-        """(h at x, u): with `seen`, the law reads that state instead of x. A sampled law's h is then
-        the loop's at x under the input solved from `seen`; any other law's h is the loop's at x
-        (the input-dependent h, such as the friction cone, read the input the law asks at x)."""
+        """(h at x, u): with `seen`, the law reads that state instead of x, and h is the loop's at x
+        under the input the law asks at `seen` (the input-dependent h, such as the friction cone, read
+        the input the plant receives), whether the law is sampled or not."""
         if self.held is None:
             if seen is None:
                 return _evaluate(self.p, x, clock, s, x_sw)
-            return _evaluate(self.p, x, clock, s, x_sw)[0], _evaluate(self.p, seen, clock, s, x_sw)[1]
+            u = _evaluate(self.p, seen, clock, s, x_sw)[1]
+            if self.open is None:  # a primitive built without its open loop: h of the law's own input at x
+                return _evaluate(self.p, x, clock, s, x_sw)[0], u
+            hv, u_applied = self.open(x, clock, s, x_sw, u)
+            return np.asarray(hv, float).ravel(), np.asarray(u_applied, float).ravel()
         solve, open_loop = self.held
         if self.k % self.every == 0:
             at = x if seen is None else seen
