@@ -64,6 +64,10 @@ def estimate(problem: PeriodicProblem, o: dict, name: str) -> RoAResult:
                      f"{tube['simulations']} rollouts at random phases converged safely from W-distance {r:.4g}")
 
 
+REDRAWS = 20
+"""Rounds of drawing again the starts that fell outside C (some h < 0 at their phase: a swing foot drawn
+below the ground just after lift-off); one still outside after them is kept, and fails."""
+
 COLLAPSE = 0.1
 """A tube radius below this fraction of the first radius tried (option r0) counts as collapsed."""
 
@@ -113,7 +117,9 @@ def unconverged(log: list[dict], r: float) -> bool:
 def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict):
     """Bisection on r: starts x*(t0) + r W^-1/2 u at random phases on the dt grid, put on the contact
     manifold of the feet held at t0, must stay in C and end within conv r of the orbit after
-    `periods` periods."""
+    `periods` periods. A start drawn outside C (some h < 0 at its phase, such as a swing foot below
+    the ground just after lift-off) is drawn again: the oracle takes a rollout into E only at a sample
+    where it judged every h >= -tol (tol: its h_tolerance), so E needs to hold only where C does."""
     prim = flow.prim
     sys = prim.system
     n = int(o.get("samples", 48))
@@ -123,15 +129,29 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
     keep = w > 1e-12 * max(w.max(), 1e-300)
     Wi = (U[:, keep] / np.sqrt(w[keep])) @ U[:, keep].T  # pseudo-inverse root: unweighted states are not moved
     held = held_feet(prim.contacts)
+    tol = float(o.get("oracle_h_tolerance", 0.0))  # the oracle's: it judges h >= -tol safe
+    redrawn = [0]
     log = []
 
-    def starts(r):
-        k = rng.integers(0, flow.steps, n)
-        u = unit_sphere(n, W.shape[0], rng)
-        u[: n // 2] *= rng.random((n // 2, 1)) ** (1 / W.shape[0])
+    def draw(r, m):
+        k = rng.integers(0, flow.steps, m)
+        u = unit_sphere(m, W.shape[0], rng)
+        u[: m // 2] *= rng.random((m // 2, 1)) ** (1 / W.shape[0])
         X0 = Xs[:, k] + r * (u @ Wi).T
         if held is not None:
-            X0 = np.stack([sys.project_to_contacts(X0[:, j], held(k[j] * flow.dt), W) for j in range(n)], 1)
+            X0 = np.stack([sys.project_to_contacts(X0[:, j], held(k[j] * flow.dt), W) for j in range(m)], 1)
+        return X0, k
+
+    def starts(r):
+        X0, k = draw(r, n)
+        out = ~(flow.least_h(X0, k * flow.dt) >= -tol)  # outside C: drawn again (E is entered only in C)
+        for _ in range(REDRAWS):
+            if not out.any():
+                break
+            redrawn[0] += int(out.sum())
+            X1, k1 = draw(r, int(out.sum()))
+            X0[:, out], k[out] = X1, k1
+            out[out] = ~(flow.least_h(X1, k1 * flow.dt) >= -tol)
         return X0, k * flow.dt
 
     def decided(X, hmin):  # a start already left C or blew up: this radius fails whatever follows
@@ -159,4 +179,5 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
                               grow=2.0)
     return r, {"samples_per_radius": n, "simulations": n * len(log), "bisection": log, "capped": capped,
                "periods": periods, "dt": flow.dt, "conv": conv, "time_s": time.perf_counter() - t0,
-               "starts": "projected onto the contact manifold of the feet held at their phase" if held else "as drawn"}
+               "starts": ("projected onto the contact manifold of the feet held at their phase" if held else "as drawn")
+               + ", inside C", "redrawn_outside_c": redrawn[0]}

@@ -57,6 +57,9 @@ class HybridFlow:
         hv = h_of(xn, t + h)
         mn = ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
         body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn)])
+        xs, ts = ca.MX.sym("x", nx), ca.MX.sym("t")
+        h0 = h_of(xs, ts)
+        self._least_h = ca.Function("hybrid_least_h", [xs, ts], [ca.mmin(h0) if h0.shape[0] else ca.inf])
         zz = ca.MX.sym("z", nx + 2)  # a period with every step's state out, and with the last one only
         self.period_fn, self.period_end = compile_many(
             [ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)]),
@@ -66,6 +69,12 @@ class HybridFlow:
     def states(self, x0: np.ndarray, t0: float = 0.0) -> np.ndarray:
         """[x; t; least h] after each step of one period from x0 at clock t0 (columns)."""
         return np.array(self.period_fn(np.concatenate([x0, [t0, np.inf]])), float)
+
+    def least_h(self, X: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """The least safety function (its windows applied) at the columns of X at clocks t, as a step
+        of the flow judges its end state."""
+        n = X.shape[1]
+        return np.array(self._least_h.map(n)(X, np.asarray(t, float)[None, :]), float).ravel()
 
     def run(self, X0: np.ndarray, t0: np.ndarray, periods: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """End states and least h of rollouts from the columns of X0 at clocks t0."""

@@ -124,6 +124,7 @@ def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=No
     ran. A primitive whose result could not come back from a worker is sized again here.
     """
     check_roa_specs(spec)
+    tol = float(spec.project.oracle.h_tolerance)
     records, todo, keys = {}, [], {}
     for inst in spec.primitives:
         roa = inst.spec.roa
@@ -132,14 +133,14 @@ def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=No
             records[inst.name] = RoARecord(inst.name, "given", "given", float(roa.radius), roa.radius,
                                            "radius chosen by the spec author")
             continue
-        keys[inst.name] = memo.key("roa", prim.digest(), roa.method, sorted(_options(inst).items()), roa.radius) \
+        keys[inst.name] = memo.key("roa", prim.digest(), roa.method, sorted(_options(inst, tol).items()), roa.radius) \
             if memo else None
         known = memo.get(keys[inst.name]) if memo else None
         if known is not None:
             records[inst.name] = RoARecord(**known)
             continue
         todo.append(inst)
-    jobs = [(inst.name, inst.spec.roa.method, _options(inst)) for inst in todo]
+    jobs = [(inst.name, inst.spec.roa.method, _options(inst, tol)) for inst in todo]
     methods = roa_methods()
     pooled = [j for j in jobs if getattr(methods.get(j[1]), "simulates", False)]
     done = dict(zip((j[0] for j in pooled), (executor or InProcess()).map(
@@ -157,14 +158,18 @@ def size_regions(spec: ProjectSpec, prims: dict[str, CompiledPrimitive], memo=No
     return records
 
 
-def _options(inst) -> dict:
+def _options(inst, h_tolerance: float = 0.0) -> dict:
     """The options a primitive's RoA verifier is given: the spec's `roa.options`, with
     `require_certified` on when the spec says `require: certified` and the verifier reads that
-    option (its certified route, e.g. lyapunov's branch-and-bound for non-polynomial loops)."""
+    option (its certified route, e.g. lyapunov's branch-and-bound for non-polynomial loops), and for
+    floquet the oracle's h_tolerance when it is not 0 (`oracle_h_tolerance`: a gait's tube draws its
+    starts where the oracle may enter E, h >= -tol)."""
     roa = inst.spec.roa
     opts = dict(roa.options)
     if roa.require == "certified" and "require_certified" in (accepted_options(roa.method) or ()):
         opts.setdefault("require_certified", True)
+    if roa.method == "floquet" and h_tolerance > 0:
+        opts["oracle_h_tolerance"] = h_tolerance
     return opts
 
 

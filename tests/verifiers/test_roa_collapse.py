@@ -91,6 +91,9 @@ class _LinearFlow:
         self.M, self.steps, self.dt = M, steps, 1.0 / steps
         self.prim = SimpleNamespace(system=None, contacts=None)
 
+    def least_h(self, X, t):
+        return 1 - np.abs(X).max(0)
+
     def run(self, X0, t0, periods):
         return self.run_until(X0, t0, periods)[:2]
 
@@ -188,3 +191,42 @@ def test_safe_set_scale_is_the_typical_size_without_a_spec_radius(tmp_path):
     small = region_size(home.with_radius(0.01), RoARecord("Home", "lyapunov", "empirical", 0.01))
     assert small.status == "warn" and small.numbers["typical"] == pytest.approx(0.5) and "safe set" in small.message
     assert region_size(home.with_radius(0.2), RoARecord("Home", "lyapunov", "empirical", 0.2)) is None
+
+
+class _HalfPlane(_LinearFlow):
+    """The fast flow with C also bounded by x_0 >= -0.3 (h = x_0 + 0.3): the flow contracts towards 0,
+    so a start inside C stays inside; every start handed to the rollouts is recorded."""
+
+    def __init__(self, M):
+        super().__init__(M)
+        self.starts = []
+
+    def least_h(self, X, t):
+        return np.minimum(1 - np.abs(X).max(0), X[0] + 0.3)
+
+    def run_until(self, X0, t0, periods, stop=None):
+        self.starts.append(X0.copy())
+        X, hmin = X0.copy(), self.least_h(X0, t0)
+        for k in range(periods):
+            X = self.M @ X
+            hmin = np.minimum(hmin, self.least_h(X, t0))
+            if stop is not None and k + 1 < periods and stop(X, hmin):
+                return X, hmin, k + 1
+        return X, hmin, periods
+
+
+def test_starts_drawn_outside_c_are_drawn_again():
+    """E is entered only where the oracle judged every h >= 0 (-tol): a tube start outside C is drawn
+    again, so the radius is set by the flow, not by the part of the ball that lies outside C."""
+    M = np.diag([0.4, 0.3])
+    flow = _HalfPlane(M)
+    r, tube = floquet_hybrid._size(flow, None, np.zeros((2, flow.steps)), np.eye(2), 0.4, {})
+    assert tube["redrawn_outside_c"] > 0 and "inside C" in tube["starts"]
+    radius = lambda X: float(np.linalg.norm(X, axis=0).max())  # noqa: E731 (half the starts lie on the sphere)
+    assert all((flow.least_h(X, None) >= 0).all() for X in flow.starts if radius(X) <= 0.9)
+    assert r > 0.6  # the ball reaches x_0 = -0.3 from r = 0.3 on: drawn as they fall, starts there would fail
+    # with the oracle's tolerance the starts may lie down to -tol
+    tol_flow = _HalfPlane(M)
+    floquet_hybrid._size(tol_flow, None, np.zeros((2, tol_flow.steps)), np.eye(2), 0.4, {"oracle_h_tolerance": 0.05})
+    lows = [float(tol_flow.least_h(X, None).min()) for X in tol_flow.starts if radius(X) <= 0.9]
+    assert min(lows) >= -0.05 and min(lows) < 0
