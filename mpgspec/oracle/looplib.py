@@ -304,11 +304,16 @@ def held_law(prim: CompiledPrimitive) -> tuple[NumericFunction, NumericFunction]
     if "looplib_held" not in prim.cache:
         lib = attach(prim)
         lib = lib if lib is not None and lib.get("solve") is not None and lib.get("loop_u") is not None else None
-        a = [ca.MX.sym(n, *prim.loop_u.sparsity_in(i).shape) for i, n in enumerate(("x", "t", "s", "x_sw", "u"))]
-        _xdot, h_all, _u_raw, u = (lib.get("loop_u") if lib is not None else prim.loop_u).call(a)
         prim.cache["looplib_held"] = (numeric(lib.get("solve") if lib is not None else prim.sampled.solve),
-                                      numeric(ca.Function("held", a, [windowed(prim, h_all, a[0], a[1], a[2]), u])))
+                                      _windowed_open(prim, lib.get("loop_u") if lib is not None else prim.loop_u, "held"))
     return prim.cache["looplib_held"]
+
+
+def _windowed_open(prim: CompiledPrimitive, loop_u: ca.Function, name: str) -> NumericFunction:
+    """(x, t, s, x_sw, u) -> (h with its windows, u saturated) of an open loop with loop_u's signature."""
+    a = [ca.MX.sym(n, *loop_u.sparsity_in(i).shape) for i, n in enumerate(("x", "t", "s", "x_sw", "u"))]
+    _xdot, h_all, _u_raw, u = loop_u.call(a)
+    return numeric(ca.Function(name, a, [windowed(prim, h_all, a[0], a[1], a[2]), u]))
 
 
 def open_law(prim: CompiledPrimitive) -> NumericFunction | None:
@@ -320,11 +325,7 @@ def open_law(prim: CompiledPrimitive) -> NumericFunction | None:
     if prim.open_loop is None:
         return None
     if "looplib_open" not in prim.cache:
-        ol = prim.open_loop
-        sym = ca.SX.sym if ol.is_a("SXFunction") else ca.MX.sym
-        a = [sym(n, *ol.sparsity_in(i).shape) for i, n in enumerate(("x", "t", "s", "x_sw", "u"))]
-        _xdot, h_all, _u_raw, u = ol.call(a)
-        prim.cache["looplib_open"] = numeric(ca.Function("open_law", a, [windowed(prim, h_all, a[0], a[1], a[2]), u]))
+        prim.cache["looplib_open"] = _windowed_open(prim, prim.open_loop, "open_law")
     return prim.cache["looplib_open"]
 
 
