@@ -2,7 +2,7 @@
 ID-QP of the paper's Stand. Each is the `spec_model` of a ControllerKind registered by entry point."""
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, field_validator, model_validator
 
@@ -46,6 +46,9 @@ class PDController(Strict):
     feedforward: list[Expr] | None = None
     gravity_compensation: bool = Field(
         default=False, description="rigid bodies: add the torques that hold the current pose on the contact feet")
+    limit: Annotated[Number, Field(gt=0)] | list[Annotated[Number, Field(gt=0)]] | None = Field(
+        default=None, description="the law asks at most this |u| of each input (one number, or one per input): "
+                                  "a design margin below the actuators' limit, e.g. a cushion of bounded torque")
     profile: MotionProfile | None = None
     target: list[Number] | None = Field(
         default=None, description="fixed desired outputs y_d (rates 0) instead of y(x*(t)): a regulator whose law "

@@ -69,3 +69,31 @@ def test_land_catches_the_jump_and_no_other_primitive_does(a1):
     assert stand.violated.startswith(("on_ground", "foot_still"))
     standing = SafetyOracle(prims["Land"], settings)(prims["Stand"].x_star(0.0), 0.0)
     assert standing.status == "unsafe" and standing.violated.startswith("airborne")
+
+
+@pytest.mark.slow
+def test_the_landing_asks_at_most_the_laws_limit_with_friction_to_spare(a1):
+    """Land's PD is a cushion of bounded torque (controller.limit, 0.8 of the motors' 33.5 N m): from
+    Jump's end its flow asks at most that (and reaches it at the touchdown), so a motor 10 % weaker
+    still gives what is asked. The stance feet keep at least 5 N inside their friction cones on the
+    way into E."""
+    from mpgspec.oracle.trace import trace
+
+    spec, prims, settings = a1
+    land = prims["Land"]
+    inst = next(i for i in spec.primitives if i.name == "Land")
+    limit = float(inst.spec.controller.limit)
+    assert limit == pytest.approx(0.8 * float(land.system.u_hi.min()))
+    end = prims["Jump"].x_star(prims["Jump"].domain[1])
+    tr = trace(land, end, 0.0, 1.0, settings, max_points=100_000)
+    U = np.array([[np.nan if v is None else v for v in row] for row in tr["u"]])
+    assert np.nanmax(np.abs(U)) <= limit + 1e-9 and np.nanmax(np.abs(U)) >= limit - 1e-6  # it does bind
+    X = np.array([[np.nan if v is None else v for v in row] for row in tr["x"]])
+    k = int(np.argmax(np.nanmax(np.abs(U), axis=0) >= limit - 1e-6))
+    raw = np.array(land.loop_raw(X[:, k], tr["t"][k], tr["t"][k], end)[2]).ravel() if land.loop_raw is not None \
+        else None
+    if raw is not None:  # the raw request (before the actuators' U) is the law's own, bounded too
+        assert np.abs(raw).max() <= limit + 1e-9
+    cones = [np.array([np.nan if v is None else v for v in vals], float) for n, vals in tr["h"].items()
+             if n.startswith("friction_cone")]
+    assert len(cones) == 4 and min(np.nanmin(c) for c in cones) >= 5.0

@@ -64,7 +64,20 @@ def pd_law(c: PDController, ctx: ControlContext) -> ca.SX:
                             key=f"{ctx.ec.owner}: controller.gravity_compensation", expected="system kind rigid_body",
                             found="an analytic system", code="MPG108")
         u = u + sys.static_torque(ctx.plan.feet)
+    if c.limit is not None:
+        u = _limited(u, c.limit, sys, ctx)
     return u
+
+
+def _limited(u: ca.SX, limit, sys: CompiledSystem, ctx: ControlContext) -> ca.SX:
+    """u clamped to [-limit, limit] per input: the law's own bound, inside the actuators' U."""
+    lim = [float(limit)] * sys.nu if not isinstance(limit, list) else [float(v) for v in limit]
+    if len(lim) != sys.nu:
+        raise SpecError("limit needs one number, or one per input", location=ctx.ec.locate(("controller", "limit")),
+                        key=f"{ctx.ec.owner}: controller.limit", expected=f"1 or {sys.nu} values",
+                        found=f"{len(lim)} values", code="MPG106")
+    lim_dm = ca.DM(lim)
+    return ca.fmin(ca.fmax(u, -lim_dm), lim_dm)
 
 
 def _task_jacobian(sys: CompiledSystem, ydot: ca.SX, xdot: ca.SX) -> ca.SX:
