@@ -113,17 +113,40 @@ class Transition:
         i = int(np.argmin(np.abs(self.t_A - t_A)))
         return self.best_t_B[i] if abs(self.t_A[i] - t_A) < 1e-9 else None
 
+    @property
+    def row_peaks(self) -> list[list[float] | None]:
+        """Per t_A: the largest |u| of each input in the cell it switches through (its best t_B)."""
+        return [None if t_b is None else list(self.evidence[i][int(np.argmin(np.abs(self.t_B - t_b)))].peak_input)
+                for i, t_b in enumerate(self.best_t_B)]
+
 
 MARGIN_SHARE = 0.8
 """Under the 'margin' rule, a t_A is taken when its row margin is at least this share of the edge's best."""
+PEAK_DIGITS = 4
+"""Significant digits of a cell's peak input as report.json keeps them: the reserve compares these, so that
+a run from the report switches where the verify's run did."""
 
 
-def switch_clocks(tr, rule: str = "first") -> list[float | None]:
+def switch_clocks(tr, rule: str = "first", reserve: float | None = None, bound=None) -> list[float | None]:
     """Per t_A of a transition (Transition or a report's): the t_B an executor switches in at, None
     where it does not switch. 'first': at every verified t_A, so the first one the run meets is taken;
     'margin': only at the verified t_A whose row margin is at least MARGIN_SHARE of the edge's best
     (an executor in a periodic primitive then waits for the well-kept switches of its cycle; where the
-    margins were not measured, as 'first')."""
+    margins were not measured, as 'first'). With `reserve` and the inputs' bounds (largest |u| each),
+    a t_A whose cell asks more than reserve x bound of some input, or whose peaks are unknown, is not
+    taken either."""
+    out = _by_rule(tr, rule)
+    if reserve is None or bound is None:
+        return out
+    lim = reserve * np.asarray(bound, float)
+    peaks = list(getattr(tr, "row_peaks", None) or [])
+    keep = [i < len(peaks) and peaks[i] is not None and len(peaks[i]) == len(lim) and
+            all(p is not None and float(f"{p:.{PEAK_DIGITS}g}") <= m for p, m in zip(peaks[i], lim))
+            for i in range(len(out))]
+    return [b if k else None for b, k in zip(out, keep)]
+
+
+def _by_rule(tr, rule: str) -> list[float | None]:
     best = list(tr.best_t_B)
     rows = list(getattr(tr, "row_margins", None) or [])
     if rule == "first" or len(rows) != len(best):

@@ -158,6 +158,8 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     weight = spec.project.sequence.weight if spec.project.sequence is not None else "duration"
     switch = spec.project.sequence.switch if spec.project.sequence is not None else "first"
     table = {"weight": weight, "switch": switch, "next": lookup_table(g, weight)}
+    if spec.project.sequence is not None and spec.project.sequence.reserve is not None:
+        table["reserve"] = float(spec.project.sequence.reserve)
     runs = {}
     if spec.project.sequence is not None:
         if progress:

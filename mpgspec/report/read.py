@@ -77,6 +77,7 @@ class ReportTransition:
     windows: list
     weights: dict = field(default_factory=dict)
     row_margins: list = field(default_factory=list)
+    row_peaks: list = field(default_factory=list)
 
     @cached_property
     def t_A(self):
@@ -91,6 +92,26 @@ class ReportTransition:
 
         i = int(np.argmin(np.abs(self.t_A - t_A)))
         return self.best_t_B[i] if abs(self.t_A[i] - t_A) < 1e-9 else None
+
+
+def _row_peaks(t: dict) -> list:
+    """Per t_A of a report's transition: the peak |u| of each input in the cell of its best t_B (None
+    where it has none or the cells do not say)."""
+    c, best, t_B = t.get("cells"), t.get("best_t_B") or [], t.get("t_B") or []
+    grids = c.get("peak_input") if isinstance(c, dict) else None
+    if not isinstance(grids, list) or not t_B:
+        return []
+    out = []
+    for i, t_b in enumerate(best):
+        if t_b is None:
+            out.append(None)
+            continue
+        j = min(range(len(t_B)), key=lambda k: abs(t_B[k] - t_b))
+        try:
+            out.append([g[i][j] for g in grids])
+        except (IndexError, TypeError):
+            out.append(None)
+    return out
 
 
 class ReportGraph:
@@ -114,7 +135,7 @@ class ReportGraph:
             self.transitions[(e["from"], e["to"])] = ReportTransition(
                 e["from"], e["to"], e["class"], list(t.get("t_A", [])), list(t.get("best_t_B", [])),
                 [tuple(w) for w in t.get("windows", [])], {k: e[k] for k in WEIGHTS if e.get(k) is not None},
-                list(t.get("row_margins") or []))
+                list(t.get("row_margins") or []), _row_peaks(t))
 
     @property
     def nodes(self) -> list[str]:

@@ -279,6 +279,8 @@ class LookupTable(_Strict):
     weight: str
     switch: Literal["first", "margin"] = Field("first", description="the sequence's switching rule: the first "
                                               "verified t_A, or the well-kept ones (sequence.switch)")
+    reserve: Num = Field(None, description="sequence.reserve: switches are taken only through cells whose peak |u| "
+                                           "is at most this share of each input's bound")
     next: dict[str, dict[str, str | None]] = Field(description="next[current][goal] = primitive to switch to")
 
 

@@ -145,6 +145,10 @@ class Sequence(Strict):
         default="first", description="when the graph run leaves a primitive along an edge: at the first "
         "verified t_A it meets (first), or only at the t_A whose least normalised safety margin is at least "
         "0.8 of the edge's best (margin: a periodic primitive waits in its cycle for the well-kept switches)")
+    reserve: Number | None = Field(
+        default=None, gt=0, le=1, description="with it, the graph run also leaves a primitive only through cells "
+        "whose peak |u| is at most this share of each input's bound (a torque reserve at every switch it chooses; "
+        "a transient hands over at the end of its domain whatever its cell asks)")
 
     @field_validator("commands")
     @classmethod

@@ -91,3 +91,54 @@ def test_the_executor_plan_reads_the_same_rule_from_the_report(pendulum):
         assert clocks == switch_clocks(g.edge(a, b), rule)
         assert clocks == switch_clocks(pendulum.mpg.edge(a, b), rule)
     assert handovers == 1  # SwingUp -> Balance
+
+
+@dataclass
+class _Peaked:
+    best_t_B: list
+    row_peaks: list
+    row_margins: list = field(default_factory=list)
+
+
+def test_reserve_drops_the_rows_whose_cell_asks_too_much():
+    e = _Peaked([0.0, None, 0.1, 0.2, 0.3], [[1.0, 2.0], None, [4.0, 0.5], [3.0, 3.2], None])
+    bound = [5.0, 4.0]
+    assert switch_clocks(e, "first", None, bound) == e.best_t_B
+    # 0.8 of the bounds: 4.0 and 3.2; a cell at the share is kept, one above it (or without peaks) is not
+    assert switch_clocks(e, "first", 0.8, bound) == [0.0, None, 0.1, 0.2, None]
+    assert switch_clocks(e, "first", 0.5, bound) == [0.0, None, None, None, None]
+    # peaks compare as report.json keeps them (4 significant digits): 3.20004 reads 3.2
+    assert switch_clocks(_Peaked([0.2], [[3.0, 3.20004]]), "first", 0.8, bound) == [0.2]
+    assert switch_clocks(_Peaked([0.2], [[3.0, 3.201]]), "first", 0.8, bound) == [None]
+    # with 'margin', a row must pass both
+    m = _Peaked([0.0, 0.1], [[1.0, 1.0], [9.0, 1.0]], [1.0, 1.0])
+    assert switch_clocks(m, "margin", 0.8, bound) == [0.0, None]
+
+
+def test_the_executor_plan_keeps_a_reserve_alike_from_the_report_and_in_memory(pendulum):
+    """With sequence.reserve the plan takes, from the report or the graph in memory, the same clocks:
+    the rule's, less those whose cell asks more than the share of the input bound (a transient still
+    hands over at every verified clock)."""
+    report, prims = pendulum.report, pendulum.compiled.prims
+    g = ReportGraph(report)
+    seq = pendulum.compiled.spec.project.sequence
+    bound = float(np.max(np.abs(prims["Balance"].system.u_hi)))
+    full = ExecutorPlan.of(g, report["lookup_table"]["next"], seq, prims)
+    share = 0.8  # the swings saturate their 7 N m in many of the cells the rule takes
+    kept = ExecutorPlan.of(g, report["lookup_table"]["next"], seq.model_copy(update={"reserve": share}), prims)
+    mem = ExecutorPlan.of(pendulum.mpg, report["lookup_table"]["next"], seq.model_copy(update={"reserve": share}),
+                          prims)
+    assert kept.edges == mem.edges
+    dropped = 0
+    for (a, b), (_t_A, clocks) in kept.edges.items():
+        before = full.edges[(a, b)][1]
+        tr = g.edge(a, b)
+        for c, c0, p in zip(clocks, before, tr.row_peaks):
+            if prims[a].cls.value == "transient":
+                assert c == c0
+            elif c is not None:
+                assert c == c0 and float(f"{p[0]:.4g}") <= share * bound
+            else:
+                dropped += c0 is not None
+    assert dropped > 0 and any(c is not None for a, b in kept.edges if prims[a].cls.value != "transient"
+                               for c in kept.edges[(a, b)][1])

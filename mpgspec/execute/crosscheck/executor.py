@@ -42,9 +42,12 @@ class ExecutorPlan:
         for a, b in sorted(pairs):
             tr = graph.edge(a, b)
             if tr is not None:  # a transient hands over at the end of its domain: the rule chooses no time there
-                rule = "first" if prims[a].cls is PrimitiveClass.TRANSIENT else seq.switch
+                transient = prims[a].cls is PrimitiveClass.TRANSIENT
+                rule = "first" if transient else seq.switch
+                reserve = None if transient else getattr(seq, "reserve", None)
+                bound = np.maximum(np.abs(prims[b].system.u_lo), np.abs(prims[b].system.u_hi))
                 edges[(a, b)] = ([float(v) for v in tr.t_A],
-                                 [None if v is None else float(v) for v in switch_clocks(tr, rule)])
+                                 [None if v is None else float(v) for v in switch_clocks(tr, rule, reserve, bound)])
         return cls(seq.start, tuple((float(c.t), c.goal) for c in seq.commands), table, edges)
 
     def key(self) -> list:
