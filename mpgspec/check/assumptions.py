@@ -23,7 +23,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.optimize import minimize
 
 from ..certify.hybrid_orbit import HybridFlow, orbit
 from ..certify.hybrid_orbit import monodromy as hybrid_monodromy
@@ -183,6 +182,7 @@ def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: 
             h = h_active(p, xs + L @ z, t)
             return float(h.min()) if h.size else 0.0
 
+        from scipy.optimize import minimize  # imported when used: scipy's start-up is a process's slowest
         res = minimize(obj, d0, method="Nelder-Mead", options={"maxiter": 400, "xatol": 1e-6, "fatol": 1e-9})
         worst = min(worst, float(res.fun))
     ok = worst >= -tol

@@ -11,7 +11,6 @@ from functools import reduce
 
 import casadi as ca
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from mpgspec.errors import ExprError
 from mpgspec.spec.expr import (
@@ -219,6 +218,8 @@ def interp_cubic(t: Sym | float, ts: Sequence[float], ys: Sequence,
 
     bc_type is passed to scipy ('not-a-knot', 'natural', 'clamped'); shapes as interp_linear.
     """
+    from scipy.interpolate import CubicSpline  # imported when used: scipy's start-up is a process's slowest
+
     knots, y = _samples(ts, ys)
     tc = _clamp(t, knots)
     spline = CubicSpline(knots, y, bc_type=bc_type, axis=0)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from ..errors import SpecError
 from ..spec.loader import PrimitiveInstance
@@ -160,6 +159,7 @@ def _table_setpoint(name: str, ts: np.ndarray, ys: np.ndarray, interpolation: st
     """t -> x*(t) from a table by linear lookup, held outside its range, wrapped into one period."""
     if interpolation != "linear":
         ts_f = np.linspace(ts[0], ts[-1], 8 * len(ts))  # cubic tables: sampled densely, then linear
+        from scipy.interpolate import CubicSpline  # imported when used: scipy's start-up is a process's slowest
         ys, ts = CubicSpline(ts, ys, axis=0)(ts_f), ts_f
     lookup = ca.interpolant(name + "_lookup", "linear", [np.asarray(ts, float)],
                             np.asarray(ys, float).ravel(order="C"))

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-import scipy.linalg
 
 from ...errors import SpecError
 from ...spec.controllers import LQRController
@@ -85,6 +84,7 @@ def lqr_law(c: LQRController, ctx: ControlContext) -> ca.SX:
                               "vanish; use another controller or fix the parameters")
     try:
         with np.errstate(all="ignore"):
+            import scipy.linalg  # imported when used: scipy's start-up is a process's slowest
             P = scipy.linalg.solve_continuous_are(A, B, Q, R)
             K = np.linalg.solve(R, B.T @ P)
     except (np.linalg.LinAlgError, ValueError) as err:
