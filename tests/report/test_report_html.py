@@ -217,3 +217,14 @@ def test_warnings_are_counted_alike_everywhere(sample_text):
     p = ProjectResult(path=Path("x"), name="x", status="pass", report=report)
     assert warning_count(report) == p.warnings == n + 1
     assert f"; {n + 1} warnings;" in summary([p], 1.0) and f"with {n + 1} warnings" in p._repr_html_()
+
+
+def test_the_sequence_says_how_its_switches_are_chosen(sample_text):
+    """The switching rule and the torque reserve of the graph run are stated where the runs are."""
+    r = json.loads(sample_text)
+    plain = render_html(r)
+    assert "at the first verified t_A it meets." in plain and "of each input's bound" not in plain
+    r["lookup_table"].update(switch="margin", reserve=0.8)
+    html = render_html(r)
+    assert "at least 0.8 of its edge's best, and only through cells whose law asks at most 0.8 of each input's bound." \
+        in html
