@@ -320,11 +320,12 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
     t_both, = _claim(r"The naive run agrees: unsafe in both at ([\d.]+) s on `trunk_clearance`", readme)
     first = cc["naive"]["mujoco"]["first_violation"]
     assert cc["naive"]["agree"] and first["h"] == "trunk_clearance" and _as_written(first["t"], t_both)
-    gap, r_w = _claim(r"never comes closer to x\\\* than ([\d.]+) outside E \(r = ([\d.]+) in E's norm\)", readme)
-    waiting = cc["graph"]["executor"]["waiting"]
-    assert waiting["primitive"] == "Walk(fast)" and _as_written(-waiting["best_roa_margin"], gap)
-    assert _as_written(radius["Walk(fast)"], r_w)
-    lag, = _claim(r"It is safe, reaches Stand and Walk\(fast\) within ([\d.]+) ms of mpgspec's run", readme)
-    goals = {g["goal"]: g for g in cc["graph"]["executor"]["goals"] if g["t"] == 3.0}
-    assert cc["graph"]["executor"]["safe"] and abs(goals["Walk(fast)"]["arrived"] - goals["Walk(fast)"]["arrived_mpgspec"]) \
-        <= float(lag) / 1000 + 1e-9
+    ex = cc["graph"]["executor"]
+    lag, = _claim(r"It is safe and reaches every goal of Table II within ([\d.]+) s of mpgspec's run", readme)
+    assert ex["safe"] and ex["reached_every_goal"] and ex.get("waiting") is None
+    assert _as_written(ex["largest_lag_s"], lag)
+    arrivals = re.findall(r"(Walk\(fast\)|Jump|Walk\(fast\) again|Lie) at ([\d.]+) s \(\D*([\d.]+) s\)",
+                          readme[readme.index("It is safe and reaches every goal of Table II"):][:400])
+    got = [(g["goal"], g["arrived"], g["arrived_mpgspec"]) for g in ex["goals"] if g["t"] > 0]
+    assert [(n.replace(" again", ""), float(a), float(m)) for n, a, m in arrivals] == \
+        [(n, pytest.approx(a, abs=5e-4), pytest.approx(m, abs=5e-5)) for n, a, m in got]
