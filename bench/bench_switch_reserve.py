@@ -30,7 +30,7 @@ SHARE = 0.8
 def reserves(report: dict) -> list[dict]:
     """Per edge the graph run takes (in the order first taken): the rows it may switch through and their
     peak |u| and least friction-cone value, and the edge's peak_input weight (over every row)."""
-    from mpgspec.graph.transition import switch_clocks
+    from mpgspec.graph.transition import executor_clocks
     from mpgspec.report.read import ReportGraph
 
     g = ReportGraph(report)
@@ -45,8 +45,7 @@ def reserves(report: dict) -> list[dict]:
     for a, b in taken:
         tr, t = g.edge(a, b), trs[(a, b)]
         transient = cls[a] == "transient"
-        clocks = switch_clocks(tr, "first" if transient else table.get("switch", "first"),
-                               None if transient else table.get("reserve"), bound)
+        clocks = executor_clocks(tr, transient, table.get("switch", "first"), table.get("reserve"), bound)
         fams = [f.split("[")[0] for f in t["h_families"]]
         cells = t["cells"]
         rows = []

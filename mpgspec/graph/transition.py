@@ -146,6 +146,13 @@ def switch_clocks(tr, rule: str = "first", reserve: float | None = None, bound=N
     return [b if k else None for b, k in zip(out, keep)]
 
 
+def executor_clocks(tr, transient: bool, rule: str, reserve: float | None = None, bound=None) -> list[float | None]:
+    """switch_clocks as the graph executor takes them: a transient hands over to its next at the end of its
+    domain, at every verified clock (no rule or reserve chooses a time there); any other source by the
+    sequence's rule and reserve."""
+    return switch_clocks(tr, "first") if transient else switch_clocks(tr, rule, reserve, bound)
+
+
 def _by_rule(tr, rule: str) -> list[float | None]:
     best = list(tr.best_t_B)
     rows = list(getattr(tr, "row_margins", None) or [])

@@ -17,7 +17,7 @@ import numpy as np
 
 from ...compile.contacts import grid_clock
 from ...compile.primitive import CompiledPrimitive
-from ...graph.transition import switch_clocks
+from ...graph.transition import executor_clocks
 from ...spec.models import PrimitiveClass
 
 
@@ -41,13 +41,11 @@ class ExecutorPlan:
         edges = {}
         for a, b in sorted(pairs):
             tr = graph.edge(a, b)
-            if tr is not None:  # a transient hands over at the end of its domain: the rule chooses no time there
-                transient = prims[a].cls is PrimitiveClass.TRANSIENT
-                rule = "first" if transient else seq.switch
-                reserve = None if transient else getattr(seq, "reserve", None)
+            if tr is not None:
                 bound = np.maximum(np.abs(prims[b].system.u_lo), np.abs(prims[b].system.u_hi))
-                edges[(a, b)] = ([float(v) for v in tr.t_A],
-                                 [None if v is None else float(v) for v in switch_clocks(tr, rule, reserve, bound)])
+                clocks = executor_clocks(tr, prims[a].cls is PrimitiveClass.TRANSIENT, seq.switch,
+                                         getattr(seq, "reserve", None), bound)
+                edges[(a, b)] = ([float(v) for v in tr.t_A], [None if v is None else float(v) for v in clocks])
         return cls(seq.start, tuple((float(c.t), c.goal) for c in seq.commands), table, edges)
 
     def key(self) -> list:
