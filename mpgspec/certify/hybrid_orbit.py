@@ -15,7 +15,7 @@ import numpy as np
 
 from ..compile.rigidbody.symmetry import reduced_monodromy
 from ..compile.contacts import Schedule
-from ..oracle.flow import LEFT, rk4_jump
+from ..oracle.flow import LEFT, jump_of, rk4_jump
 from ..oracle import looplib
 from ..oracle.jit import compile_many, cse_sx
 
@@ -33,17 +33,18 @@ def _parts(prim, xs0: np.ndarray) -> tuple:
         h_of = lambda xx, tt: looplib.windowed(prim, loop(xx, tt, S_LONG, xs0)[1], xx, tt, S_LONG)  # noqa: E731
         return (lambda xx, tt: loop(xx, tt, S_LONG, xs0)[0], lambda xx, tt: loop(xx, tt, S_LONG, xs0)[3],
                 lib.get("jump"), h_of)
-    f_cl, ctrl, jump, h_fn = (cse_sx(g) for g in (prim.f_cl, prim.control, prim.jump, prim.h))
+    f_cl, ctrl, jump, h_fn = (cse_sx(g) for g in (prim.f_cl, prim.control, jump_of(prim), prim.h))
     return (lambda xx, tt: f_cl(xx, tt, S_LONG, xs0), lambda xx, tt: ctrl(xx, tt, S_LONG, xs0)[1], jump,
             lambda xx, tt: h_fn(xx, tt, S_LONG, xs0))
 
 
 class HybridFlow:
-    """Compiled steps, periods and tubes of a compiled primitive's discrete flow."""
+    """Compiled steps, periods and tubes of a compiled primitive's discrete flow. `period` (default:
+    the primitive's) is the stretch one call runs: a fixed primitive's flow is run in such chunks."""
 
-    def __init__(self, prim, dt: float):
+    def __init__(self, prim, dt: float, period: float | None = None):
         self.prim, self.dt = prim, float(dt)
-        T = float(prim.period)
+        T = float(prim.period if period is None else period)
         self.steps = int(round(T / dt))
         if abs(self.steps * dt - T) > 1e-9 or any(abs(b / dt - round(b / dt)) > 1e-6 for b in prim.boundaries):
             raise ValueError(f"the period and switching times must be multiples of dt = {dt:g}")

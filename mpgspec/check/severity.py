@@ -7,11 +7,18 @@ from ..oracle.joint import Map, run
 from ..oracle.tasks import Failed
 from .assumptions import AssumptionCheck, check_primitive
 from .region_size import region_size
+from .roa_flows import roa_invariant
 
 
 def primitive_checks(prims: dict[str, CompiledPrimitive], name: str) -> list[dict]:
-    """check_primitive of prims[name], as dicts: one map item of the executor."""
-    return [c.to_dict() for c in check_primitive(prims[name])]
+    """check_primitive of prims[name] and, for a fixed primitive, roa_invariant (flows from E's
+    boundary), as dicts: one map item of the executor."""
+    p = prims[name]
+    checks = check_primitive(p)
+    flows = roa_invariant(p)
+    if flows is not None:
+        checks.insert(3, flows)  # after roa_in_safe_set, in the order of Definition 1
+    return [c.to_dict() for c in checks]
 
 
 def _checks_by_name(prims: dict[str, CompiledPrimitive], memo):

@@ -91,7 +91,7 @@ def _locate_checks(spec: ProjectSpec, ch: Checks, report: dict) -> None:
         if (w := _where(loc)) is not None:
             entry["location"] = w
     for c in report.get("assumptions", []):
-        on_roa = c["name"] in ("roa_in_safe_set", "roa_size")
+        on_roa = c["name"] in ("roa_in_safe_set", "roa_invariant", "roa_size")
         w = _where(prim(c["primitive"], "roa") if on_roa else prim(c["primitive"]))
         if w is not None:
             c["location"] = w

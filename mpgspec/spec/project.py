@@ -181,7 +181,8 @@ class Project(Strict):
     safe_sets: dict[str, list[SafetyFunction]] = Field(default_factory=dict)
     oracle: OracleConfig = OracleConfig()
     assumptions: dict[
-        Literal["setpoint_dynamics", "setpoint_safe", "roa_in_safe_set", "local_stability", "roa_size"],
+        Literal["setpoint_dynamics", "setpoint_safe", "roa_in_safe_set", "roa_invariant", "local_stability",
+                "roa_size"],
         Literal["fail", "warn", "off"],
     ] = Field(default_factory=dict, description="what a failed assumption check does (default: fail)")
     assertions: list[Assertion] = Field(default_factory=list)

@@ -5,6 +5,7 @@ import pinocchio as pin
 import pytest
 
 from mpgspec.check.assumptions import largest_radius_in_safe_set, roa_in_safe_set
+from mpgspec.check.roa_flows import boundary_starts
 
 FEET = ("FL_foot", "FR_foot", "RL_foot", "RR_foot")
 
@@ -92,3 +93,17 @@ def test_spec_radius_of_lie_is_within_the_largest_safe_one(a1):
     lie = prims["Lie"]
     r = largest_radius_in_safe_set(lie, r_max=0.08, samples=40, rel_tol=0.05)
     assert lie.radius <= r < 0.08
+
+
+def test_boundary_starts_lie_on_e_and_the_contact_manifold(a1):
+    """roa_invariant's starts for the A1's Stand: 16 on the W-sphere of E, feet on the ground and still."""
+    _, prims, _ = a1
+    stand = prims["Stand"]
+    X = boundary_starts(stand, 16, 0)
+    W, xs = np.asarray(stand.W), np.asarray(stand.x_star(0.0)).ravel()
+    d = np.sqrt(np.einsum("ij,ik,kj->j", X - xs[:, None], W, X - xs[:, None]))
+    assert np.allclose(d, stand.radius, rtol=1e-3)
+    sys = stand.system
+    for j in range(X.shape[1]):
+        x = X[:, j]
+        assert np.allclose(sys.project_to_contacts(x, ("FL_foot", "FR_foot", "RL_foot", "RR_foot"), W), x, atol=1e-8)
