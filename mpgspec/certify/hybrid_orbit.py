@@ -2,7 +2,8 @@
 
 The flow is the oracle's own discrete one: RK4 steps of dt from clock times on the dt grid (every
 contact switch lies on it), each followed by the primitive's jump (quaternion renormalised,
-plastic impact of feet that join the contact mode). x*(t) must be a trajectory of that flow step
+plastic impact of feet that join the contact mode); a sampled law (an ID-QP with a control rate)
+is solved at a step's start when due and held over the step, as the oracle holds it. x*(t) must be a trajectory of that flow step
 by step (`orbit`); the monodromy is the derivative of one period of the map by central
 differences, with `neutral` (base_x, base_y, yaw of a floating base on flat ground) taken on the
 reduced state and the neutral multipliers reported by name. The assumption checks
@@ -10,12 +11,14 @@ reduced state and the neutral multipliers reported by name. The assumption check
 """
 from __future__ import annotations
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 
 from ..compile.rigidbody.symmetry import reduced_monodromy
 from ..compile.contacts import Schedule
-from ..oracle.flow import LEFT, jump_of, rk4_jump
+from ..oracle.flow import LEFT, jump_of, rk4_jump, solve_or_keep
 from ..oracle import looplib
 from ..oracle.jit import compile_many, cse_sx
 
@@ -38,6 +41,31 @@ def _parts(prim, xs0: np.ndarray) -> tuple:
             lambda xx, tt: h_fn(xx, tt, S_LONG, xs0))
 
 
+def _hold_size(prim) -> int:
+    """Entries after [x; t; min h] that a sampled law needs: steps left before its next solve, the
+    held input and the warm start (0 for a law evaluated continuously)."""
+    law = prim.sampled
+    return 0 if law is None else 1 + prim.system.nu + law.nw
+
+
+def _held_step(prim, xs0: np.ndarray, x, t, h: float, left: float, hold):
+    """(x after one step, h at its end, hold after it) of a sampled law held over the step, as the
+    oracle runs it: solved at the step's start from the warm start when due (every rate / dt steps),
+    the open loop integrated under the held input, then the jump."""
+    law, nu = prim.sampled, prim.system.nu
+    solve = looplib.part(prim, "solve")
+    law = law if solve is None else dataclasses.replace(law, solve=solve)
+    loop_u = looplib.part(prim, "loop_u") or looplib.plain_loop(prim, True)
+    jump = looplib.part(prim, "jump") or jump_of(prim)
+    m = law.steps(h)
+    c, u, w = hold[0], hold[1:1 + nu], hold[1 + nu:]
+    u, w = solve_or_keep(law, nu)(c < 0.5, x, t, S_LONG, xs0, w, u)
+    xn = rk4_jump(lambda xx, tt: loop_u(xx, tt, S_LONG, xs0, u)[0], lambda xx, tt: loop_u(xx, tt, S_LONG, xs0, u)[3],
+                  jump, x, t, h, left)
+    hv = looplib.windowed(prim, loop_u(xn, t + h, S_LONG, xs0, u)[1], xn, t + h, S_LONG)
+    return xn, hv, ca.vertcat(ca.if_else(c < 0.5, m - 1, c - 1), u, w)
+
+
 class HybridFlow:
     """Compiled steps, periods and tubes of a compiled primitive's discrete flow. `period` (default:
     the primitive's) is the stretch one call runs: a fixed primitive's flow is run in such chunks."""
@@ -50,26 +78,31 @@ class HybridFlow:
             raise ValueError(f"the period and switching times must be multiples of dt = {dt:g}")
         nx = prim.system.nx
         xs0 = np.array(prim.setpoint(0.0), float).ravel()
-        z = ca.MX.sym("z", nx + 2)  # [x; t; min h so far]
-        x, t, m = z[:nx], z[nx], z[nx + 1]
         f, k, jump, h_of = _parts(prim, xs0)
+        self.hold = _hold_size(prim)
+        z = ca.MX.sym("z", nx + 2 + self.hold)  # [x; t; min h so far (; a sampled law's hold)]
+        x, t, m = z[:nx], z[nx], z[nx + 1]
         h = self.dt
-        xn = rk4_jump(f, k, jump, x, t, h, LEFT if isinstance(prim.contacts, Schedule) else 0.0)
-        hv = h_of(xn, t + h)
+        left = LEFT if isinstance(prim.contacts, Schedule) else 0.0
+        if self.hold:
+            xn, hv, hold_next = _held_step(prim, xs0, x, t, h, left, z[nx + 2:])
+        else:
+            xn, hold_next = rk4_jump(f, k, jump, x, t, h, left), ca.MX(0, 1)
+            hv = h_of(xn, t + h)
         mn = ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
-        body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn)])
+        body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn, hold_next)])
         xs, ts = ca.MX.sym("x", nx), ca.MX.sym("t")
         h0 = h_of(xs, ts)
         self._least_h = ca.Function("hybrid_least_h", [xs, ts], [ca.mmin(h0) if h0.shape[0] else ca.inf])
-        zz = ca.MX.sym("z", nx + 2)  # a period with every step's state out, and with the last one only
+        zz = ca.MX.sym("z", nx + 2 + self.hold)  # a period with every step's state out, and with the last one only
         self.period_fn, self.period_end = compile_many(
-            [ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)]),
+            [ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)[:nx + 2, :]]),
              ca.Function("hybrid_period_end", [zz], [body.fold(self.steps)(zz)])],
             looplib.caller_flags(prim, ("-O1",)), libs=looplib.libs_of(prim))
 
     def states(self, x0: np.ndarray, t0: float = 0.0) -> np.ndarray:
         """[x; t; least h] after each step of one period from x0 at clock t0 (columns)."""
-        return np.array(self.period_fn(np.concatenate([x0, [t0, np.inf]])), float)
+        return np.array(self.period_fn(np.concatenate([x0, [t0, np.inf], np.zeros(self.hold)])), float)
 
     def least_h(self, X: np.ndarray, t: np.ndarray) -> np.ndarray:
         """The least safety function (its windows applied) at the columns of X at clocks t, as a step
@@ -85,14 +118,14 @@ class HybridFlow:
     def run_until(self, X0: np.ndarray, t0: np.ndarray, periods: int, stop=None) -> tuple[np.ndarray, np.ndarray, int]:
         """(states, least h, periods run) of rollouts from the columns of X0 at clocks t0: `periods`
         periods, or fewer when stop(states, least h) says after one that the outcome is decided."""
-        n = X0.shape[1]
-        Z = np.vstack([X0, t0[None, :], np.full((1, n), np.inf)])
+        n, nx = X0.shape[1], X0.shape[0]
+        Z = np.vstack([X0, t0[None, :], np.full((1, n), np.inf), np.zeros((self.hold, n))])  # a solve due at once
         fn = self.period_end.map(n)
         for k in range(periods):
             Z = np.array(fn(Z), float)
-            if stop is not None and k + 1 < periods and stop(Z[:-2], Z[-1]):
-                return Z[:-2], Z[-1], k + 1
-        return Z[:-2], Z[-1], periods
+            if stop is not None and k + 1 < periods and stop(Z[:nx], Z[nx + 1]):
+                return Z[:nx], Z[nx + 1], k + 1
+        return Z[:nx], Z[nx + 1], periods
 
 
 def orbit(flow: HybridFlow, W: np.ndarray) -> tuple[np.ndarray, float, float]:

@@ -107,3 +107,28 @@ def test_boundary_starts_lie_on_e_and_the_contact_manifold(a1):
     for j in range(X.shape[1]):
         x = X[:, j]
         assert np.allclose(sys.project_to_contacts(x, ("FL_foot", "FR_foot", "RL_foot", "RR_foot"), W), x, atol=1e-8)
+
+
+def test_roa_invariant_runs_stands_held_law_as_the_oracle_does(a1):
+    """The flow roa_invariant runs Stand on (its ID-QP solved at each 1 ms step's start and held) is the
+    oracle's own chunk, settled (long after the motion profile), bit for bit; and the check passes."""
+    from mpgspec.certify.hybrid_orbit import S_LONG, HybridFlow
+    from mpgspec.check.roa_flows import roa_invariant
+    from mpgspec.oracle.integrator import build_chunk, initial_state
+
+    _, prims, settings = a1
+    stand = prims["Stand"]
+    assert stand.sampled is not None
+    X0 = boundary_starts(stand, 2, 5)
+    XT, _ = HybridFlow(stand, 0.001, 0.1).run(X0, np.zeros(2), 1)
+    chunk = build_chunk(stand, 0.001, 100, True, settings.jit_flags, with_state=True, boundaries=False)
+    nx = stand.system.nx
+    for j in range(2):
+        z = initial_state(stand, X0[:, j], 0.0)
+        z[nx + 1], z[nx + 2:2 * nx + 2] = S_LONG, stand.x_star(0.0)
+        zf, _ = chunk.run(z[:, None])
+        assert np.array_equal(zf[:nx, 0], XT[:, j])
+        assert np.abs(XT[:, j] - X0[:, j]).max() > 0.01  # the flow moved
+    chk = roa_invariant(stand)
+    assert chk.status == "pass" and chk.numbers["unsafe"] == 0 and chk.numbers["outside_at_end"] == 0, chk.message
+    assert chk.numbers["contact_manifold"] and 0.5 < chk.numbers["final_distance_max"] < 1
