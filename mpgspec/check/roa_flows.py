@@ -22,6 +22,7 @@ from ..compile.primitive import CompiledPrimitive
 from ..spec.models import PrimitiveClass
 from .assumptions import HYBRID_DT, AssumptionCheck
 from .roa_manifold import contact_projection
+from .roa_samples import metric, sphere_offsets, weighted_distances
 
 SAMPLES = 16
 """Starts on E's boundary."""
@@ -36,31 +37,18 @@ CONVERGED = 0.05
 """Flows within this fraction of r from x* have converged."""
 
 
-def _wdist(W: np.ndarray, D: np.ndarray) -> np.ndarray:
-    v = np.einsum("ij,ik,kj->j", D, W, D)
-    return np.sqrt(np.where(np.isfinite(v), np.maximum(v, 0.0), np.inf))
-
-
 def boundary_starts(p: CompiledPrimitive, n: int, seed: int) -> np.ndarray:
-    """Columns x* + r W^-1/2 u on the W-sphere of radius r around x*(0), each put on the contact
-    manifold of the primitive's feet (projected, pushed back to the sphere, projected again)."""
-    W = np.asarray(p.W, float)
-    rng = np.random.default_rng(seed)
-    w, U = np.linalg.eigh(0.5 * (W + W.T))
-    keep = w > 1e-12 * max(w.max(), 1e-300)
-    Wi = (U[:, keep] / np.sqrt(w[keep])) @ U[:, keep].T  # unweighted states are not moved
+    """Columns on the W-sphere of radius r around x*(0), each put on the contact manifold of the
+    primitive's feet (projected, pushed back to the sphere, projected again)."""
     xs = np.asarray(p.x_star(0.0), float).ravel()
-    u = rng.normal(size=(n, W.shape[0]))
-    D = (u @ Wi).T
     r = float(p.radius) * (1 - 1e-9)
-    X = xs[:, None] + r * D / np.maximum(_wdist(W, D), 1e-300)
-    project = contact_projection(p, W)
+    X = xs[:, None] + sphere_offsets(metric(p), r, n, np.random.default_rng(seed)).T
+    project = contact_projection(p, metric(p))
     if project is None:
         return X
     for _ in range(2):
         X = np.asarray(project.many(X.T, xs, 0.0)[0], float).T
-        D = X - xs[:, None]
-        X = xs[:, None] + r * D / np.maximum(_wdist(W, D), 1e-300)
+        X = xs[:, None] + (X - xs[:, None]) * (r / np.maximum(weighted_distances(p, X, xs), 1e-300))
     return np.asarray(project.many(X.T, xs, 0.0)[0], float).T
 
 
@@ -69,13 +57,12 @@ def roa_invariant(p: CompiledPrimitive, tol: float = 1e-9, samples: int = SAMPLE
     """The check above for a fixed primitive with a non-empty E; None for other primitives."""
     if p.cls is not PrimitiveClass.FIXED or not float(p.radius) > 0:
         return None
-    W = np.asarray(p.W, float)
     r = float(p.radius)
     T = float(horizon or p.horizon or HORIZON)
     flow = HybridFlow(p, HYBRID_DT, CHUNK)
-    xs = np.asarray(p.x_star(0.0), float).ravel()[:, None]
+    xs = np.asarray(p.x_star(0.0), float).ravel()
     X = boundary_starts(p, samples, seed)
-    r0 = _wdist(W, X - xs)
+    r0 = weighted_distances(p, X, xs)
     margin = lambda Y: np.array(p.roa_margin.map(Y.shape[1])(Y, 0.0), float).ravel()  # noqa: E731
     h0 = flow.least_h(X, np.zeros(samples))
     hmin, dist = h0.copy(), r0.copy()
@@ -84,7 +71,7 @@ def roa_invariant(p: CompiledPrimitive, tol: float = 1e-9, samples: int = SAMPLE
         X, hk = flow.run(X, np.full(samples, k * CHUNK), 1)
         hmin = np.minimum(hmin, hk)
         ran = (k + 1) * CHUNK
-        dist = _wdist(W, X - xs)
+        dist = weighted_distances(p, X, xs)
         if (hmin < -tol).any() or not np.isfinite(X).all():
             break
         if (dist <= CONVERGED * r).all():  # a slow drift is no evidence of rest: only this ends a run early
@@ -98,7 +85,7 @@ def roa_invariant(p: CompiledPrimitive, tol: float = 1e-9, samples: int = SAMPLE
                else None, "unsafe": int(unsafe.sum()), "outside_at_end": int(outside.sum()),
                "final_distance_max": float(np.nanmax(final)) if np.isfinite(final).any() else None,
                "final_distance_median": float(np.nanmedian(final)) if np.isfinite(final).any() else None,
-               "contact_manifold": contact_projection(p, W) is not None}
+               "contact_manifold": contact_projection(p, metric(p)) is not None}
     where = "on the contact manifold, " if numbers["contact_manifold"] else ""
     least_h = "no safety function" if numbers["least_h"] is None else f"least h {numbers['least_h']:.3g}"
     head = f"{samples} flows from E's boundary ({where}seed {seed}), {ran:.2g} s of {T:.2g} s"

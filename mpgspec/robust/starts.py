@@ -15,7 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..check.assumptions import _contact_projection
+from ..check.roa_samples import metric, sphere_offsets, weighted_distance
 from ..compile.primitive import CompiledPrimitive
+
+__all__ = ["INSIDE", "Start", "boundary_starts", "metric", "sphere_offsets", "weighted_distance"]
 
 INSIDE = 1e-9
 """Relative slack of `distance <= r_A` when a projected sample is kept."""
@@ -29,31 +32,6 @@ class Start:
     x: np.ndarray
     sample: int | None = None
     distance: float = 0.0
-
-
-def metric(prim: CompiledPrimitive) -> np.ndarray:
-    """W of the primitive's E."""
-    return np.array(prim.W, float)
-
-
-def weighted_distance(prim: CompiledPrimitive, x: np.ndarray, xs: np.ndarray) -> float:
-    """||x - xs||_W with wrapped states measured the short way round, as E's margin measures them."""
-    dx = np.asarray(x, float) - np.asarray(xs, float)
-    p = np.asarray(prim.system.wrap, float)
-    dx = np.where(p > 0, dx - p * np.floor((dx + p / 2) / np.where(p > 0, p, 1.0)), dx)
-    W = metric(prim)
-    return float(np.sqrt(max(dx @ W @ dx, 0.0)))
-
-
-def sphere_offsets(W: np.ndarray, radius: float, n: int, rng: np.random.Generator) -> np.ndarray:
-    """n offsets dx (n, nx) with dx' W dx = radius^2, uniform over the sphere in W's weighted
-    subspace (directions of zero weight are not moved)."""
-    w, V = np.linalg.eigh(W)
-    keep = w > 1e-12
-    L = V[:, keep] / np.sqrt(w[keep])  # unit vectors of the weighted norm -> state offsets
-    d = rng.normal(size=(n, L.shape[1]))
-    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
-    return radius * d @ L.T
 
 
 def boundary_starts(prim: CompiledPrimitive, t_A: float, n: int, seed: int) -> list[Start]:

@@ -80,13 +80,19 @@ def test_a_safe_flow_that_leaves_e_is_a_warning(tmp_path):
     assert chk.numbers["final_distance_max"] == pytest.approx((1 + 0.2 * np.exp(2.5)) / 1.2, rel=0.02)
 
 
-def test_the_check_is_in_the_report_and_a_failure_fails_the_run(tmp_path):
+def _verify(tmp_path: Path, extra: str = ""):
+    """(exit code, report, Hold's roa_invariant) of a run with E = 1.5."""
     path = tmp_path / "project.yaml"
-    path.write_text(SPEC.format(h="16 - x^2", r=1.5, extra=""))
+    path.write_text(SPEC.format(h="16 - x^2", r=1.5, extra=extra))
     res = api.verify([path], out_dir=None, overrides={"jit": False})
     (p,) = res.projects
     (chk,) = [a for a in p.report["assumptions"] if a["primitive"] == "Hold" and a["name"] == "roa_invariant"]
-    assert res.exit_code == 1 and chk["status"] == "fail" and chk["level"] == "empirical"
+    return res.exit_code, p, chk
+
+
+def test_the_check_is_in_the_report_and_a_failure_fails_the_run(tmp_path):
+    rc, p, chk = _verify(tmp_path)
+    assert rc == 1 and chk["status"] == "fail" and chk["level"] == "empirical"
     assert chk["location"]["line"] == 15  # the primitive's roa key
     (other,) = [a for a in p.report["assumptions"] if a["primitive"] == "Other" and a["name"] == "roa_invariant"]
     assert other["status"] == "pass"
@@ -95,13 +101,9 @@ def test_the_check_is_in_the_report_and_a_failure_fails_the_run(tmp_path):
 
 
 def test_the_project_may_report_it_as_a_warning(tmp_path):
-    path = tmp_path / "project.yaml"
-    path.write_text(SPEC.format(h="16 - x^2", r=1.5, extra="assumptions: {roa_invariant: warn}\n"))
-    res = api.verify([path], out_dir=None, overrides={"jit": False})
-    (p,) = res.projects
-    (chk,) = [a for a in p.report["assumptions"] if a["primitive"] == "Hold" and a["name"] == "roa_invariant"]
+    rc, _, chk = _verify(tmp_path, "assumptions: {roa_invariant: warn}\n")
     assert chk["status"] == "warn" and "reported as a warning" in chk["message"]
-    assert res.exit_code == 0
+    assert rc == 0
 
 
 
