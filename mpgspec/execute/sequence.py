@@ -275,7 +275,7 @@ class _Simulation:
                 return self._hand_over(p, i, t_now)
             if self.mode == "graph" and self.goal != self.cur and self.converged \
                     and p.cls is not PrimitiveClass.TRANSIENT:
-                event = self._graph_switch(p, i, clk)
+                event = self._graph_switch(p, i, clk, float(M[i]))
                 if event:
                     return event
         return None
@@ -338,15 +338,18 @@ class _Simulation:
             run.failed = run.failed or f"unverified hand-over {self.cur} -> {p.next} at t = {t_now:.3f} s"
         return (i, "transient_end", (p.next, t_B if self.mode == "graph" else None))
 
-    def _graph_switch(self, p: CompiledPrimitive, i: int, clk: float):
+    def _graph_switch(self, p: CompiledPrimitive, i: int, clk: float, margin: float):
         """Towards the goal by the lookup table, at a grid time t_A the oracle verified (within dt / 2)
-        that the sequence's switching rule takes (ExecutorPlan.switch_clock)."""
+        that the sequence's switching rule takes (ExecutorPlan.switch_clock), from within the share of
+        E_A the switch was checked from (ExecutorPlan.admits; margin: the state's RoA margin)."""
         nxt = self.table[self.cur].get(self.goal)
         if not nxt or nxt == self.cur:
             return None
         c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clk, p.period)
         t_B = self.plan.switch_clock(self.cur, nxt, c, self.dt / 2)
-        return None if t_B is None else (i, "graph", (nxt, t_B))
+        if t_B is None or not self.plan.admits(self.cur, nxt, c, self.dt / 2, margin, p.radius):
+            return None
+        return (i, "graph", (nxt, t_B))
 
     def _act(self, event, X) -> bool:
         """Switch (or end) at the event's step; False when the run ends."""

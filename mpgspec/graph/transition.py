@@ -35,6 +35,12 @@ class Transition:
     row_margins: list[float | None] = field(default_factory=list)
     """Per t_A: the least normalised safety margin of the cell at its best t_B (see measure_margins),
     None where no t_B is verified; empty until measured."""
+    row_from_roa: list[list | None] = field(default_factory=list)
+    """Per t_A: [share of r_A the executor may switch within, samples of E_A's boundary safe, samples drawn]
+    at the row's best t_B (robust/from_roa.py; share 0: refused), None where the row was not checked;
+    empty when no such check ran."""
+    from_roa_worst: dict | None = None
+    """The worst sample of E_A's boundary that was not safe: t_A, t_B, sample, status, violated h, margin."""
     certified: dict = field(default_factory=dict)
     """t_A intervals proved for every t_A in them, not only at grid points: {windows: [[a, b], ...],
     boxes: start boxes used, order: Taylor order, width: largest start-box width, seconds}; empty
@@ -134,7 +140,8 @@ def switch_clocks(tr, rule: str = "first", reserve: float | None = None, bound=N
     (an executor in a periodic primitive then waits for the well-kept switches of its cycle; where the
     margins were not measured, as 'first'). With `reserve` and the inputs' bounds (largest |u| each),
     a t_A whose cell asks more than reserve x bound of some input, or whose peaks are unknown, is not
-    taken either."""
+    taken either. A row checked from the boundary of E_A (row_from_roa) with a sample not safe is never
+    taken: the executor leaves A from anywhere in E_A."""
     out = _by_rule(tr, rule)
     if reserve is None or bound is None:
         return out
@@ -153,8 +160,21 @@ def executor_clocks(tr, transient: bool, rule: str, reserve: float | None = None
     return switch_clocks(tr, "first") if transient else switch_clocks(tr, rule, reserve, bound)
 
 
+def switch_shares(tr) -> list[float]:
+    """Per t_A: the share of r_A within which the executor may switch through the row (robust/from_roa.py):
+    1 where the row was not checked from E_A's boundary, 0 where it was refused."""
+    rows = list(getattr(tr, "row_from_roa", None) or [])
+    return [1.0 if i >= len(rows) or rows[i] is None else float(rows[i][0]) for i in range(len(tr.best_t_B))]
+
+
+def from_roa_ok(tr) -> list[bool]:
+    """Per t_A: not refused by the check from E_A's boundary."""
+    return [s > 0 for s in switch_shares(tr)]
+
+
 def _by_rule(tr, rule: str) -> list[float | None]:
-    best = list(tr.best_t_B)
+    """The rows the rule takes among those the check from E_A's boundary did not refuse."""
+    best = [b if ok else None for b, ok in zip(tr.best_t_B, from_roa_ok(tr))]
     rows = list(getattr(tr, "row_margins", None) or [])
     if rule == "first" or len(rows) != len(best):
         return best

@@ -31,6 +31,7 @@ from ..oracle.tasks import Failed
 from ..plan.planner import lookup_table, shortest_plan
 from ..progress import Progress, of_project
 from ..spec.uncertainty_refs import check_uncertainty, check_uncertainty_compiled
+from ..robust.from_roa import check_from_roa, from_roa_samples
 from ..robust.graph import RobustResult, prefetch_robust, robust_steps
 from ..settings import OracleSettings
 from ..spec.loader import ProjectSpec
@@ -126,6 +127,12 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
         if progress:
             progress(spec.name, "certified windows (validated integration over t_A intervals)", 0, 0)
         certify_windows(g, prims, settings, executor, cb)
+    samples = from_roa_samples(spec)
+    t_roa = time.perf_counter()
+    if samples:
+        if progress:
+            progress(spec.name, f"switches from E_A's boundary ({samples} samples a row)", 0, 0)
+        from_roa_calls = check_from_roa(g, prims, settings, samples, executor, cb)
     t1 = time.perf_counter()
     names = list(prims)
     pairs = [(a, b) for a in names for b in names if a != b]
@@ -134,7 +141,8 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     memo = getattr(executor, "memo", None)
     edges, failures = run(traces_stage(g, prims, settings, pairs, memo), executor, cb)
     calls = sum(len(tr.t_A) * len(tr.t_B) for tr in g.transitions.values())
-    timing = {"graph_s": t1 - t0, "oracle_calls": calls, "oracle_calls_per_s": calls / max(t1 - t0, 1e-9),
+    timing = {"graph_s": t1 - t0, **({"from_roa_s": t1 - t_roa, "from_roa_calls": from_roa_calls} if samples else {}),
+              "oracle_calls": calls, "oracle_calls_per_s": calls / max(t1 - t0, 1e-9),
               "traces_s": time.perf_counter() - t1,
               **{k: v - before.get(k, 0) for k, v in getattr(executor, "stats", {}).items()}}  # this project's
     return VerifiedGraph(g, edges, failures, timing)

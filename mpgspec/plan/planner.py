@@ -50,16 +50,26 @@ def plan_graph(g: MotionPrimitiveGraph) -> nx.DiGraph:
     """The graph restricted to executable moves.
 
     A transient hands over to its `next` at the end of its domain, so its only usable out-edge is
-    the one to `next`, and only when the oracle verified it from t_A = t_f.
+    the one to `next`, and only when the oracle verified it from t_A = t_f. Any other edge is usable
+    while some verified row was not refused by the check from E_A's boundary (robust/from_roa.py).
     """
     G = g.G.copy()
     for n, d in g.G.nodes(data=True):
-        if d.get("cls") == "transient":
-            for _, b in list(G.out_edges(n)):
-                tr = g.edge(n, b)
+        for _, b in list(G.out_edges(n)):
+            tr = g.edge(n, b)
+            if d.get("cls") == "transient":
                 if b != d.get("next") or tr is None or tr.switch_clock(d["domain"][1]) is None:
                     G.remove_edge(n, b)
+            elif tr is not None and getattr(tr, "row_from_roa", None) and not _executable(tr):
+                G.remove_edge(n, b)
     return G
+
+
+def _executable(tr) -> bool:
+    """Whether some verified row of the edge survived the check from E_A's boundary."""
+    from ..graph.transition import from_roa_ok  # imported when a report or graph carries the check
+
+    return any(t_b is not None and ok for t_b, ok in zip(tr.best_t_B, from_roa_ok(tr)))
 
 
 def shortest_path(G: nx.DiGraph, source: str, goal: str,

@@ -89,6 +89,7 @@ def transition_entry(tr, h_names: list[str]) -> dict:
         "verdicts": tr.verdicts.tolist(), "cells": compact_cells(cells, h_names),
         "windows": [list(w) for w in tr.windows], "best_t_B": tr.best_t_B, "weights": tr.weights,
         **({"row_margins": [finite_json(m) for m in tr.row_margins]} if tr.row_margins else {}),
+        **({"from_roa": {"rows": tr.row_from_roa, "worst": finite_json(tr.from_roa_worst)}} if tr.row_from_roa else {}),
         "counts": {"safe": sum(e.verdict for e in flat), "total": len(flat),
                    "inconclusive": sum(e.status == "inconclusive" for e in flat),
                    "refined": sum(e.refined for e in flat), "errors": sum(e.reason.value == "error" for e in flat),
@@ -122,6 +123,13 @@ def edge_entries(graph) -> list[dict]:
                                     f"domain" if nd.get("cls") == "transient" else "not executable")
             if b == nd.get("next"):
                 e["unusable_reason"] = f"{a} is transient and this switch is not safe from the end of its domain"
+            tr = graph.edge(a, b)
+            if nd.get("cls") != "transient" and getattr(tr, "row_from_roa", None):
+                w = tr.from_roa_worst or {}
+                e["unusable_reason"] = (f"no verified switch is safe from every sample of E_{a}'s boundary or of the "
+                                        f"spheres at 1/2 and 1/4 of its radius (the executor leaves {a} from within "
+                                        f"E_{a}): at t_A = {w.get('t_A')} {w.get('status')}, "
+                                        f"{w.get('violated') or w.get('reason')}")
         out.append(e)
     return out
 

@@ -78,6 +78,7 @@ class ReportTransition:
     weights: dict = field(default_factory=dict)
     row_margins: list = field(default_factory=list)
     row_peaks: list = field(default_factory=list)
+    row_from_roa: list = field(default_factory=list)
 
     @cached_property
     def t_A(self):
@@ -135,7 +136,7 @@ class ReportGraph:
             self.transitions[(e["from"], e["to"])] = ReportTransition(
                 e["from"], e["to"], e["class"], list(t.get("t_A", [])), list(t.get("best_t_B", [])),
                 [tuple(w) for w in t.get("windows", [])], {k: e[k] for k in WEIGHTS if e.get(k) is not None},
-                list(t.get("row_margins") or []), _row_peaks(t))
+                list(t.get("row_margins") or []), _row_peaks(t), list((t.get("from_roa") or {}).get("rows") or []))
 
     @property
     def nodes(self) -> list[str]:

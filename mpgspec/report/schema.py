@@ -167,6 +167,16 @@ class Certified(_Strict):
     time_s: float = Field(ge=0, description="wall-clock time the proof took, s")
 
 
+
+class FromRoA(_Strict):
+    rows: list[tuple[float, int, int] | None] = Field(description="per t_A: [share of r_A, samples safe, samples "
+                                                     "drawn on E_A's boundary] at the row's best t_B; null where not "
+                                                     "checked. The executor switches through the row only within "
+                                                     "that share of r_A from x_A*(t_A); 0: never")
+    worst: dict | None = Field(None, description="the worst sample not safe: t_A, t_B, sample, status, violated, "
+                                                 "margin, reason (null: every sample safe)")
+
+
 class Transition(_Strict):
     """Oracle grid of one ordered pair: cells[i_A][i_B]; class 0 means no edge."""
 
@@ -191,6 +201,8 @@ class Transition(_Strict):
     row_margins: list[Num] | None = Field(None, description="per t_A: the least normalised safety margin of the "
                                           "cell at its best t_B (null where none is verified); what "
                                           "`sequence: {switch: margin}` chooses switch times by")
+    from_roa: FromRoA | None = Field(None, description="the rows the executor may switch through, also checked from "
+                                     "seeded samples of E_A's boundary (absent: not checked)")
     counts: Counts
     certified: Certified | None = Field(None, description="t_A intervals proved for every t_A in them (null: none)")
 
@@ -208,8 +220,8 @@ class Transition(_Strict):
         for name in ("status", "reason", "checked", "refined", "saturated", "method"):
             if any(not row.isdigit() for row in getattr(c, name) or () if row):
                 raise ValueError(f"{name} of {self.from_} -> {self.to} must be strings of digits")
-        for name in ("best_t_B", "row_margins"):
-            v = getattr(self, name)
+        rows = self.from_roa.rows if self.from_roa is not None else None
+        for name, v in (("best_t_B", self.best_t_B), ("row_margins", self.row_margins), ("from_roa.rows", rows)):
             if v is not None and len(v) != shape[0]:
                 raise ValueError(f"{name} of {self.from_} -> {self.to} has {len(v)} entries, not {shape[0]}")
         return self

@@ -137,6 +137,18 @@ def _check_transitions(trs, names: list[str], where) -> dict:
                   f"a list of {len(t_A)} entries (one per t_A)", rows)
             for j, m in enumerate(rows):
                 _number(m, f"{key}.row_margins[{j}]", where)
+        fr = t.get("from_roa")
+        if fr is not None:
+            rows = fr.get("rows") if isinstance(fr, dict) else None
+            _need(isinstance(rows, (list, tuple)) and len(rows) == len(t_A), where, f"{key}.from_roa.rows",
+                  f"a list of {len(t_A)} entries (one per t_A)", rows)
+            for j, r in enumerate(rows):
+                ok = r is None or (isinstance(r, (list, tuple)) and len(r) == 3 and
+                                   isinstance(r[0], (int, float)) and not isinstance(r[0], bool) and 0 <= r[0] <= 1 and
+                                   all(isinstance(k, int) and not isinstance(k, bool) and k >= 0 for k in r[1:]) and
+                                   r[1] <= r[2])
+                _need(ok, where, f"{key}.from_roa.rows[{j}]", "null or [share of r_A in [0, 1], safe, drawn], "
+                      "0 <= safe <= drawn", r)
         _windows(t.get("windows"), f"{key}.windows", where)
         weights = t.get("weights", {})
         _need(isinstance(weights, dict), where, f"{key}.weights", "an object", weights)

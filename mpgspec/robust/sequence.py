@@ -173,6 +173,7 @@ class _Runs:
         self.cur_a = np.array(self.cur, dtype=object)
         self.Z = np.zeros((ds.nz, n))
         self.safe, self.conv = np.ones(n, bool), np.zeros(n, bool)
+        self.margin = np.full(n, -np.inf)  # each run's RoA margin after its last step
         self.first = [None] * n
         self.goal, self.cmd = [seq.start] * n, 0
         self.goals = [c.goal for c in seq.commands]
@@ -229,6 +230,7 @@ class _Runs:
                 self.fail(int(cols[q]), t, name, None if j is None or hq[j] >= -tol else
                           {"h": ds.prims[name].h_names[j], "value": float(hq[j])})
         self.conv |= M > 0
+        self.margin = M
 
     def commands(self, t: float) -> str | None:
         """The goal of the commands due by t (every run's new goal), or None."""
@@ -286,7 +288,8 @@ class _Runs:
             if nxt and nxt != cur:
                 c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clk, p.period)
                 tb = self.plan.switch_clock(cur, nxt, c, self.ds.settings.dt / 2)
-                if tb is not None:
+                if tb is not None and self.plan.admits(cur, nxt, c, self.ds.settings.dt / 2, float(self.margin[r]),
+                                                       p.radius):
                     return (nxt, tb)
         return None
 

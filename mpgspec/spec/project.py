@@ -25,6 +25,11 @@ class OracleConfig(Strict):
         "(each rollout runs at dt/2 beside one at dt; their difference is its error: about 2x the cost, "
         "far tighter on long rollouts of contracting closed loops)")
 
+    from_roa: int | None = Field(
+        default=None, ge=0, le=1000, description="seeded samples of E_A's boundary every row the executor may "
+        "switch through is also checked from (it leaves A from anywhere in E_A); a row with a sample not safe is "
+        "not taken. Default 8 for rigid bodies, 0 (off) for other systems")
+
     @model_validator(mode="after")
     def _step_within_horizon(self):
         if self.dt > self.horizon:

@@ -17,7 +17,7 @@ import numpy as np
 
 from ...compile.contacts import grid_clock
 from ...compile.primitive import CompiledPrimitive
-from ...graph.transition import executor_clocks
+from ...graph.transition import executor_clocks, switch_shares
 from ...spec.models import PrimitiveClass
 
 
@@ -30,7 +30,8 @@ class ExecutorPlan:
     start: str
     commands: tuple[tuple[float, str], ...]
     table: dict = field(hash=False)
-    edges: dict = field(hash=False)  # (from, to) -> (t_A list, switch-in clock list, None where none)
+    edges: dict = field(hash=False)  # (from, to) -> (t_A list, switch-in clock list, None where none, share of r_A
+    # the executor switches within per t_A: robust/from_roa.py)
 
     @classmethod
     def of(cls, graph, table: dict, seq, prims: dict[str, CompiledPrimitive]) -> "ExecutorPlan":
@@ -45,7 +46,8 @@ class ExecutorPlan:
                 bound = np.maximum(np.abs(prims[b].system.u_lo), np.abs(prims[b].system.u_hi))
                 clocks = executor_clocks(tr, prims[a].cls is PrimitiveClass.TRANSIENT, seq.switch,
                                          getattr(seq, "reserve", None), bound)
-                edges[(a, b)] = ([float(v) for v in tr.t_A], [None if v is None else float(v) for v in clocks])
+                edges[(a, b)] = ([float(v) for v in tr.t_A], [None if v is None else float(v) for v in clocks],
+                                 switch_shares(tr))
         return cls(seq.start, tuple((float(c.t), c.goal) for c in seq.commands), table, edges)
 
     def key(self) -> list:
@@ -55,12 +57,24 @@ class ExecutorPlan:
 
     def switch_clock(self, a: str, b: str, t_A: float, tol: float) -> float | None:
         """The verified t_B of edge a -> b for a clock within tol of one of its grid times, else None."""
+        j = self._row(a, b, t_A, tol)
+        return None if j is None else self.edges[(a, b)][1][j]
+
+    def admits(self, a: str, b: str, t_A: float, tol: float, margin: float, radius: float) -> bool:
+        """Whether the state, whose RoA margin r_A - ||x - x_A*(t_A)||_W is `margin`, lies within the share
+        of r_A the switch a -> b was checked from at that grid time (always, for a share of 1)."""
+        j = self._row(a, b, t_A, tol)
+        shares = self.edges[(a, b)][2] if j is not None else []
+        share = float(shares[j]) if j is not None and j < len(shares) else 1.0
+        return share >= 1.0 or (share > 0 and margin >= (1.0 - share) * float(radius))
+
+    def _row(self, a: str, b: str, t_A: float, tol: float) -> int | None:
         e = self.edges.get((a, b))
         if e is None or not e[0]:
             return None
         tA = np.asarray(e[0], float)
         j = int(np.argmin(np.abs(tA - t_A)))
-        return e[1][j] if abs(tA[j] - t_A) <= tol + 1e-12 else None
+        return j if abs(tA[j] - t_A) <= tol + 1e-12 else None
 
 
 class StateExecutor:
@@ -99,7 +113,13 @@ class StateExecutor:
             return None
         c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clock, p.period)
         t_B = plan.switch_clock(self.cur, nxt, c, self.dt / 2)
-        return None if t_B is None else self._switch(t, nxt, t_B)
+        if t_B is None or not plan.admits(self.cur, nxt, c, self.dt / 2, self._margin(p, x, clock), p.radius):
+            return None
+        return self._switch(t, nxt, t_B)
+
+    @staticmethod
+    def _margin(p: CompiledPrimitive, x, clock: float) -> float:
+        return float(np.asarray(p.roa_margin(x, clock), float).ravel()[0])
 
     def _switch(self, t: float, to: str, t_B: float) -> dict:
         self.cur, self.converged = to, False

@@ -1,0 +1,102 @@
+"""Switches checked from the boundary of E_A: the share of r_A a switch is verified from, against a
+target whose safe region of attraction is known in closed form, and the executor that keeps to it.
+
+x' = x + u. Hold: u = -4x (x' = -3x, stable everywhere), E_Hold of radius R. Go: u = -2x + x^3, so
+x' = -x + x^3: from |x0| < 1 the flow converges to 0 (x^2 = 1 / (1 + (1/x0^2 - 1) e^2t)), from |x0| > 1
+it escapes in finite time and leaves C = {16 - x^2 >= 0}. Algorithm 1 checks Hold -> Go from
+x_Hold* = 0 only, where Go is safe. From E_Hold's boundary |x0| = R the switch is safe iff R < 1; the
+check tries R, R/2, R/4 in turn, so its share is the first of 1, 1/2, 1/4 with share x R < 1.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from mpgspec import api
+from mpgspec.execute.crosscheck.executor import ExecutorPlan
+
+SPEC = """\
+project: escape
+system:
+  name: line
+  kind: analytic
+  states: [x]
+  inputs: [u]
+  dynamics: {{f: ["x"], g: [[1]]}}
+  input_bounds: {{u: [-100, 100]}}
+primitives:
+  - name: Hold
+    class: fixed
+    setpoint: {{expr: [0]}}
+    controller: {{type: expression, u: ["-4*x"]}}
+    safe_set: [{{name: wall, h: "16 - x^2"}}]
+    roa: {{radius: {r}}}
+  - name: Go
+    class: fixed
+    setpoint: {{expr: [0]}}
+    controller: {{type: expression, u: ["-2*x + x^3"]}}
+    safe_set: [{{name: wall, h: "16 - x^2"}}]
+    roa: {{radius: 0.2}}
+oracle: {{horizon: 3, dt: 0.01, accuracy: low, grid: {{t_A: 2, t_B: 2}}{extra}}}
+assumptions: {{roa_invariant: warn}}
+sequence:
+  start: Hold
+  duration: 4
+  dt: 0.01
+  commands:
+    - {{t: 0, goal: Hold}}
+    - {{t: 1, goal: Go}}
+"""
+
+
+def _verify(tmp_path: Path, r: float, samples: int | None = 8):
+    path = tmp_path / "project.yaml"
+    path.write_text(SPEC.format(r=r, extra="" if samples is None else f", from_roa: {samples}"))
+    res = api.verify([path], out_dir=None, overrides={"jit": False})
+    (p,) = res.projects
+    assert not p.errors, p.errors
+    (tr,) = [t for t in p.report["transitions"] if t["from"] == "Hold" and t["to"] == "Go"]
+    (edge,) = [e for e in p.report["edges"] if e["from"] == "Hold" and e["to"] == "Go"]
+    return p.report, tr, edge
+
+
+@pytest.mark.parametrize("r, share", [(0.9, 1.0), (1.5, 0.5), (3.0, 0.25)])
+def test_a_switch_is_verified_within_the_share_of_e_a_whose_samples_are_safe(tmp_path, r, share):
+    report, tr, edge = _verify(tmp_path, r)
+    assert tr["class"] == 1 and edge["usable"]  # Algorithm 1 from x_Hold* = 0
+    (row,) = tr["from_roa"]["rows"]
+    assert row[0] == share and row[2] == 8
+    assert row[1] == (8 if share == 1.0 else 0)  # every sample of |x0| = r escapes when r > 1
+    if share < 1:
+        worst = tr["from_roa"]["worst"]
+        assert worst["status"] == "unsafe" and worst["violated"] == "wall"
+    run = report["sequence"]["runs"]["graph"]
+    assert run["safe"] and [s["to"] for s in run["switches"]][-1] == "Go"  # x = x_Hold* lies within any share
+
+
+def test_a_switch_unsafe_from_every_share_makes_the_edge_unusable(tmp_path):
+    """R = 5: |x0| = 5, 2.5 and 1.25 all escape; the edge stays in the graph (Algorithm 1) but the
+    planner and the executor do not take it."""
+    report, tr, edge = _verify(tmp_path, 5.0)
+    assert tr["class"] == 1 and tr["from_roa"]["rows"][0][0] == 0.0
+    assert edge["usable"] is False and "E_Hold" in edge["unusable_reason"]
+    assert report["lookup_table"]["next"]["Hold"]["Go"] in (None, "Hold")
+    run = report["sequence"]["runs"]["graph"]
+    assert "Go" not in [s["to"] for s in run["switches"]]
+
+
+def test_without_the_check_the_rows_carry_no_share(tmp_path):
+    _, tr, edge = _verify(tmp_path, 5.0, samples=None)  # an analytic system: off unless asked
+    assert "from_roa" not in tr and edge["usable"]
+
+
+def test_the_executor_switches_only_within_the_rows_share():
+    plan = ExecutorPlan("A", ((0.0, "B"),), {"A": {"B": "B"}}, {("A", "B"): ([0.0], [0.0], [0.5])})
+    r = 2.0
+    assert plan.admits("A", "B", 0.0, 1e-9, margin=r - 0.9, radius=r)  # ||x - x*|| = 0.9 <= 0.5 r
+    assert not plan.admits("A", "B", 0.0, 1e-9, margin=r - 1.1, radius=r)
+    full = ExecutorPlan("A", (), {}, {("A", "B"): ([0.0], [0.0], [1.0])})
+    assert full.admits("A", "B", 0.0, 1e-9, margin=-5.0, radius=r)  # share 1: as before, no distance test
+    refused = ExecutorPlan("A", (), {}, {("A", "B"): ([0.0], [None], [0.0])})
+    assert not refused.admits("A", "B", 0.0, 1e-9, margin=r, radius=r)
