@@ -50,11 +50,19 @@ def disagreements(report: dict) -> list[dict]:
             out.append({"mode": mode, "text": f"the {mode} executor deciding from {sim}'s state is unsafe{first}"})
         elif not e.get("reached_every_goal", True):
             w = e.get("waiting") or {}
-            where = f": it waits in {w.get('primitive')}, whose E its state never enters (best E margin " \
-                    f"{_num(w.get('best_roa_margin'))})" if w else ""
+            where = f": it waits in {w.get('primitive')}, {waiting_why(w)}" if w else ""
             out.append({"mode": mode, "text": f"the {mode} executor deciding from {sim}'s state does not reach "
                                               f"every goal{where}"})
     return out
+
+
+def waiting_why(w: dict) -> str:
+    """Why an executor waits in a primitive, from its best RoA margin there."""
+    m = w.get("best_roa_margin")
+    if m is not None and m > 0:
+        return (f"whose E its state entered (best E margin {_num(m)}) but never within the share of it the next "
+                f"switch was checked from (edges, from E_A)")
+    return f"whose E its state never enters (best E margin {_num(m)})"
 
 
 def nominal_only_path(report: dict) -> dict | None:

@@ -16,7 +16,7 @@ from markupsafe import Markup
 
 from . import fig6, svg
 from .compact import h_families, least, readable
-from .findings import disagreements, nominal_only_path, path_text
+from .findings import disagreements, nominal_only_path, path_text, waiting_why
 from .proved import proved_text
 from .sections.registry import report_sections, section_data
 from .traversal import command_rows
@@ -48,6 +48,7 @@ def _env() -> jinja2.Environment:
     env = jinja2.Environment(loader=jinja2.PackageLoader("mpgspec.report", "templates"), autoescape=True,
                              trim_blocks=True, lstrip_blocks=True, undefined=jinja2.StrictUndefined)
     env.filters["num"] = _num
+    env.filters["waiting_why"] = waiting_why
     env.filters["spec_link"] = _spec_link
     env.filters["windows"] = lambda ws: ", ".join(f"[{_num(a)}, {_num(b)}]" for a, b in ws) or "–"
     return env
