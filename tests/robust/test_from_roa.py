@@ -97,6 +97,7 @@ def test_the_executor_switches_only_within_the_rows_share():
     assert plan.admits("A", "B", 0.0, 1e-9, margin=r - 0.9, radius=r)  # ||x - x*|| = 0.9 <= 0.5 r
     assert not plan.admits("A", "B", 0.0, 1e-9, margin=r - 1.1, radius=r)
     full = ExecutorPlan("A", (), {}, {("A", "B"): ([0.0], [0.0], [1.0])})
-    assert full.admits("A", "B", 0.0, 1e-9, margin=-5.0, radius=r)  # share 1: as before, no distance test
+    assert full.admits("A", "B", 0.0, 1e-9, margin=0.0, radius=r)  # share 1: anywhere in E_A
+    assert not full.admits("A", "B", 0.0, 1e-9, margin=-1e-6, radius=r)  # but not outside it
     refused = ExecutorPlan("A", (), {}, {("A", "B"): ([0.0], [None], [0.0])})
     assert not refused.admits("A", "B", 0.0, 1e-9, margin=r, radius=r)

@@ -62,11 +62,12 @@ class ExecutorPlan:
 
     def admits(self, a: str, b: str, t_A: float, tol: float, margin: float, radius: float) -> bool:
         """Whether the state, whose RoA margin r_A - ||x - x_A*(t_A)||_W is `margin`, lies within the share
-        of r_A the switch a -> b was checked from at that grid time (always, for a share of 1)."""
+        of r_A the switch a -> b was checked from at that grid time (within E_A, for a share of 1: a state
+        that entered E_A and left it again does not switch)."""
         j = self._row(a, b, t_A, tol)
         shares = self.edges[(a, b)][2] if j is not None else []
         share = float(shares[j]) if j is not None and j < len(shares) else 1.0
-        return share >= 1.0 or (share > 0 and margin >= (1.0 - share) * float(radius))
+        return share > 0 and margin >= (1.0 - share) * float(radius)
 
     def _row(self, a: str, b: str, t_A: float, tol: float) -> int | None:
         e = self.edges.get((a, b))
