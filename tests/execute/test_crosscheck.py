@@ -385,7 +385,7 @@ def test_the_graph_executor_switches_from_mujocos_state(a1):
                                                          GoalCommand(t=0.02, goal="Stand")])
     table = {"Lie": {"Stand": "Stand", "Lie": None}, "Stand": {"Lie": "Lie", "Stand": None}}
     plan = ExecutorPlan("Lie", ((0.0, "Lie"), (0.02, "Stand")), table,
-                        {("Lie", "Stand"): ([0.0], [0.0]), ("Stand", "Lie"): ([0.0], [0.0])})
+                        {("Lie", "Stand"): ([0.0], [0.0], [1.0]), ("Stand", "Lie"): ([0.0], [0.0], [1.0])})
     run = simulate_sequence(prims, None, None, seq, settings, "naive")
     xs = CrossCheckSettings(runs=("graph",), settle=0.01)
     res = crosscheck_runs(prims, {"graph": run}, seq.duration, xs, robot=robot, plan=plan)
@@ -400,3 +400,8 @@ def test_the_graph_executor_switches_from_mujocos_state(a1):
     e2 = crosscheck_runs(tiny, {"graph": run}, seq.duration, xs, robot=robot, plan=plan).runs["graph"]["executor"]
     assert not e2["reached_every_goal"] and e2["waiting"]["primitive"] == "Lie"
     assert e2["waiting"]["best_roa_margin"] < 0 and len(e2["switches"]) == 1
+    # ... and one whose switch was checked only from a share of E_Lie the state never comes within
+    plan.edges[("Lie", "Stand")] = ([0.0], [0.0], [1e-9])
+    e3 = crosscheck_runs(prims, {"graph": run}, seq.duration, xs, robot=robot, plan=plan).runs["graph"]["executor"]
+    assert not e3["reached_every_goal"] and e3["waiting"]["primitive"] == "Lie" and len(e3["switches"]) == 1
+    assert e3["waiting"]["best_roa_margin"] > 0

@@ -10,7 +10,7 @@ from mpgspec.spec.models import PrimitiveClass
 
 
 def _prim(cls, margin, period=None, domain=None, nxt=None):
-    return SimpleNamespace(cls=cls, period=period, domain=domain, next=nxt,
+    return SimpleNamespace(cls=cls, period=period, domain=domain, next=nxt, radius=1.0,
                            roa_margin=lambda x, t: np.array([[margin(x, t)]]))
 
 
@@ -21,8 +21,9 @@ def _setup():
     table = {"Stand": {"Walk": "Walk", "Jump": "Jump", "Stand": None},
              "Walk": {"Stand": "Stand", "Jump": "Stand", "Walk": None},
              "Jump": {"Stand": "Stand", "Walk": "Stand", "Jump": None}}
-    edges = {("Stand", "Walk"): ([0.0], [0.1]), ("Walk", "Stand"): ([0.0, 0.1, 0.2, 0.3], [0.0, None, 0.0, None]),
-             ("Stand", "Jump"): ([0.0], [0.0]), ("Jump", "Stand"): ([0.25], [0.0])}
+    edges = {("Stand", "Walk"): ([0.0], [0.1], [1.0]),
+             ("Walk", "Stand"): ([0.0, 0.1, 0.2, 0.3], [0.0, None, 0.0, None], [1.0] * 4),
+             ("Stand", "Jump"): ([0.0], [0.0], [1.0]), ("Jump", "Stand"): ([0.25], [0.0], [1.0])}
     plan = ExecutorPlan("Stand", ((0.0, "Stand"), (1.0, "Walk"), (3.0, "Jump")), table, edges)
     return plan, prims
 
@@ -62,3 +63,21 @@ def test_a_transient_hands_over_at_the_end_of_its_domain_and_goals_are_timed():
     assert [g["goal"] for g in goals] == ["Stand", "Walk", "Jump"]
     assert goals[0]["arrived"] == 0.0 and goals[1]["arrived"] is None and goals[2]["arrived"] == 3.0
     assert goals[1]["arrived_mpgspec"] == 1.2 and goals[2]["arrived_mpgspec"] is None
+
+
+def test_it_switches_only_within_the_share_of_e_the_switch_was_checked_from():
+    """Stand -> Walk checked from half of E_Stand only (radius 1: margin >= 0.5); a state that entered E
+    and left it again does not switch either (share 1 needs the state in E at the switch)."""
+    plan, prims = _setup()
+    plan.edges[("Stand", "Walk")] = ([0.0], [0.1], [0.5])
+    ex = StateExecutor(plan, prims, 1000.0)
+    assert ex.decide(1.0, np.array([0.3]), 1.0) is None and ex.converged  # in E, but 0.7 from x*
+    assert ex.decide(1.001, np.array([0.49]), 1.001) is None
+    assert ex.decide(1.002, np.array([0.5]), 1.002)["to"] == "Walk"  # within half of r
+    plan.edges[("Walk", "Stand")] = ([0.0, 0.1, 0.2, 0.3], [0.0, None, 0.0, None], [1.0] * 4)
+    ex.decide(3.0, np.array([0.2]), 0.4)  # Jump commanded: via Stand, from Walk's t_A = 0 (0.4 wraps to 0)
+    assert ex.cur == "Stand"
+    ex2 = StateExecutor(plan, prims, 1000.0)
+    ex2.cur, ex2.goal, ex2.converged, ex2.cmd_i = "Walk", "Stand", True, 2  # entered E_Walk before
+    assert ex2.decide(1.5, np.array([-0.01]), 0.2) is None  # outside E now: no switch
+    assert ex2.decide(1.6, np.array([0.01]), 0.2)["to"] == "Stand"

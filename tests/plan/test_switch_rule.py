@@ -84,7 +84,7 @@ def test_the_executor_plan_reads_the_same_rule_from_the_report(pendulum):
     plan = ExecutorPlan.of(g, report["lookup_table"]["next"], seq, prims)
     assert plan.edges, "the plan has no edges"
     handovers = 0
-    for (a, b), (_t_A, clocks) in plan.edges.items():
+    for (a, b), (_t_A, clocks, _shares) in plan.edges.items():
         # a transient hands over at the end of its domain whatever the margin: the rule chooses no time there
         rule = "first" if prims[a].cls.value == "transient" else "margin"
         handovers += rule == "first"
@@ -130,7 +130,7 @@ def test_the_executor_plan_keeps_a_reserve_alike_from_the_report_and_in_memory(p
                           prims)
     assert kept.edges == mem.edges
     dropped = 0
-    for (a, b), (_t_A, clocks) in kept.edges.items():
+    for (a, b), (_t_A, clocks, _shares) in kept.edges.items():
         before = full.edges[(a, b)][1]
         tr = g.edge(a, b)
         for c, c0, p in zip(clocks, before, tr.row_peaks):
