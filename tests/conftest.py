@@ -107,3 +107,20 @@ def pytest_xdist_make_scheduler(config, log):
             return _unit(nodeid)
 
     return ModuleScheduling(config, log)
+
+
+def _fixed(name: str, u: str, h: str, radius) -> str:
+    return (f"  - name: {name}\n    class: fixed\n    setpoint: {{expr: [0]}}\n"
+            f"    controller: {{type: expression, u: [\"{u}\"]}}\n"
+            f"    safe_set: [{{name: wall, h: \"{h}\"}}]\n    roa: {{radius: {radius}}}\n")
+
+
+@pytest.fixture
+def line_spec():
+    """A project on the line x' = x + u (|u| <= bound): line_spec(project, bound, primitives, tail) with
+    primitives as (name, u, h, radius) of fixed primitives at x* = 0, and tail the YAML after them."""
+    def make(project: str, bound: float, prims: list[tuple], tail: str = "") -> str:
+        head = (f"project: {project}\nsystem:\n  name: line\n  kind: analytic\n  states: [x]\n  inputs: [u]\n"
+                f"  dynamics: {{f: [\"x\"], g: [[1]]}}\n  input_bounds: {{u: [-{bound}, {bound}]}}\nprimitives:\n")
+        return head + "".join(_fixed(*p) for p in prims) + tail
+    return make

@@ -19,35 +19,17 @@ from mpgspec.check.roa_flows import roa_invariant
 from mpgspec.spec.loader import load_project
 from mpgspec.pipeline.stages import compile_project
 
-SPEC = """\
-project: unstable
-system:
-  name: line
-  kind: analytic
-  states: [x]
-  inputs: [u]
-  dynamics: {{f: ["x"], g: [[1]]}}
-  input_bounds: {{u: [-1, 1]}}
-primitives:
-  - name: Hold
-    class: fixed
-    setpoint: {{expr: [0]}}
-    controller: {{type: expression, u: ["-2*x"]}}
-    safe_set: [{{name: wall, h: "{h}"}}]
-    roa: {{radius: {r}}}
-  - name: Other
-    class: fixed
-    setpoint: {{expr: [0]}}
-    controller: {{type: expression, u: ["-2*x"]}}
-    safe_set: [{{name: wall, h: "16 - x^2"}}]
-    roa: {{radius: 0.5}}
-oracle: {{horizon: 3, dt: 0.01, accuracy: low, grid: {{t_A: 2, t_B: 2}}}}
-{extra}"""
+ORACLE = "oracle: {horizon: 3, dt: 0.01, accuracy: low, grid: {t_A: 2, t_B: 2}}\n"
 
 
-def _hold(tmp_path: Path, r: float, h: str = "16 - x^2"):
+def _spec(line_spec, r: float, h: str = "16 - x^2", extra: str = "") -> str:
+    """Hold (u = -2x, E of radius r, C = {h >= 0}) and Other (E of radius 0.5) on x' = x + u, |u| <= 1."""
+    return line_spec("unstable", 1, [("Hold", "-2*x", h, r), ("Other", "-2*x", "16 - x^2", 0.5)], ORACLE + extra)
+
+
+def _hold(tmp_path: Path, line_spec, r: float, h: str = "16 - x^2"):
     path = tmp_path / "project.yaml"
-    path.write_text(SPEC.format(h=h, r=r, extra=""))
+    path.write_text(_spec(line_spec, r, h))
     return compile_project(load_project(path))["Hold"]
 
 
@@ -57,8 +39,8 @@ def _at_horizon(r: float, T: float = 2.5) -> float:
 
 
 @pytest.mark.parametrize("r, status", [(0.5, "pass"), (0.9, "pass"), (0.99, "pass"), (1.5, "fail")])
-def test_flows_from_the_boundary_of_e_are_judged_by_the_true_safe_region(tmp_path, r, status):
-    chk = roa_invariant(_hold(tmp_path, r))
+def test_flows_from_the_boundary_of_e_are_judged_by_the_true_safe_region(tmp_path, r, status, line_spec):
+    chk = roa_invariant(_hold(tmp_path, line_spec, r))
     assert chk.status == status and chk.level == "empirical", chk.message
     assert chk.numbers["samples"] == 16 and chk.numbers["start_radius_min"] == pytest.approx(1.0, abs=1e-6)
     if status == "fail":
@@ -73,25 +55,25 @@ def test_flows_from_the_boundary_of_e_are_judged_by_the_true_safe_region(tmp_pat
         assert chk.numbers["final_distance_max"] == pytest.approx(_at_horizon(r) / r, rel=1e-3)
 
 
-def test_a_safe_flow_that_leaves_e_is_a_warning(tmp_path):
-    chk = roa_invariant(_hold(tmp_path, 1.2, h="100 - x^2"))
+def test_a_safe_flow_that_leaves_e_is_a_warning(tmp_path, line_spec):
+    chk = roa_invariant(_hold(tmp_path, line_spec, 1.2, h="100 - x^2"))
     assert chk.status == "warn", chk.message
     assert chk.numbers["unsafe"] == 0 and chk.numbers["outside_at_end"] == 16
     assert chk.numbers["final_distance_max"] == pytest.approx((1 + 0.2 * np.exp(2.5)) / 1.2, rel=0.02)
 
 
-def _verify(tmp_path: Path, extra: str = ""):
+def _verify(tmp_path: Path, line_spec, extra: str = ""):
     """(exit code, report, Hold's roa_invariant) of a run with E = 1.5."""
     path = tmp_path / "project.yaml"
-    path.write_text(SPEC.format(h="16 - x^2", r=1.5, extra=extra))
+    path.write_text(_spec(line_spec, 1.5, extra=extra))
     res = api.verify([path], out_dir=None, overrides={"jit": False})
     (p,) = res.projects
     (chk,) = [a for a in p.report["assumptions"] if a["primitive"] == "Hold" and a["name"] == "roa_invariant"]
     return res.exit_code, p, chk
 
 
-def test_the_check_is_in_the_report_and_a_failure_fails_the_run(tmp_path):
-    rc, p, chk = _verify(tmp_path)
+def test_the_check_is_in_the_report_and_a_failure_fails_the_run(tmp_path, line_spec):
+    rc, p, chk = _verify(tmp_path, line_spec)
     assert rc == 1 and chk["status"] == "fail" and chk["level"] == "empirical"
     assert chk["location"]["line"] == 15  # the primitive's roa key
     (other,) = [a for a in p.report["assumptions"] if a["primitive"] == "Other" and a["name"] == "roa_invariant"]
@@ -100,16 +82,16 @@ def test_the_check_is_in_the_report_and_a_failure_fails_the_run(tmp_path):
     assert names.index("roa_invariant") == names.index("roa_in_safe_set") + 1
 
 
-def test_the_project_may_report_it_as_a_warning(tmp_path):
-    rc, _, chk = _verify(tmp_path, "assumptions: {roa_invariant: warn}\n")
+def test_the_project_may_report_it_as_a_warning(tmp_path, line_spec):
+    rc, _, chk = _verify(tmp_path, line_spec, "assumptions: {roa_invariant: warn}\n")
     assert chk["status"] == "warn" and "reported as a warning" in chk["message"]
     assert rc == 0
 
 
 
-def test_a_run_ends_once_every_flow_is_near_x_star(tmp_path):
+def test_a_run_ends_once_every_flow_is_near_x_star(tmp_path, line_spec):
     """x' = -x from |x| = 0.5: within 0.05 r once e^-t <= 0.05, t = ln 20 = 3.0 s (the chunk ending at 3.0 s)."""
-    chk = roa_invariant(_hold(tmp_path, 0.5), horizon=4.0)
+    chk = roa_invariant(_hold(tmp_path, line_spec, 0.5), horizon=4.0)
     assert chk.status == "pass" and chk.numbers["stopped"] == "converged", chk.message
     assert chk.numbers["ran_s"] == pytest.approx(3.0) and chk.numbers["horizon_s"] == 4.0
     assert "converging to x*" in chk.message

@@ -16,28 +16,7 @@ import pytest
 from mpgspec import api
 from mpgspec.execute.crosscheck.executor import ExecutorPlan
 
-SPEC = """\
-project: escape
-system:
-  name: line
-  kind: analytic
-  states: [x]
-  inputs: [u]
-  dynamics: {{f: ["x"], g: [[1]]}}
-  input_bounds: {{u: [-100, 100]}}
-primitives:
-  - name: Hold
-    class: fixed
-    setpoint: {{expr: [0]}}
-    controller: {{type: expression, u: ["-4*x"]}}
-    safe_set: [{{name: wall, h: "16 - x^2"}}]
-    roa: {{radius: {r}}}
-  - name: Go
-    class: fixed
-    setpoint: {{expr: [0]}}
-    controller: {{type: expression, u: ["-2*x + x^3"]}}
-    safe_set: [{{name: wall, h: "16 - x^2"}}]
-    roa: {{radius: 0.2}}
+TAIL = """\
 oracle: {{horizon: 3, dt: 0.01, accuracy: low, grid: {{t_A: 2, t_B: 2}}{extra}}}
 assumptions: {{roa_invariant: warn}}
 sequence:
@@ -50,9 +29,11 @@ sequence:
 """
 
 
-def _verify(tmp_path: Path, r: float, samples: int | None = 8):
+def _verify(tmp_path: Path, line_spec, r: float, samples: int | None = 8):
     path = tmp_path / "project.yaml"
-    path.write_text(SPEC.format(r=r, extra="" if samples is None else f", from_roa: {samples}"))
+    tail = TAIL.format(extra="" if samples is None else f", from_roa: {samples}")
+    path.write_text(line_spec("escape", 100, [("Hold", "-4*x", "16 - x^2", r), ("Go", "-2*x + x^3", "16 - x^2", 0.2)],
+                              tail))
     res = api.verify([path], out_dir=None, overrides={"jit": False})
     (p,) = res.projects
     assert not p.errors, p.errors
@@ -62,8 +43,8 @@ def _verify(tmp_path: Path, r: float, samples: int | None = 8):
 
 
 @pytest.mark.parametrize("r, share", [(0.9, 1.0), (1.5, 0.5), (3.0, 0.25)])
-def test_a_switch_is_verified_within_the_share_of_e_a_whose_samples_are_safe(tmp_path, r, share):
-    report, tr, edge = _verify(tmp_path, r)
+def test_a_switch_is_verified_within_the_share_of_e_a_whose_samples_are_safe(tmp_path, r, share, line_spec):
+    report, tr, edge = _verify(tmp_path, line_spec, r)
     assert tr["class"] == 1 and edge["usable"]  # Algorithm 1 from x_Hold* = 0
     (row,) = tr["from_roa"]["rows"]
     assert row[0] == share and row[2] == 8
@@ -75,10 +56,10 @@ def test_a_switch_is_verified_within_the_share_of_e_a_whose_samples_are_safe(tmp
     assert run["safe"] and [s["to"] for s in run["switches"]][-1] == "Go"  # x = x_Hold* lies within any share
 
 
-def test_a_switch_unsafe_from_every_share_makes_the_edge_unusable(tmp_path):
+def test_a_switch_unsafe_from_every_share_makes_the_edge_unusable(tmp_path, line_spec):
     """R = 5: |x0| = 5, 2.5 and 1.25 all escape; the edge stays in the graph (Algorithm 1) but the
     planner and the executor do not take it."""
-    report, tr, edge = _verify(tmp_path, 5.0)
+    report, tr, edge = _verify(tmp_path, line_spec, 5.0)
     assert tr["class"] == 1 and tr["from_roa"]["rows"][0][0] == 0.0
     assert edge["usable"] is False and "E_Hold" in edge["unusable_reason"]
     assert report["lookup_table"]["next"]["Hold"]["Go"] in (None, "Hold")
@@ -86,8 +67,8 @@ def test_a_switch_unsafe_from_every_share_makes_the_edge_unusable(tmp_path):
     assert "Go" not in [s["to"] for s in run["switches"]]
 
 
-def test_without_the_check_the_rows_carry_no_share(tmp_path):
-    _, tr, edge = _verify(tmp_path, 5.0, samples=None)  # an analytic system: off unless asked
+def test_without_the_check_the_rows_carry_no_share(tmp_path, line_spec):
+    _, tr, edge = _verify(tmp_path, line_spec, 5.0, samples=None)  # an analytic system: off unless asked
     assert "from_roa" not in tr and edge["usable"]
 
 
