@@ -132,7 +132,9 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     if samples:
         if progress:
             progress(spec.name, f"switches from E_A's boundary ({samples} samples a row)", 0, 0)
-        from_roa_calls = check_from_roa(g, prims, settings, samples, executor, cb)
+        seq = spec.project.sequence
+        from_roa_calls = check_from_roa(g, prims, settings, samples, executor, cb, seq.switch if seq else "first",
+                                        seq.reserve if seq else None)
     t1 = time.perf_counter()
     names = list(prims)
     pairs = [(a, b) for a in names for b in names if a != b]

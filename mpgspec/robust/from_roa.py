@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
-from ..graph.transition import MotionPrimitiveGraph
+from ..graph.transition import MotionPrimitiveGraph, switch_clocks
 from ..oracle.executors import Executor, InProcess, split
 from ..settings import OracleSettings
 from ..spec.models import PrimitiveClass
@@ -36,14 +36,18 @@ def from_roa_samples(spec) -> int:
     return RIGID_BODY_SAMPLES if getattr(spec.system, "kind", None) == "rigid_body" else 0
 
 
-def _rows(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive]):
-    """(a, b, i, t_A, t_B) of every row the executor may switch through from a non-transient source."""
+def _rows(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], rule: str, reserve: float | None):
+    """(a, b, i, t_A, t_B, taken) of every verified row from a non-transient source; taken: whether the
+    sequence's switching rule and reserve take it (switch_clocks on the grid before this check)."""
     for (a, b), tr in g.transitions.items():
         if g.edge(a, b) is None or prims[a].cls is PrimitiveClass.TRANSIENT:
             continue
+        sys = prims[b].system
+        bound = np.maximum(np.abs(sys.u_lo), np.abs(sys.u_hi))
+        taken = switch_clocks(tr, rule, reserve, bound)
         for i, t_b in enumerate(tr.best_t_B):
             if t_b is not None:
-                yield a, b, i, float(tr.t_A[i]), float(t_b)
+                yield a, b, i, float(tr.t_A[i]), float(t_b), taken[i] is not None
 
 
 FRACTIONS = (1.0, 0.5, 0.25)
@@ -51,19 +55,27 @@ FRACTIONS = (1.0, 0.5, 0.25)
 
 
 def check_from_roa(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
-                   samples: int, executor: Executor | None = None, progress=None) -> int:
+                   samples: int, executor: Executor | None = None, progress=None, rule: str = "first",
+                   reserve: float | None = None) -> int:
     """Fill each edge's row_from_roa (per t_A: [share of r_A, safe samples, samples drawn on E_A's
     boundary], None where the row is not checked) and from_roa_worst (the worst sample on E_A's
     boundary that was not safe); returns the oracle calls made.
 
     A row is checked at r_A; when a sample there is not safe, at each smaller share of FRACTIONS in
     turn. Its share is the first at which every sample is safe (0 when none is: the row is refused),
-    and the executor switches through the row only within that share of r_A from x_A*(t_A)."""
+    and the executor switches through the row only within that share of r_A from x_A*(t_A). A verified
+    row the sequence's `rule` and `reserve` never take (graph.transition.switch_clocks) is not checked and
+    is refused: [0, 0, 0]."""
     executor = executor or InProcess()
     for tr in g.transitions.values():
         tr.row_from_roa = [None] * len(tr.t_A) if g.edge(tr.source, tr.target) is not None else []
         tr.from_roa_worst = None
-    todo = [(a, b, i, t_a, t_b) for a, b, i, t_a, t_b in _rows(g, prims)]
+    todo = []
+    for a, b, i, t_a, t_b, taken in _rows(g, prims, rule, reserve):
+        if taken:
+            todo.append((a, b, i, t_a, t_b))
+        else:
+            g.transitions[(a, b)].row_from_roa[i] = [0.0, 0, 0]
     calls = 0
     for level, share in enumerate(FRACTIONS):
         if not todo:

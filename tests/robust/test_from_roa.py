@@ -82,3 +82,48 @@ def test_the_executor_switches_only_within_the_rows_share():
     assert not full.admits("A", "B", 0.0, 1e-9, margin=-1e-6, radius=r)  # but not outside it
     refused = ExecutorPlan("A", (), {}, {("A", "B"): ([0.0], [None], [0.0])})
     assert not refused.admits("A", "B", 0.0, 1e-9, margin=r, radius=r)
+
+
+def test_only_the_rows_the_sequences_rule_takes_are_checked(tmp_path):
+    """The pendulum with `switch: margin` and 4 samples: a row the margin rule does not take on the
+    unchecked grid is refused unchecked ([0, 0, 0]); every other verified row is checked; the graph
+    run leaves a primitive only through checked rows with a share above 0."""
+    import shutil
+
+    from mpgspec.compile.contacts import grid_clock
+    from mpgspec.graph.transition import switch_clocks
+
+    proj = tmp_path / "pendulum"
+    shutil.copytree(Path(__file__).resolve().parents[2] / "specs" / "pendulum", proj)
+    spec = proj / "project.yaml"
+    text = spec.read_text().replace("  duration: 40\n", "  duration: 40\n  switch: margin\n")
+    spec.write_text(text.replace("  horizon: 6.0\n", "  horizon: 6.0\n  from_roa: 4\n"))
+    report = api.verify(proj)["pendulum"].report
+    checked = skipped = 0
+    for t in report["transitions"]:
+        fr = t.get("from_roa")
+        if fr is None:
+            continue
+        plain = type("Row", (), {"best_t_B": t["best_t_B"], "row_margins": t.get("row_margins") or []})
+        taken = switch_clocks(plain, "margin")
+        for row, tb, tk in zip(fr["rows"], t["best_t_B"], taken):
+            if tb is None or row is None:
+                continue
+            if tk is None:
+                assert row == [0.0, 0, 0]
+                skipped += 1
+            else:
+                assert row[2] == 4 and row[0] in (0.0, 0.25, 0.5, 1.0)
+                checked += 1
+    assert checked and skipped
+    prims = {p["name"]: p for p in report["primitives"]}
+    trs = {(t["from"], t["to"]): t for t in report["transitions"]}
+    since = None
+    for s in report["sequence"]["runs"]["graph"]["switches"]:
+        a = s.get("from")
+        if a is not None and s["reason"].startswith("towards") and prims[a]["class"] != "transient":
+            t = trs[(a, s["to"])]
+            c = 0.0 if prims[a]["class"] == "fixed" else grid_clock(since[1] + s["t"] - since[0], prims[a]["period"])
+            i = min(range(len(t["t_A"])), key=lambda k: abs(t["t_A"][k] - c))
+            assert t["from_roa"]["rows"][i][0] > 0 and t["from_roa"]["rows"][i][2] == 4
+        since = (s["t"], s["clock"])
