@@ -22,8 +22,9 @@ def weighted_distances(prim: CompiledPrimitive, X: np.ndarray, xs: np.ndarray) -
     """weighted_distance of every column of X (inf where it is not finite)."""
     D = np.asarray(X, float) - np.asarray(xs, float).reshape(-1, 1)
     p = np.asarray(prim.system.wrap, float).reshape(-1, 1)
-    D = np.where(p > 0, D - p * np.floor((D + p / 2) / np.where(p > 0, p, 1.0)), D)
-    v = np.einsum("ij,ik,kj->j", D, metric(prim), D)
+    with np.errstate(invalid="ignore", over="ignore"):  # a blown-up state is at distance inf, no warning
+        D = np.where(p > 0, D - p * np.floor((D + p / 2) / np.where(p > 0, p, 1.0)), D)
+        v = np.einsum("ij,ik,kj->j", D, metric(prim), D)
     return np.sqrt(np.where(np.isfinite(v), np.maximum(v, 0.0), np.inf))
 
 
