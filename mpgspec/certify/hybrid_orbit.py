@@ -68,9 +68,10 @@ def _held_step(prim, xs0: np.ndarray, x, t, h: float, left: float, hold):
 
 class HybridFlow:
     """Compiled steps, periods and tubes of a compiled primitive's discrete flow. `period` (default:
-    the primitive's) is the stretch one call runs: a fixed primitive's flow is run in such chunks."""
+    the primitive's) is the stretch one call runs: a fixed primitive's flow is run in such chunks;
+    `states`: also compile the period with every step's state out (orbit, monodromy), not only its end."""
 
-    def __init__(self, prim, dt: float, period: float | None = None):
+    def __init__(self, prim, dt: float, period: float | None = None, states: bool = True):
         self.prim, self.dt = prim, float(dt)
         T = float(prim.period if period is None else period)
         self.steps = int(round(T / dt))
@@ -95,10 +96,11 @@ class HybridFlow:
         h0 = h_of(xs, ts)
         self._least_h = ca.Function("hybrid_least_h", [xs, ts], [ca.mmin(h0) if h0.shape[0] else ca.inf])
         zz = ca.MX.sym("z", nx + 2 + self.hold)  # a period with every step's state out, and with the last one only
-        self.period_fn, self.period_end = compile_many(
-            [ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)[:nx + 2, :]]),
-             ca.Function("hybrid_period_end", [zz], [body.fold(self.steps)(zz)])],
-            looplib.caller_flags(prim, ("-O1",)), libs=looplib.libs_of(prim))
+        fns = [ca.Function("hybrid_period_end", [zz], [body.fold(self.steps)(zz)])]
+        if states:
+            fns.append(ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)[:nx + 2, :]]))
+        compiled = compile_many(fns, looplib.caller_flags(prim, ("-O1",)), libs=looplib.libs_of(prim))
+        self.period_end, self.period_fn = compiled[0], (compiled[1] if states else None)
 
     def states(self, x0: np.ndarray, t0: float = 0.0) -> np.ndarray:
         """[x; t; least h] after each step of one period from x0 at clock t0 (columns)."""

@@ -59,7 +59,7 @@ def roa_invariant(p: CompiledPrimitive, tol: float = 1e-9, samples: int = SAMPLE
         return None
     r = float(p.radius)
     T = float(horizon or p.horizon or HORIZON)
-    flow = HybridFlow(p, HYBRID_DT, CHUNK)
+    flow = HybridFlow(p, HYBRID_DT, CHUNK, states=False)
     xs = np.asarray(p.x_star(0.0), float).ravel()
     X = boundary_starts(p, samples, seed)
     r0 = weighted_distances(p, X, xs)
