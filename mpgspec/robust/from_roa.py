@@ -88,6 +88,9 @@ def check_from_roa(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive],
             ev = evidence.get(row, [])
             safe = sum(e.status == "safe" for e in ev)
             tr = g.transitions[(a, b)]
+            if not ev:  # no sample of E_A's sphere could be drawn (E empty, or W weighs nothing): not checked
+                tr.row_from_roa[i] = None
+                continue
             if level == 0:
                 tr.row_from_roa[i] = [1.0, safe, len(ev)]
                 for k, e in enumerate(ev):
