@@ -11,14 +11,13 @@ reduced state and the neutral multipliers reported by name. The assumption check
 """
 from __future__ import annotations
 
-import dataclasses
-
 import casadi as ca
 import numpy as np
 
 from ..compile.rigidbody.symmetry import reduced_monodromy
 from ..compile.contacts import Schedule
-from ..oracle.flow import LEFT, jump_of, rk4_jump, solve_or_keep
+from ..oracle.flow import LEFT, jump_of, rk4_jump
+from ..oracle.integrator import compiled_jump, hold_inputs, hold_size, loop_of
 from ..oracle import looplib
 from ..oracle.jit import compile_many, cse_sx
 
@@ -41,29 +40,16 @@ def _parts(prim, xs0: np.ndarray) -> tuple:
             lambda xx, tt: h_fn(xx, tt, S_LONG, xs0))
 
 
-def _hold_size(prim) -> int:
-    """Entries after [x; t; min h] that a sampled law needs: steps left before its next solve, the
-    held input and the warm start (0 for a law evaluated continuously)."""
-    law = prim.sampled
-    return 0 if law is None else 1 + prim.system.nu + law.nw
-
-
 def _held_step(prim, xs0: np.ndarray, x, t, h: float, left: float, hold):
     """(x after one step, h at its end, hold after it) of a sampled law held over the step, as the
-    oracle runs it: solved at the step's start from the warm start when due (every rate / dt steps),
+    oracle runs it (integrator.hold_inputs: solved at the step's start from the warm start when due),
     the open loop integrated under the held input, then the jump."""
-    law, nu = prim.sampled, prim.system.nu
-    solve = looplib.part(prim, "solve")
-    law = law if solve is None else dataclasses.replace(law, solve=solve)
-    loop_u = looplib.part(prim, "loop_u") or looplib.plain_loop(prim, True)
-    jump = looplib.part(prim, "jump") or jump_of(prim)
-    m = law.steps(h)
-    c, u, w = hold[0], hold[1:1 + nu], hold[1 + nu:]
-    u, w = solve_or_keep(law, nu)(c < 0.5, x, t, S_LONG, xs0, w, u)
+    (u,), hold_next = hold_inputs(prim, h, hold, [(x, t, S_LONG, xs0)])
+    loop_u = loop_of(prim, held=True)
     xn = rk4_jump(lambda xx, tt: loop_u(xx, tt, S_LONG, xs0, u)[0], lambda xx, tt: loop_u(xx, tt, S_LONG, xs0, u)[3],
-                  jump, x, t, h, left)
+                  compiled_jump(prim), x, t, h, left)
     hv = looplib.windowed(prim, loop_u(xn, t + h, S_LONG, xs0, u)[1], xn, t + h, S_LONG)
-    return xn, hv, ca.vertcat(ca.if_else(c < 0.5, m - 1, c - 1), u, w)
+    return xn, hv, hold_next
 
 
 class HybridFlow:
@@ -80,7 +66,7 @@ class HybridFlow:
         nx = prim.system.nx
         xs0 = np.array(prim.setpoint(0.0), float).ravel()
         f, k, jump, h_of = _parts(prim, xs0)
-        self.hold = _hold_size(prim)
+        self.hold = hold_size(prim)
         z = ca.MX.sym("z", nx + 2 + self.hold)  # [x; t; min h so far (; a sampled law's hold)]
         x, t, m = z[:nx], z[nx], z[nx + 1]
         h = self.dt

@@ -153,6 +153,11 @@ def switch_clocks(tr, rule: str = "first", reserve: float | None = None, bound=N
     return [b if k else None for b, k in zip(out, keep)]
 
 
+def input_bounds(system) -> np.ndarray:
+    """The largest |u| of each input of a system: the `bound` a reserve is a share of."""
+    return np.maximum(np.abs(system.u_lo), np.abs(system.u_hi))
+
+
 def executor_clocks(tr, transient: bool, rule: str, reserve: float | None = None, bound=None) -> list[float | None]:
     """switch_clocks as the graph executor takes them: a transient hands over to its next at the end of its
     domain, at every verified clock (no rule or reserve chooses a time there); any other source by the

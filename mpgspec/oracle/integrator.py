@@ -210,7 +210,7 @@ def _ends(prim: CompiledPrimitive, held: bool = False) -> tuple[ca.Function, ca.
     (see _rate) and h(x_next) - h(x_next - e), which reuse the one compiled loop instead of generating
     derivative code several times its size.
     """
-    loop = _loop(prim, held)
+    loop = loop_of(prim, held)
     f = _xdot_of(loop) if held else prim.f_cl
     if not loop.is_a("SXFunction") or f.n_nodes() > INLINE_NODES:
         a = loop.mx_in()  # the inner stages take xdot from the same loop: its code is generated once
@@ -235,7 +235,7 @@ def _at_end(prim: CompiledPrimitive, start: ca.Function) -> ca.Function:
     return ca.Function("at_end", a, [r[1], r[2]])
 
 
-def _loop(prim: CompiledPrimitive, held: bool = False) -> ca.Function:
+def loop_of(prim: CompiledPrimitive, held: bool = False) -> ca.Function:
     """The closed loop (x, t, s, x_sw) -> (xdot, h, u_raw, u), or with `held` the open loop loop_u
     (x, t, s, x_sw, u_raw) -> (xdot, h, u_raw, u): from the primitive's loop library when one is
     attached (looplib.py), else looplib.plain_loop."""
@@ -243,7 +243,7 @@ def _loop(prim: CompiledPrimitive, held: bool = False) -> ca.Function:
     return ext if ext is not None else plain_loop(prim, held)
 
 
-def _jump(prim: CompiledPrimitive) -> ca.Function:
+def compiled_jump(prim: CompiledPrimitive) -> ca.Function:
     """flow.jump_of, from the primitive's loop library when one is attached."""
     ext = part(prim, "jump")
     return ext if ext is not None else jump_of(prim)
@@ -298,7 +298,7 @@ def hold_start(prim: CompiledPrimitive, doubling: bool = False) -> np.ndarray:
     return np.zeros(hold_size(prim, doubling))
 
 
-def _hold(prim: CompiledPrimitive, dt: float, block, rollouts: list) -> tuple[list, object]:
+def hold_inputs(prim: CompiledPrimitive, dt: float, block, rollouts: list) -> tuple[list, object]:
     """The input each rollout holds over this step, and the hold's entries after it.
 
     block = [c; u; w (; u_c; w_c)], c the steps left before the next solve; rollouts: (x, t, s, x_sw)
@@ -347,11 +347,11 @@ def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries:
         return _guarded_body(prim, dt, with_state, boundaries)
     nx, nh = prim.system.nx, len(prim.h_names)
     start, end, f = _ends(prim, prim.sampled is not None)
-    jump = _jump(prim)
+    jump = compiled_jump(prim)
     nz = 2 * nx + 2 + hold_size(prim)
     z = _sym(prim.f_cl, prim)("z", nz)
     x, t, s, xs = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2]
-    U, hold_next = _hold(prim, dt, z[2 * nx + 2:], [(x, t, s, xs)])  # U: [u] of a sampled law, else []
+    U, hold_next = hold_inputs(prim, dt, z[2 * nx + 2:], [(x, t, s, xs)])  # U: [u] of a sampled law, else []
     tc = wrap(prim, t)
     h, edge = step_length(prim, dt, tc, x, s, edge=True) if boundaries else (ca.DM(dt), None)
     k1, h0, d0, u_raw, u = start(x, t, s, xs, *U)
@@ -370,7 +370,7 @@ def _step_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries:
 def _guarded_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundaries: bool) -> tuple:
     """_step_body for a loop with guards: the step ends where a guard first crosses (pieces.py)."""
     start, end, _f = _ends(prim)
-    body = guarded_body(prim, dt, start, end, _jump(prim), _margin(prim), with_state, boundaries,
+    body = guarded_body(prim, dt, start, end, compiled_jump(prim), _margin(prim), with_state, boundaries,
                         _h_rows(len(prim.h_names)))
     return body, 2 * prim.system.nx + 2
 
@@ -421,18 +421,18 @@ def _doubling_body(prim: CompiledPrimitive, dt: float, with_state: bool, boundar
     nx, nh = prim.system.nx, len(prim.h_names)
     if guarded(prim):
         start = _ends(prim)[0]
-        body = guarded_doubling_body(prim, dt, start, _at_end(prim, start), _loop(prim), _jump(prim),
+        body = guarded_doubling_body(prim, dt, start, _at_end(prim, start), loop_of(prim), compiled_jump(prim),
                                      _margin(prim), with_state, boundaries, _h_rows(nh))
         return body, 3 * nx + 2
     held = prim.sampled is not None
     start, _end, f = _ends(prim, held)
-    loop = _loop(prim, held)
-    jump = _jump(prim)
+    loop = loop_of(prim, held)
+    jump = compiled_jump(prim)
     nz = 3 * nx + 2 + hold_size(prim, doubling=True)
     z = _sym(prim.f_cl, prim)("z", nz)
     x, t, s, xs, xc = z[:nx], z[nx], z[nx + 1], z[nx + 2:2 * nx + 2], z[2 * nx + 2:3 * nx + 2]
     # a sampled law: each rollout solves it at its own start state and holds it over the whole step
-    U, hold_next = _hold(prim, dt, z[3 * nx + 2:], [(x, t, s, xs), (xc, t, s, xs)])
+    U, hold_next = hold_inputs(prim, dt, z[3 * nx + 2:], [(x, t, s, xs), (xc, t, s, xs)])
     Uj, Uc = U[:1], U[1:]
     fj, fc = (lambda xx, tt, ss: f(xx, tt, ss, xs, *Uj)), (lambda xx, tt, ss: f(xx, tt, ss, xs, *Uc))
     tc = wrap(prim, t)

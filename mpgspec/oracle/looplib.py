@@ -5,7 +5,7 @@ law) is called from the MX graphs of the oracle's judged chunks, the trace chunk
 period map and the cross-check; inlined, each of them generates and compiles its own copy. Here it
 is compiled once per primitive, with the other large per-primitive parts the chunks call:
 - loop (x, t, s, x_sw) -> (xdot, h, u_raw, u): the closed loop every safety function active
-  (integrator._loop), or for a sampled law loop_u (..., u_held) and the law's solve;
+  (integrator.loop_of), or for a sampled law loop_u (..., u_held) and the law's solve;
 - jump (x, u, t, s) -> x: the discrete update after a step (flow.jump_of);
 - loop_g (x, t, s, x_sw) -> (xdot, h, u_raw, u, g): the loop and its guards (compile/guards.py),
   for a loop stepped piece by piece (oracle/pieces.py);

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compile.primitive import CompiledPrimitive
-from ..graph.transition import MotionPrimitiveGraph, switch_clocks
+from ..graph.transition import MotionPrimitiveGraph, input_bounds, switch_clocks
 from ..oracle.executors import Executor, InProcess, split
 from ..settings import OracleSettings
 from ..spec.models import PrimitiveClass
@@ -42,9 +42,7 @@ def _rows(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], rule: st
     for (a, b), tr in g.transitions.items():
         if g.edge(a, b) is None or prims[a].cls is PrimitiveClass.TRANSIENT:
             continue
-        sys = prims[b].system
-        bound = np.maximum(np.abs(sys.u_lo), np.abs(sys.u_hi))
-        taken = switch_clocks(tr, rule, reserve, bound)
+        taken = switch_clocks(tr, rule, reserve, input_bounds(prims[b].system))
         for i, t_b in enumerate(tr.best_t_B):
             if t_b is not None:
                 yield a, b, i, float(tr.t_A[i]), float(t_b), taken[i] is not None

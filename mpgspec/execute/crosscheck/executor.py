@@ -17,7 +17,7 @@ import numpy as np
 
 from ...compile.contacts import grid_clock
 from ...compile.primitive import CompiledPrimitive
-from ...graph.transition import executor_clocks, switch_shares
+from ...graph.transition import executor_clocks, input_bounds, switch_shares
 from ...spec.models import PrimitiveClass
 
 
@@ -43,9 +43,8 @@ class ExecutorPlan:
         for a, b in sorted(pairs):
             tr = graph.edge(a, b)
             if tr is not None:
-                bound = np.maximum(np.abs(prims[b].system.u_lo), np.abs(prims[b].system.u_hi))
                 clocks = executor_clocks(tr, prims[a].cls is PrimitiveClass.TRANSIENT, seq.switch,
-                                         getattr(seq, "reserve", None), bound)
+                                         getattr(seq, "reserve", None), input_bounds(prims[b].system))
                 edges[(a, b)] = ([float(v) for v in tr.t_A], [None if v is None else float(v) for v in clocks],
                                  switch_shares(tr))
         return cls(seq.start, tuple((float(c.t), c.goal) for c in seq.commands), table, edges)
@@ -103,8 +102,9 @@ class StateExecutor:
             return self._switch(t, p.next, t_B if t_B is not None else self.prims[p.next].start_clock())
         if self.goal == self.cur:
             return None
+        m = None
         if not self.converged:
-            m = float(np.asarray(p.roa_margin(x, clock), float).ravel()[0])
+            m = self._margin(p, x, clock)
             self.best[self.cur] = max(self.best.get(self.cur, -np.inf), m)
             self.converged = m > 0
         if not self.converged:
@@ -114,7 +114,9 @@ class StateExecutor:
             return None
         c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clock, p.period)
         t_B = plan.switch_clock(self.cur, nxt, c, self.dt / 2)
-        if t_B is None or not plan.admits(self.cur, nxt, c, self.dt / 2, self._margin(p, x, clock), p.radius):
+        if t_B is None:
+            return None
+        if not plan.admits(self.cur, nxt, c, self.dt / 2, self._margin(p, x, clock) if m is None else m, p.radius):
             return None
         return self._switch(t, nxt, t_B)
 
