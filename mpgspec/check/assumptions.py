@@ -78,6 +78,30 @@ def _hybrid_orbit(p: CompiledPrimitive) -> dict:
     return p.cache["hybrid_orbit"]
 
 
+def seed_hybrid_orbit(p: CompiledPrimitive, evidence: dict) -> bool:
+    """Take the orbit defect, least h and reduced monodromy the floquet verifier computed while sizing
+    E (mpgspec.roa's evidence: exact floats, fresh or read back from the cache) as this primitive's,
+    where it ran the same flow (step HYBRID_DT, the neutral directions _hybrid_orbit takes): the
+    gait's one-period map is then not run again for Definition 1. Returns whether it was taken."""
+    if not _hybrid(p) or "hybrid_orbit" in p.cache or not isinstance(evidence, dict):
+        return False
+    found = evidence.get("neutral")
+    neutral = list(NEUTRAL) if p.system.model.n_base else []
+    if (evidence.get("hybrid") is not True or evidence.get("dt") != HYBRID_DT or not isinstance(found, dict)
+            or list(found) != neutral):
+        return False
+    try:
+        M = np.array(evidence["monodromy"], float)
+        defect, least_h = float(evidence["orbit_defect"]), float(evidence["least_h_on_orbit"])
+        mult = {k: float(v["multiplier"]) for k, v in found.items()}
+    except (KeyError, TypeError, ValueError):
+        return False
+    if M.ndim != 2 or M.shape[0] != M.shape[1] or not np.isfinite(M).all():
+        return False
+    p.cache["hybrid_orbit"] = {"defect": defect, "least_h": least_h, "mu": np.linalg.eigvals(M), "neutral": mult}
+    return True
+
+
 def _event_transient(p: CompiledPrimitive) -> bool:
     return p.cls is PrimitiveClass.TRANSIENT and bool(getattr(p.system, "events", False)) and p.jump is not None
 

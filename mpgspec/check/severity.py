@@ -5,7 +5,7 @@ from ..compile.primitive import CompiledPrimitive
 from ..oracle.executors import InProcess
 from ..oracle.joint import Map, run
 from ..oracle.tasks import Failed
-from .assumptions import AssumptionCheck, check_primitive
+from .assumptions import AssumptionCheck, check_primitive, seed_hybrid_orbit
 from .region_size import region_size
 from .roa_flows import roa_invariant
 
@@ -53,7 +53,12 @@ def check_assumptions(prims: dict[str, CompiledPrimitive], severity: dict, memo=
 
 
 def assumptions_stage(prims: dict[str, CompiledPrimitive], severity: dict, memo=None, roa: dict | None = None):
-    """check_assumptions as a stage (mpgspec.oracle.joint)."""
+    """check_assumptions as a stage (mpgspec.oracle.joint). A gait's orbit and monodromy are those its
+    floquet verifier computed this run, where it ran the same flow (seed_hybrid_orbit), before the
+    checks' map starts (workers forked after it inherit them)."""
+    for name, rec in (roa or {}).items():
+        if name in prims:
+            seed_hybrid_orbit(prims[name], rec.evidence)
     known = yield from _checks_by_name(prims, memo)
     out = []
     for p in prims.values():

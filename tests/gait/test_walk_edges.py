@@ -13,7 +13,8 @@ from mpgspec.oracle.verdict import ENVELOPE_STEPS, Block, Carry, envelope
 
 
 @pytest.fixture(scope="module")
-def setup(a1_project):
+def sized(a1_project):
+    """(prims, settings, the floquet verifier's result for Walk(in_place))."""
     spec, prims, settings = a1_project
     assert settings.error == "doubling"
     prims = dict(prims)  # Walk(in_place) is replaced by its sized copy below
@@ -21,7 +22,35 @@ def setup(a1_project):
     res = _estimate(inst.spec.roa.method, prims["Walk(in_place)"], inst.spec.roa.options)
     assert res.level == "empirical" and 0.002 < res.radius < 0.05
     prims["Walk(in_place)"] = prims["Walk(in_place)"].with_radius(float(res.radius))
-    return prims, settings
+    return prims, settings, res
+
+
+@pytest.fixture(scope="module")
+def setup(sized):
+    return sized[:2]
+
+
+def test_definition_1_takes_the_verifiers_orbit_bit_for_bit(sized):
+    """The gait's orbit defect, least h and multipliers that Definition 1's checks take from the
+    floquet verifier's evidence (seed_hybrid_orbit) are the bits they compute themselves, also when the
+    evidence was read back from the cache (JSON); evidence of another step, other neutral directions or
+    without a finite monodromy is not taken."""
+    import json
+
+    from mpgspec.check.assumptions import _hybrid_orbit, seed_hybrid_orbit
+
+    prims, _s, res = sized
+    walk = prims["Walk(in_place)"]
+    own, seeded, stored = (walk.with_radius(walk.radius) for _ in range(3))
+    for other in ({**res.evidence, "dt": 0.002}, {**res.evidence, "neutral": {}},
+                  {**res.evidence, "monodromy": [["nan"]]}, {**res.evidence, "monodromy": None}):
+        assert not seed_hybrid_orbit(seeded, other) and "hybrid_orbit" not in seeded.cache
+    assert seed_hybrid_orbit(seeded, res.evidence)
+    assert seed_hybrid_orbit(stored, json.loads(json.dumps(res.evidence)))
+    a = _hybrid_orbit(own)
+    for b in (seeded.cache["hybrid_orbit"], stored.cache["hybrid_orbit"]):
+        assert a["defect"] == b["defect"] and a["least_h"] == b["least_h"] and a["neutral"] == b["neutral"]
+        assert np.array_equal(a["mu"], b["mu"]) and len(a["neutral"]) == 3
 
 
 def _call(prims, settings, a, b, t_a, t_b, **kw):

@@ -76,7 +76,8 @@ class _Events:
     def advance(self, touching: np.ndarray, s: float, dt: float) -> None:
         """After a control period ending s after switch-in, with the feet touching as given."""
         self.tau = np.where(self.tau < NEVER, self.tau + dt, self.tau)
-        now = [bool(np.any(touching & ~self.flags)), bool(self.flags.any() and not touching.any())]
+        on, was = touching.tolist(), self.flags.tolist()
+        now = [any(a and not b for a, b in zip(on, was)), any(was) and not any(on)]
         for k, e in enumerate(now[: len(self.tau)]):
             if e and not bool(happened(self.tau[k], s)):
                 self.tau[k] = 0.0
@@ -96,10 +97,12 @@ class _Sim:
         self.events: _Events | None = None
         self._foot_of = {int(g): k for k, g in enumerate(robot.foot_geoms)}
         self._trunk = {int(g) for g in robot.trunk_geoms}
+        self._now: list | None = None  # the geom pairs in contact at the current state, once read
 
     def set(self, x: np.ndarray) -> None:
         self.d.qpos[:], self.d.qvel[:] = self.robot.state.to_mujoco(x)
         self.mj.mj_forward(self.m, self.d)
+        self._now = None
 
     def touching(self) -> np.ndarray:
         """Whether each foot sphere touches the floor."""
@@ -115,9 +118,11 @@ class _Sim:
         return any(a in self._trunk or b in self._trunk for a, b in self._pairs())
 
     def _pairs(self) -> list:
-        """The geom pairs in contact now (a few: read as a list, not as arrays)."""
-        n = self.d.ncon
-        return self.d.contact.geom[:n].tolist() if n else []
+        """The geom pairs in contact now (a few: read as a list, not as arrays), read once per state."""
+        if self._now is None:
+            n = self.d.ncon
+            self._now = self.d.contact.geom[:n].tolist() if n else []
+        return self._now
 
     def state(self) -> np.ndarray:
         extra = self.events.extra() if self.events is not None else None
@@ -138,6 +143,7 @@ class _Sim:
         if n > 0:  # the n steps in MuJoCo's own loop: the same steps as one call each, less Python
             self.mj.mj_step(self.m, self.d, nstep=n)
         self.mj.mj_forward(self.m, self.d)
+        self._now = None
         return bad.number == before
 
 
@@ -290,10 +296,13 @@ def _evaluate(p: CompiledPrimitive, x, clock: float, s: float, x_sw) -> tuple[np
 
 
 def _judge(out: Replay, p: CompiledPrimitive, hv: np.ndarray, act: np.ndarray, t: float, tol: float) -> None:
-    least, when = out.worst.setdefault(p.name, (np.full(len(hv), np.inf), np.zeros(len(hv))))
-    v = np.where(act, np.nan_to_num(hv, nan=-np.inf), np.inf)
+    got = out.worst.get(p.name)
+    least, when = got if got is not None else out.worst.setdefault(p.name, (np.full(len(hv), np.inf), np.zeros(len(hv))))
+    finite = bool(np.isfinite(hv).all())
+    v = np.where(act, hv if finite else np.nan_to_num(hv, nan=-np.inf), np.inf)
     lower = v < least
-    least[lower], when[lower] = v[lower], t
+    if lower.any():
+        least[lower], when[lower] = v[lower], t
     bad = act & ~(hv >= -tol)  # NaN counts as violated
     if bad.any():
         out.safe = False

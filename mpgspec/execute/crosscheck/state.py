@@ -8,6 +8,7 @@ w_mujoco = w_base, with R the base's rotation (body to world).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,7 +16,8 @@ import numpy as np
 
 def quat_matrix(q_wxyz) -> np.ndarray:
     """Rotation matrix (body to world) of a quaternion, w first; normalised first."""
-    w, x, y, z = np.asarray(q_wxyz, float) / np.linalg.norm(q_wxyz)
+    q = np.asarray(q_wxyz, float)
+    w, x, y, z = (q / math.sqrt(q.dot(q))).tolist()  # np.linalg.norm's arithmetic, on Python floats
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
                      [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
