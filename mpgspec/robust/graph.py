@@ -30,7 +30,7 @@ from ..plan.planner import lookup_table
 from ..spec.uncertainty_refs import latency_steps, rigid_nominal
 from ..progress import of_project
 from ..oracle.executors import InProcess
-from ..oracle.joint import Map, run
+from ..oracle.joint import Map, concurrently, run
 from ..oracle.tasks import Failed
 from .cells import TargetJob, failed_target, job_cost, run_target
 from .library import prefetch
@@ -83,8 +83,9 @@ def robust_stage(cp, vg, progress=None, memo=None, executor=None) -> RobustResul
 
 
 def robust_steps(cp, vg, progress=None, memo=None, workers: int = 1):
-    """robust_stage as a stage (mpgspec.oracle.joint): the targets' checks one map, then the
-    uncertain sequences (spread over `workers` items)."""
+    """robust_stage as a stage (mpgspec.oracle.joint): the targets' checks one map, beside them the
+    uncertain sequences naive and through the nominal graph, then through the robust graph (each
+    spread over `workers` items; each mode's runs depend on the seed and its graph only)."""
     spec, prims, settings, g = cp.spec, cp.prims, cp.settings, vg.graph
     unc = spec.project.uncertainty
     if unc is None:
@@ -101,18 +102,25 @@ def robust_steps(cp, vg, progress=None, memo=None, workers: int = 1):
     sys = next(iter(prims.values())).system
     sc, jobs = target_jobs(spec, prims, settings, g)
     among = set(unc.nodes) if unc.nodes is not None else set(prims)
-    edges, nodes, n_roll, build_s = yield from targets_stage(jobs, prims, unc)
+    runs = spec.project.sequence is not None and unc.runs > 0
+    w = spec.project.sequence.weight if runs else None
+    targets = targets_stage(jobs, prims, unc)
+    if runs:  # the naive and nominal-graph runs need no robust verdict: they run beside the targets' checks
+        first = yield from concurrently({"targets": targets, "nominal": uncertain_stage(
+            spec, prims, settings, {"graph": (g, lookup_table(g, w))}, unc.runs, unc.seed, workers)})
+        edges, nodes, n_roll, build_s = first["targets"]
+    else:
+        edges, nodes, n_roll, build_s = yield from targets
     rg = _robust_graph(g, edges, unc.nodes)
     scen = _scenario_record(unc, sc, among, edges, nodes, sys)
     t1 = time.perf_counter()
     seq = None
-    if spec.project.sequence is not None and unc.runs > 0:
+    if runs:
         if progress:
-            progress(spec.name, "sequence under uncertainty", 0, 3)
-        w = spec.project.sequence.weight
-        seq = yield from uncertain_stage(spec, prims, settings, {"graph": (g, lookup_table(g, w)),
-                                                                 "robust_graph": (rg, lookup_table(rg, w))},
-                                         unc.runs, unc.seed, workers)
+            progress(spec.name, "sequence under uncertainty (through the robust graph)", 2, 3)
+        late = yield from uncertain_stage(spec, prims, settings, {"robust_graph": (rg, lookup_table(rg, w))},
+                                          unc.runs, unc.seed, workers, naive=False)
+        seq = {**late, "modes": {**first["nominal"]["modes"], **late["modes"]}}
     timing = {"robust_s": time.perf_counter() - t0, "robust_build_s": build_s, "robust_rollouts": n_roll,
               "robust_sequence_s": time.perf_counter() - t1}
     edges.sort(key=lambda e: (e["from"], e["to"]))

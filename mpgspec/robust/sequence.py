@@ -368,10 +368,11 @@ def sequence_under_uncertainty(spec, prims, settings, graphs: dict, runs: int, s
     return run(stage, executor or InProcess(), progress)
 
 
-def uncertain_stage(spec, prims, settings, graphs: dict, runs: int, seed: int, workers: int = 1):
-    """sequence_under_uncertainty as a stage (mpgspec.oracle.joint): the modes spread over up to
-    `workers` items of one map (in this process for one)."""
-    modes = [("naive", None, {})] + [(m, g, table) for m, (g, table) in graphs.items()]
+def uncertain_stage(spec, prims, settings, graphs: dict, runs: int, seed: int, workers: int = 1,
+                    naive: bool = True):
+    """sequence_under_uncertainty as a stage (mpgspec.oracle.joint): the modes (naive unless `naive` is
+    False, then one per graph) spread over up to `workers` items of one map (in this process for one)."""
+    modes = [("naive", None, {})] * naive + [(m, g, table) for m, (g, table) in graphs.items()]
     workers = max(1, min(workers, len(modes)))
     jobs = [ModeJob(_portable(spec) if workers > 1 else spec, settings, runs, seed, modes[k::workers])
             for k in range(workers)]
