@@ -315,17 +315,19 @@ def _judge(out: Replay, p: CompiledPrimitive, hv: np.ndarray, act: np.ndarray, t
 
 def _contacts(sim: _Sim, c: dict, p: CompiledPrimitive, clock: float, t: float, radius: float) -> None:
     """Penetration of the feet, slip of the held feet, the first lift-off of a held foot, the trunk."""
-    z = sim.d.site_xpos[sim.robot.foot_sites, 2]
-    c["max_penetration"] = max(c["max_penetration"], float(np.max(-z, initial=0.0)))
+    low = float(sim.d.site_xpos[sim.robot.foot_sites, 2].min())
+    if -low > c["max_penetration"]:  # the deepest foot below the floor's top (0 when none is)
+        c["max_penetration"] = -low
     held = held_feet(p, clock)
-    on = sim.touching()
-    for k, f in enumerate(sim.robot.feet):
-        if held is not None and f in held:
-            if not on[k] and c["lift_off"] is None:
-                c["lift_off"] = {"t": float(t), "foot": f, "primitive": p.name}
-            if on[k]:
-                v = sim.slip(k, radius)
-                if v > c["max_slip_speed"]:
-                    c["max_slip_speed"], c["slip_at"] = v, {"t": float(t), "foot": f}
+    if held is not None:
+        on = sim.touching()
+        for k, f in enumerate(sim.robot.feet):
+            if f in held:
+                if not on[k] and c["lift_off"] is None:
+                    c["lift_off"] = {"t": float(t), "foot": f, "primitive": p.name}
+                if on[k]:
+                    v = sim.slip(k, radius)
+                    if v > c["max_slip_speed"]:
+                        c["max_slip_speed"], c["slip_at"] = v, {"t": float(t), "foot": f}
     if c["trunk_contact"] is None and sim.trunk_touching():
         c["trunk_contact"] = float(t)
