@@ -27,7 +27,7 @@ def _raise_lstsq(err, flag):
 def lstsq_many(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     """x[i] = np.linalg.lstsq(A[i], b[i], rcond=None)[0] for stacked A (n, m, k) and b (n, m)."""
     if _lstsq_gufunc is None or not A.shape[0]:
-        return np.array([np.linalg.lstsq(a, y, rcond=None)[0] for a in A]).reshape(A.shape[0], A.shape[2])
+        return np.array([np.linalg.lstsq(a, y, rcond=None)[0] for a, y in zip(A, b)]).reshape(A.shape[0], A.shape[2])
     rcond = np.finfo(float).eps * max(A.shape[1:])
     with np.errstate(call=_raise_lstsq, invalid="call", over="ignore", divide="ignore", under="ignore"):
         x = _lstsq_gufunc(A, b[..., None], rcond, signature="ddd->ddid")[0]
