@@ -104,8 +104,10 @@ class DisturbedSequences:
     """Seeded draws of the uncertainty and the sequence run under them, in any mode."""
 
     def __init__(self, prims, steppers: dict[str, _Stepper], names: list[str], nd: int, bound, unc, settings, seq,
-                 runs: int, seed: int):
-        self.prims, self.fns, self.settings, self.seq, self.n = prims, steppers, settings, seq, runs
+                 runs: int, seed: int, cols: list[int] | None = None):
+        """`cols` (optional): run only these of the `runs` draws (each run's outcome depends on its
+        own draws alone, so a block of runs gives the same outcomes as in the whole)."""
+        self.prims, self.fns, self.settings, self.seq = prims, steppers, settings, seq
         sys = next(iter(prims.values())).system
         rng = np.random.default_rng(seed)
         lo = np.array([unc.parameters[p].range[0] for p in names])
@@ -117,6 +119,9 @@ class DisturbedSequences:
         self.steps = int(round(seq.duration / settings.dt))
         pieces = int(np.ceil(seq.duration / HOLD)) + 1
         self.dist = rng.uniform(-1, 1, (pieces, nd, runs)) * np.asarray(bound, float).reshape(1, nd, 1)
+        if cols is not None:
+            self.theta, self.err, self.dist = self.theta[:, cols], self.err[:, cols], self.dist[:, :, cols]
+        self.n = self.theta.shape[1] if cols is not None else runs
         self.nz = max(f.nz for f in steppers.values())
 
     def _apply(self, fn, cols: np.ndarray, args: list[np.ndarray]):
@@ -346,6 +351,7 @@ class ModeJob:
     runs: int
     seed: int
     modes: list
+    cols: list | None = None  # the runs of this job (None: all)
 
 
 def run_modes(prims: dict, job: ModeJob) -> dict:
@@ -353,7 +359,7 @@ def run_modes(prims: dict, job: ModeJob) -> dict:
     spec, settings = job.spec, job.settings
     fns, names, nd, bound = steppers(spec, prims, settings)
     ds = DisturbedSequences(prims, fns, names, nd, bound, spec.project.uncertainty, settings,
-                            spec.project.sequence, job.runs, job.seed)
+                            spec.project.sequence, job.runs, job.seed, job.cols)
     return {m: ds.run(g, table, "naive" if g is None else "graph") for m, g, table in job.modes}
 
 
@@ -371,20 +377,47 @@ def sequence_under_uncertainty(spec, prims, settings, graphs: dict, runs: int, s
 def uncertain_stage(spec, prims, settings, graphs: dict, runs: int, seed: int, workers: int = 1,
                     naive: bool = True):
     """sequence_under_uncertainty as a stage (mpgspec.oracle.joint): the modes (naive unless `naive` is
-    False, then one per graph) spread over up to `workers` items of one map (in this process for one)."""
+    False, then one per graph) spread over up to `workers` items of one map (in this process for one);
+    with fewer modes than workers, each mode's runs in consecutive blocks, one item each, and the blocks'
+    statistics merged (the same as one job's: each run depends on its own draws only)."""
     modes = [("naive", None, {})] * naive + [(m, g, table) for m, (g, table) in graphs.items()]
-    workers = max(1, min(workers, len(modes)))
-    jobs = [ModeJob(_portable(spec) if workers > 1 else spec, settings, runs, seed, modes[k::workers])
-            for k in range(workers)]
-    if workers == 1:
+    workers = max(1, min(workers, max(len(modes), runs)))
+    portable = _portable(spec) if workers > 1 else spec
+    if len(modes) >= workers:
+        jobs = [ModeJob(portable, settings, runs, seed, modes[k::workers]) for k in range(workers)]
+    else:
+        blocks = [b.tolist() for b in np.array_split(np.arange(runs), workers) if len(b)]
+        jobs = [ModeJob(portable, settings, runs, seed, modes, b) for b in blocks]
+    if len(jobs) == 1:
         done = [run_modes(prims, jobs[0])]
     else:
         done = yield Map(run_modes, jobs, "sequence under uncertainty", prims,
-                         cost=[float(len(job.modes) * runs) for job in jobs])
-    out = {}
+                         cost=[float(len(job.modes) * (len(job.cols) if job.cols is not None else runs)) for job in jobs])
+    parts: dict[str, list] = {}
     for job, res in zip(jobs, done):
-        out.update({m: _failed_mode(runs, res.error) for m, _, _ in job.modes} if isinstance(res, Failed) else res)
+        for m, _, _ in job.modes:
+            parts.setdefault(m, []).append(_failed_mode(runs, res.error) if isinstance(res, Failed) else res[m])
+    out = {m: (got[0] if len(got) == 1 else _merged(got, runs)) for m, got in parts.items()}
     return {"runs": runs, "seed": seed, "disturbance_hold_s": HOLD, "modes": {m: out[m] for m, _, _ in modes}}
+
+
+def _merged(blocks: list[dict], runs: int) -> dict:
+    """One mode's statistics from those of consecutive blocks of its runs, as DisturbedSequences.run
+    gives them for all runs at once; a block that failed fails the mode (its error the evidence)."""
+    failed = next((b for b in blocks if "goals" not in b), None)  # _failed_mode's record
+    if failed is not None:
+        return failed
+    safe = sum(b["safe_runs"] for b in blocks)
+    taken: dict[tuple[str, str], int] = {}
+    for b in blocks:
+        for e in b["switches"]:
+            taken[(e["from"], e["to"])] = taken.get((e["from"], e["to"]), 0) + e["count"]
+    return {"safe_fraction": safe / runs, "safe_runs": safe, "runs": runs,
+            "reached_goal": sum(b["reached_goal"] for b in blocks), "goals": blocks[0]["goals"],
+            "goals_reached": [sum(v) for v in zip(*(b["goals_reached"] for b in blocks))],
+            "first_violation": [f for b in blocks for f in b["first_violation"]][:5],
+            "final": [c for b in blocks for c in b["final"]],
+            "switches": [{"from": a, "to": b, "count": c} for (a, b), c in sorted(taken.items())]}
 
 
 def _failed_mode(runs: int, error: str) -> dict:

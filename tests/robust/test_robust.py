@@ -185,6 +185,28 @@ def test_sequence_statistics_are_seeded_on_shared_draws_and_robust_mode_avoids_l
     assert ("Balance", "Swing(2.6)") in used["robust_graph"]  # the robust way round, through the largest swing
 
 
+def test_a_modes_runs_split_in_blocks_give_the_statistics_of_all_runs_at_once(built, rob):
+    """With fewer modes than workers each mode's runs go out in consecutive blocks (uneven here: 7 runs
+    on 3 workers); merged, every statistic (fractions, goals, first violations, final primitives,
+    switches per edge) is what one job running all of them gives."""
+    from mpgspec.oracle.executors import InProcess
+    from mpgspec.oracle.joint import run
+    from mpgspec.plan.planner import lookup_table
+    from mpgspec.robust.sequence import uncertain_stage
+
+    cp, vg = built
+    spec = _balance_to_swingup(cp.spec)
+    graphs = {"graph": (vg.graph, lookup_table(vg.graph)), "robust_graph": (rob.graph, lookup_table(rob.graph))}
+    whole = run(uncertain_stage(spec, cp.prims, cp.settings, graphs, 7, 11, workers=1), InProcess())
+    for name, g in graphs.items():
+        split = run(uncertain_stage(spec, cp.prims, cp.settings, {name: g}, 7, 11, workers=3, naive=False),
+                    InProcess())
+        assert split["modes"] == {name: whole["modes"][name]} and split["runs"] == 7
+    naive = run(uncertain_stage(spec, cp.prims, cp.settings, {}, 7, 11, workers=2), InProcess())
+    assert naive["modes"] == {"naive": whole["modes"]["naive"]}
+    assert any(m["first_violation"] for m in whole["modes"].values())  # the merge had violations to order
+
+
 def _cli(capsys, *argv):
     from mpgspec.cli import main
 
