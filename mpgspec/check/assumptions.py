@@ -73,9 +73,15 @@ def _hybrid_orbit(p: CompiledPrimitive) -> dict:
         Xs, defect, least_h = orbit(flow, W)
         neutral = list(NEUTRAL) if p.system.model.n_base else []
         M, found = hybrid_monodromy(flow, Xs[:, 0], neutral)
-        p.cache["hybrid_orbit"] = {"defect": defect, "least_h": least_h, "mu": np.linalg.eigvals(M),
-                                   "neutral": {k: float(v["multiplier"]) for k, v in found.items()}}
+        p.cache["hybrid_orbit"] = _orbit_record(defect, least_h, M, found)
     return p.cache["hybrid_orbit"]
+
+
+def _orbit_record(defect: float, least_h: float, M: np.ndarray, found: dict) -> dict:
+    """What the gait checks read of an orbit: its defect, least h, the reduced multipliers and the
+    neutral ones by name."""
+    return {"defect": defect, "least_h": least_h, "mu": np.linalg.eigvals(M),
+            "neutral": {k: float(v["multiplier"]) for k, v in found.items()}}
 
 
 def seed_hybrid_orbit(p: CompiledPrimitive, evidence: dict) -> bool:
@@ -92,13 +98,12 @@ def seed_hybrid_orbit(p: CompiledPrimitive, evidence: dict) -> bool:
         return False
     try:
         M = np.array(evidence["monodromy"], float)
-        defect, least_h = float(evidence["orbit_defect"]), float(evidence["least_h_on_orbit"])
-        mult = {k: float(v["multiplier"]) for k, v in found.items()}
+        if M.ndim != 2 or M.shape[0] != M.shape[1] or not np.isfinite(M).all():
+            return False
+        record = _orbit_record(float(evidence["orbit_defect"]), float(evidence["least_h_on_orbit"]), M, found)
     except (KeyError, TypeError, ValueError):
         return False
-    if M.ndim != 2 or M.shape[0] != M.shape[1] or not np.isfinite(M).all():
-        return False
-    p.cache["hybrid_orbit"] = {"defect": defect, "least_h": least_h, "mu": np.linalg.eigvals(M), "neutral": mult}
+    p.cache["hybrid_orbit"] = record
     return True
 
 

@@ -157,13 +157,19 @@ class DisturbedSequences:
             new_goal = runs.commands(t - dt)
             runs.switch(t, new_goal)
             runs.arrive()
-        cur, safe = runs.cur, runs.safe
-        every = safe & runs.arrived.all(axis=0)
-        return {"safe_fraction": float(safe.mean()), "safe_runs": int(safe.sum()), "runs": self.n,
-                "reached_goal": int(every.sum()), "goals": list(runs.goals),
-                "goals_reached": [int((safe & a).sum()) for a in runs.arrived],
-                "first_violation": [f for f in runs.first if f is not None][:5], "final": cur,
-                "switches": [{"from": a, "to": b, "count": c} for (a, b), c in sorted(runs.taken.items())]}
+        safe = runs.safe
+        return _statistics(self.n, int(safe.sum()), int((safe & runs.arrived.all(axis=0)).sum()), list(runs.goals),
+                           [int((safe & a).sum()) for a in runs.arrived], [f for f in runs.first if f is not None],
+                           runs.cur, runs.taken)
+
+
+def _statistics(n: int, safe: int, reached: int, goals: list, goals_reached: list, first: list, final: list,
+                taken: dict) -> dict:
+    """A mode's statistics over n runs: safe and reached counts, per goal the safe runs that arrived in
+    it, the first five violations in run order, each run's final primitive, the switches per edge."""
+    return {"safe_fraction": safe / n, "safe_runs": safe, "runs": n, "reached_goal": reached, "goals": goals,
+            "goals_reached": goals_reached, "first_violation": first[:5], "final": final,
+            "switches": [{"from": a, "to": b, "count": c} for (a, b), c in sorted(taken.items())]}
 
 
 class _Runs:
@@ -407,17 +413,13 @@ def _merged(blocks: list[dict], runs: int) -> dict:
     failed = next((b for b in blocks if "goals" not in b), None)  # _failed_mode's record
     if failed is not None:
         return failed
-    safe = sum(b["safe_runs"] for b in blocks)
     taken: dict[tuple[str, str], int] = {}
     for b in blocks:
         for e in b["switches"]:
             taken[(e["from"], e["to"])] = taken.get((e["from"], e["to"]), 0) + e["count"]
-    return {"safe_fraction": safe / runs, "safe_runs": safe, "runs": runs,
-            "reached_goal": sum(b["reached_goal"] for b in blocks), "goals": blocks[0]["goals"],
-            "goals_reached": [sum(v) for v in zip(*(b["goals_reached"] for b in blocks))],
-            "first_violation": [f for b in blocks for f in b["first_violation"]][:5],
-            "final": [c for b in blocks for c in b["final"]],
-            "switches": [{"from": a, "to": b, "count": c} for (a, b), c in sorted(taken.items())]}
+    return _statistics(runs, sum(b["safe_runs"] for b in blocks), sum(b["reached_goal"] for b in blocks),
+                       blocks[0]["goals"], [sum(v) for v in zip(*(b["goals_reached"] for b in blocks))],
+                       [f for b in blocks for f in b["first_violation"]], [c for b in blocks for c in b["final"]], taken)
 
 
 def _failed_mode(runs: int, error: str) -> dict:

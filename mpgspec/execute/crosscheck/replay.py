@@ -297,7 +297,9 @@ def _evaluate(p: CompiledPrimitive, x, clock: float, s: float, x_sw) -> tuple[np
 
 def _judge(out: Replay, p: CompiledPrimitive, hv: np.ndarray, act: np.ndarray, t: float, tol: float) -> None:
     got = out.worst.get(p.name)
-    least, when = got if got is not None else out.worst.setdefault(p.name, (np.full(len(hv), np.inf), np.zeros(len(hv))))
+    if got is None:  # built once per primitive, not at every update
+        got = out.worst[p.name] = (np.full(len(hv), np.inf), np.zeros(len(hv)))
+    least, when = got
     finite = bool(np.isfinite(hv).all())
     v = np.where(act, hv if finite else np.nan_to_num(hv, nan=-np.inf), np.inf)
     lower = v < least
