@@ -7,8 +7,10 @@ nothing changed; per project and phase, with what gcc cost.
 
 Each side runs `python -m mpgspec verify PATH ... -q` in a subprocess with a fresh MPGSPEC_CACHE,
 so nothing compiled or stored before is reused, then once more with nothing changed. CC points at a
-wrapper around gcc that records, per compiled library, the C source's bytes and gcc's CPU seconds
-(its children's rusage): this works for any commit, instrumented or not. Phase times come from
+wrapper around gcc, and MPGSPEC_QUICK_CC at one around tcc when it is installed, that record per
+compiled library the compiler, the C source's bytes and the compiler's CPU seconds (its children's
+rusage): this works for any commit, instrumented or not (one that knows no quick compiler sends
+everything to CC). Phase times come from
 each project's report.json (`timing`). A baseline commit is checked out into a temporary worktree and
 run with the same interpreter and packages (PYTHONPATH), cold then warm, before the working tree:
 both sides meet the same machine within one invocation, and the ratios (baseline / now) are what to
@@ -42,12 +44,12 @@ CC_WRAPPER = """#!{python}
 import json, os, resource, subprocess, sys
 src = next((a for a in sys.argv[1:] if a.endswith(".c")), "")
 before = resource.getrusage(resource.RUSAGE_CHILDREN)
-rc = subprocess.call(["gcc", *sys.argv[1:]])
+rc = subprocess.call([{compiler!r}, *sys.argv[1:]])
 after = resource.getrusage(resource.RUSAGE_CHILDREN)
 cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 with open({log!r}, "a") as f:
     f.write(json.dumps({{"name": os.path.basename(src)[:-2], "c_bytes": os.path.getsize(src) if src else 0,
-                        "gcc_s": cpu}}) + "\\n")
+                        "gcc_s": cpu, "cc": os.path.basename({compiler!r})}}) + "\\n")
 sys.exit(rc)
 """
 
@@ -55,10 +57,14 @@ sys.exit(rc)
 def run_side(tree: Path, paths: list[str], jobs: int | None, work: Path) -> dict:
     """Cold then warm `mpgspec verify` of `paths` with the code of `tree`: wall times, gcc log, phases."""
     cache, out, log = work / "cache", work / "reports", work / "gcc.jsonl"
-    cc = work / "cc"
-    cc.write_text(CC_WRAPPER.format(python=sys.executable, log=str(log)))
-    cc.chmod(0o755)
-    env = {**os.environ, "MPGSPEC_CACHE": str(cache), "CC": str(cc), "PYTHONPATH": str(tree)}
+    env = {**os.environ, "MPGSPEC_CACHE": str(cache), "PYTHONPATH": str(tree)}
+    quick = shutil.which(os.environ.get("MPGSPEC_QUICK_CC", "tcc") or "-")
+    for var, compiler in (("CC", "gcc"), ("MPGSPEC_QUICK_CC", quick)):
+        if compiler:
+            cc = work / f"cc_{Path(compiler).name}"
+            cc.write_text(CC_WRAPPER.format(python=sys.executable, log=str(log), compiler=compiler))
+            cc.chmod(0o755)
+            env[var] = str(cc)
     cmd = [sys.executable, "-m", "mpgspec", "verify", *paths, "--out", str(out), "-q"]
     if jobs:
         cmd += ["-j", str(jobs)]
@@ -89,14 +95,20 @@ def _phases(out: Path) -> dict:
 
 
 def _gcc(log: Path) -> dict:
-    """Libraries compiled, C bytes and gcc CPU seconds, in total and by kind (name up to its first '_')."""
+    """Libraries compiled, C bytes and compiler CPU seconds, in total, by compiler and by kind (name up
+    to its first '_'); the quick compiler's probe is not a library."""
     rows = [json.loads(ln) for ln in log.read_text().splitlines()] if log.exists() else []
+    rows = [r for r in rows if r["name"] != "probe"]
+    by_cc = defaultdict(float)
+    for r in rows:
+        by_cc[r.get("cc", "gcc")] += r["gcc_s"]
     kinds = defaultdict(lambda: [0, 0, 0.0])
     for r in rows:
         k = kinds[r["name"].split("_")[0]]
         k[0], k[1], k[2] = k[0] + 1, k[1] + r["c_bytes"], k[2] + r["gcc_s"]
     return {"libraries": len(rows), "c_bytes": sum(r["c_bytes"] for r in rows),
-            "gcc_s": sum(r["gcc_s"] for r in rows), "kinds": {k: tuple(v) for k, v in sorted(kinds.items())}}
+            "gcc_s": sum(r["gcc_s"] for r in rows), "by_cc": dict(by_cc),
+            "kinds": {k: tuple(v) for k, v in sorted(kinds.items())}}
 
 
 def baseline_tree(ref: str, tmp: Path) -> Path:
@@ -115,7 +127,8 @@ def table(sides: dict[str, dict]) -> list[tuple]:
             ("exit codes (cold, warm)", *(f"{sides[n]['cold_exit']}, {sides[n]['warm_exit']}" for n in names)),
             ("libraries compiled", *(str(sides[n]["gcc"]["libraries"]) for n in names)),
             ("C bytes compiled", *(f"{sides[n]['gcc']['c_bytes'] / 1e6:.1f} MB" for n in names)),
-            ("gcc CPU seconds", *(f"{sides[n]['gcc']['gcc_s']:.0f} s" for n in names))]
+            ("compiler CPU seconds", *(f"{sides[n]['gcc']['gcc_s']:.0f} s" for n in names)),
+            ("of them tcc", *(f"{sides[n]['gcc']['by_cc'].get('tcc', 0.0):.1f} s" for n in names))]
     projects = sorted({p for n in names for p in sides[n]["phases"]})
     for p in projects:
         for ph in PHASES:
@@ -126,7 +139,7 @@ def table(sides: dict[str, dict]) -> list[tuple]:
         b, a = (sides[n] for n in names)
         ratios = {"cold `mpgspec verify` wall": b["cold_s"] / a["cold_s"],
                   "nothing changed, wall": b["warm_s"] / a["warm_s"],
-                  "gcc CPU seconds": b["gcc"]["gcc_s"] / max(a["gcc"]["gcc_s"], 1e-9)}
+                  "compiler CPU seconds": b["gcc"]["gcc_s"] / max(a["gcc"]["gcc_s"], 1e-9)}
         rows = [(*r, f"{ratios[r[0]]:.2f}x" if r[0] in ratios else "") for r in rows]
     return rows
 
@@ -172,7 +185,7 @@ def main(argv=None) -> int:
     print(text)
     kinds = sides["now"]["gcc"]["kinds"]
     by_kind = ", ".join(f"{k} {n} ({b / 1e6:.1f} MB, {s:.0f} s)" for k, (n, b, s) in kinds.items())
-    print(f"\ngcc by kind (now): {by_kind}")
+    print(f"\ncompiler by kind (now): {by_kind}")
     if not args.no_write:
         mach = machine(casadi=_casadi_version(), revision=revision(ROOT))
         load = Path("/proc/loadavg").read_text().split()[:3] if Path("/proc/loadavg").exists() else ["?"]
@@ -181,8 +194,9 @@ def main(argv=None) -> int:
                  f"`python bench/bench_cold.py {' '.join(argv if argv is not None else sys.argv[1:])}` "
                  f"({time.perf_counter() - t0:.0f} s wall).")
         section = (f"{HEADING}\n\n{stamp} Each side: a fresh MPGSPEC_CACHE, `mpgspec verify "
-                   f"{' '.join(args.paths)} -q` cold, then again with nothing changed; gcc CPU seconds from a "
-                   f"CC wrapper; phases from report.json.\n\n{text}\n\ngcc by kind (now): {by_kind}\n")
+                   f"{' '.join(args.paths)} -q` cold, then again with nothing changed; compiler CPU seconds from "
+                   f"wrappers around gcc and tcc; phases from report.json.\n\n{text}\n\ncompiler by kind (now): "
+                   f"{by_kind}\n")
         write_section(ROOT / "bench" / "RESULTS.md", HEADING, section)
     return 0
 

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from .integrator import Rows, step_body
-from .jit import compile_cached, cse_sx, optimising
+from .jit import compile_cached, cse_sx, optimising, quick_compiler
 from .looplib import attach, caller_flags, compile_callers, guarded, libs_of
 from .verdict import ENVELOPE_STEPS, LANES, Block, Carry, Decision, evidences, lane_sum
 
@@ -280,18 +280,21 @@ def build_judged_chunk(prim: CompiledPrimitive, dt: float, K: int, B: int, tol: 
 
 
 GUARDED_FLAGS = ("-O1",)
-"""gcc flags (at least) of the chunk of a small loop with guards: an MX graph of calls per step
-(the smooth step, the location in a conditional, the judge), 73-101 KB of C on the pendulum; at -O1
-gcc takes about 0.3 s more per primitive than at -O0 and the chunk runs in about a third of the
-time, faster than the unguarded loop's inlined chunk at -O0 (bench/bench_pieces.py). A chunk that
-calls a loop library is compiled at looplib.CALLER_FLAGS: its loop evaluations dominate, and its
-smooth step, run at every step, is compiled at jit.HOT_LEVEL inside it (jit.hot_code)."""
+"""gcc flags (at least) of the chunk of a small loop with guards when no quick compiler (jit.QUICK_CC)
+is installed: an MX graph of calls per step (the smooth step, the location in a conditional, the
+judge), 73-101 KB of C on the pendulum; at -O1 gcc takes about 0.3 s more per primitive than at -O0
+and the chunk runs in about a third of the time, faster than the unguarded loop's inlined chunk at
+-O0 (bench/bench_pieces.py). With tcc the chunk keeps the project's flags: on the pendulum, cart and
+ladder a cold verify took 11.6-12.5 s against 14.1-14.9 s, the pendulum's 4,930 oracle calls again
+(compiled, `--no-cache`) 0.61-0.72 s against 0.50-0.57 s, the reports identical. A chunk that calls
+a loop library is compiled at looplib.CALLER_FLAGS: its loop evaluations dominate, and its smooth
+step, run at every step, is compiled at jit.HOT_LEVEL inside it (jit.hot_code)."""
 
 
 def _flags(prim: CompiledPrimitive, flags: tuple[str, ...]) -> tuple[str, ...]:
     """The gcc flags of a judged chunk: `flags`, with GUARDED_FLAGS for a loop with guards where
-    `flags` optimise less."""
-    if not guarded(prim) or optimising(flags):
+    `flags` optimise less and gcc would compile it."""
+    if not guarded(prim) or optimising(flags) or quick_compiler() is not None:
         return tuple(flags)
     return tuple(f for f in flags if not f.startswith("-O")) + GUARDED_FLAGS
 

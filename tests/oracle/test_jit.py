@@ -3,6 +3,7 @@ the compile log, and common-subexpression elimination keeping outputs equal."""
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import casadi as ca
@@ -181,3 +182,51 @@ def test_hot_code_is_optimised_alone_with_the_same_values():
     a, b = compile_cached(_caller(True), ("-O0",)), compile_cached(_caller(False), ("-O0",))
     assert np.array_equal(_eval(a, v), _eval(b, v))  # bit for bit: -O1 does not reassociate
     np.testing.assert_allclose(_eval(a, v), _eval(_caller(True), v), rtol=1e-15)
+
+
+def _mixed() -> ca.Function:
+    """Arithmetic, libm, branches and the min/max CasADi's generated code uses."""
+    x = ca.SX.sym("x", 3)
+    y = ca.if_else(x[0] > x[1], ca.sin(x[0]) * ca.exp(-x[2] ** 2), ca.atan2(x[1], 1 + x[2] ** 2))
+    z = ca.fmax(ca.sqrt(1 + x[0] ** 2) - ca.fmin(ca.cos(x[1]), x[2]), ca.fabs(ca.floor(3 * x[2]) / 7)) + x[0] ** 3 / 3
+    return ca.Function("mixed", [x], [ca.vertcat(y, z, ca.tanh(y * z) + ca.log(1 + z * z))])
+
+
+def _log(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
+@pytest.mark.skipif(jit.quick_compiler() is None, reason="no tcc (Debian's tcc) on this machine")
+def test_unoptimised_code_goes_to_the_quick_compiler_and_computes_the_same_bits(tmp_path, monkeypatch):
+    log = tmp_path / "log.jsonl"
+    monkeypatch.setenv("MPGSPEC_JIT_LOG", str(log))
+    pts = np.random.default_rng(3).uniform(-3, 3, (3, 2000))
+    quick = compile_cached(_mixed(), ("-O0",)).map(pts.shape[1])
+    optimised = compile_cached(_mixed(), ("-O1",)).map(pts.shape[1])
+    monkeypatch.setenv("MPGSPEC_QUICK_CC", "")  # everything to gcc
+    plain = compile_cached(_mixed(), ("-O0",)).map(pts.shape[1])
+    assert [r["cc"] for r in _log(log)] == ["tcc", "gcc", "gcc"]
+    assert len(list(cache_dir().glob("mixed_*.so"))) == 3  # the compiler is part of the library's name
+    a, b = np.asarray(quick(pts)), np.asarray(plain(pts))
+    assert np.array_equal(a, b)  # bit for bit: both evaluate IEEE doubles in the order written
+    np.testing.assert_allclose(a, np.asarray(_mixed().map(pts.shape[1])(pts)), rtol=1e-13)
+    np.testing.assert_allclose(np.asarray(optimised(pts)), a, rtol=1e-13)
+
+
+def test_what_the_quick_compiler_cannot_build_goes_to_gcc(tmp_path, monkeypatch):
+    """A quick compiler that builds its probe but fails on the real code: gcc builds it, no warning."""
+    fake = tmp_path / "quickcc"
+    fake.write_text('#!/bin/sh\ncase "$*" in *probe.c*) exec gcc "$@";; esac\necho "cannot" >&2\nexit 1\n')
+    fake.chmod(0o755)
+    log = tmp_path / "log.jsonl"
+    monkeypatch.setenv("MPGSPEC_JIT_LOG", str(log))
+    monkeypatch.setenv("MPGSPEC_QUICK_CC", str(fake))
+    assert jit.quick_compiler() == str(fake)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        f = compile_cached(_mixed(), ("-O0",))
+    assert not f.is_a("SXFunction") and [r["cc"] for r in _log(log)] == ["gcc"]
+    np.testing.assert_allclose(_eval(f, [0.3, -1.2, 0.8]), _eval(_mixed(), [0.3, -1.2, 0.8]), rtol=1e-14)
+    for name in ("/nonexistent/tcc", ""):  # missing or switched off: no quick compiler
+        monkeypatch.setenv("MPGSPEC_QUICK_CC", name)
+        assert jit.quick_compiler() is None
