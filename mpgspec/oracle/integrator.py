@@ -481,7 +481,8 @@ def build_first(prim: CompiledPrimitive, dt: float, jit: bool = True) -> ca.Func
                          [hm, _margin(prim)(x, t), u_raw, u])
         small = prim.loop.is_a("SXFunction") and prim.f_cl.n_nodes() <= INLINE_NODES \
             and prim.roa_margin.is_a("SXFunction")
-        prim.cache[key] = compile_cached(fn, ("-O1",)) if jit and small else fn  # large loops: not worth a compile
+        # run once per start: unoptimised (tcc builds it in milliseconds); large loops: not worth a compile
+        prim.cache[key] = compile_cached(fn, ("-O0",)) if jit and small else fn
     return prim.cache[key]
 
 
