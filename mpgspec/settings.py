@@ -29,7 +29,8 @@ class OracleSettings:
     # (a robot's loop is called from its loop library, compiled at LOOP_FLAGS); on the pendulum and the
     # cart, -O0 against -O1 cuts gcc 3.5x (judged chunks 24.9 -> 7.2 CPU-s) and a cold verify of both
     # from 52 to 32 CPU-s; warm, the pendulum's graph takes 1.15x the time (a chunk's compiled step up
-    # to 3x), so give ("-O1",) for long runs on a small loop. The robust steps keep STEP_FLAGS.
+    # to 3x), so give ("-O1",) for long runs on a small loop. The robust steps keep STEP_FLAGS. With tcc
+    # installed, -O0 code is built by tcc (oracle.jit.QUICK_CC) in about a twentieth of gcc's time.
     jit_flags: tuple[str, ...] = ("-O0",)
     error: str = "local"
 
