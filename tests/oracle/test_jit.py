@@ -166,7 +166,7 @@ def _caller(hot: bool) -> ca.Function:
     return ca.Function("caller", [X], [inner(X) + rare(inner(X))])
 
 
-def test_hot_code_is_optimised_alone_with_the_same_values():
+def test_hot_code_is_optimised_alone_with_the_same_values(monkeypatch):
     code = _caller(True)
     cg = ca.CodeGenerator("caller.c", {"with_header": False})
     cg.add(code)
@@ -179,6 +179,7 @@ def test_hot_code_is_optimised_alone_with_the_same_values():
     assert jit.hot_code(src, ("-O1",)) == src and jit.hot_code(src.replace("hot_", "cold_"), ("-O0",)) == \
         src.replace("hot_", "cold_")
     v = [0.3, -1.7, 2.5]
+    monkeypatch.setenv("MPGSPEC_QUICK_CC", "")  # gcc, which reads the pragmas (tcc builds -O0 code without them)
     a, b = compile_cached(_caller(True), ("-O0",)), compile_cached(_caller(False), ("-O0",))
     assert np.array_equal(_eval(a, v), _eval(b, v))  # bit for bit: -O1 does not reassociate
     np.testing.assert_allclose(_eval(a, v), _eval(_caller(True), v), rtol=1e-15)
@@ -230,3 +231,19 @@ def test_what_the_quick_compiler_cannot_build_goes_to_gcc(tmp_path, monkeypatch)
     for name in ("/nonexistent/tcc", ""):  # missing or switched off: no quick compiler
         monkeypatch.setenv("MPGSPEC_QUICK_CC", name)
         assert jit.quick_compiler() is None
+
+
+def test_a_guarded_small_loops_chunk_is_optimised_only_when_gcc_builds_it(monkeypatch):
+    """With tcc the judged chunk keeps the project's -O0 (tcc builds it in milliseconds); without it,
+    gcc builds it at GUARDED_FLAGS; an optimising project flag is kept either way."""
+    from mpgspec.oracle import judged
+    from mpgspec.oracle.looplib import guarded
+
+    root = Path(__file__).resolve().parents[2]
+    prims = compile_project(load_project(root / "specs" / "pendulum" / "project.yaml"))
+    p = next(p for p in prims.values() if guarded(p))
+    fake = Path(jit.__file__)  # any existing file name that is not a compiler: the probe fails
+    for quick, want in (("gcc", ("-O0",)), (str(fake), judged.GUARDED_FLAGS), ("", judged.GUARDED_FLAGS)):
+        monkeypatch.setenv("MPGSPEC_QUICK_CC", quick)
+        assert judged._flags(p, ("-O0",)) == want, quick
+        assert judged._flags(p, ("-O2",)) == ("-O2",)
