@@ -67,6 +67,7 @@ from mpgspec.oracle.evidence import OracleEvidence, Reason  # noqa: E402
 from mpgspec.oracle.integrator import Chunk, build_chunk, initial_state  # noqa: E402
 from mpgspec.oracle.judged import JudgedChunk  # noqa: E402
 from mpgspec.oracle.oracle import SafetyOracle  # noqa: E402
+from mpgspec.pipeline.reuse import compiled  # noqa: E402
 from mpgspec.spec.loader import load_project  # noqa: E402
 
 try:
@@ -115,6 +116,23 @@ def all_points(prims, gA, gB) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]],
                     sb.append(f"{a} @ t_A={float(ta):.4g}")
         out[b], src[b] = (np.array(x0s), np.array(t0s)), sb
     return out, src
+
+
+def own_grid_points(prims) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """all_points on every primitive's own t_A and t_B grids (at least one clock each)."""
+    gA = {n: p.clock_grid(max(p.grid_A, 1), "A") for n, p in prims.items()}
+    gB = {n: p.clock_grid(max(p.grid_B, 1), "B") for n, p in prims.items()}
+    return all_points(prims, gA, gB)[0]
+
+
+def example(name: str):
+    """(primitives, settings) of specs/<name>: the A1 with E sized by its verifiers, as verify sizes it
+    (pipeline.reuse.compiled); another project compiled only."""
+    spec = load_project(ROOT / "specs" / name / "project.yaml")
+    if name == "a1":
+        cp = compiled(spec)
+        return cp.prims, cp.settings
+    return compile_project(spec), settings_for(spec)
 
 
 def stratified(points: dict, n: int, seed: int = 0) -> tuple[dict, list[tuple[str, int]], dict]:

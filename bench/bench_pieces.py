@@ -11,8 +11,9 @@ bench/RESULTS.md.
 
 - pendulum (small loops, inlined): every primitive's loop has guards (its input saturation,
   SwingUp's switch at t = 1.5, the swings' clock wrap); both error estimates. A guarded chunk is
-  compiled at judged.GUARDED_FLAGS (-O1), an unguarded one at the project's flags (-O0): the table
-  also gives the ratio with the unguarded chunks at -O1, the cost of the guards alone.
+  compiled at judged.GUARDED_FLAGS (-O1) by gcc, or at the project's flags (-O0) by tcc when it is
+  installed (bench_quick_cc.py), an unguarded one at the project's flags: the table also gives the
+  ratio with the unguarded chunks at -O1, the cost of the guards alone.
 - a1 (large loops, called from their loop libraries; E sized as `mpgspec verify` sizes it): the
   walks' 24 torque limits and their gait's clock guards, Lie's and the transients' likewise;
   Stand's sampled ID-QP has none. The project's own error estimate (step doubling).
@@ -35,15 +36,11 @@ os.environ.setdefault("MPGSPEC_CACHE", tempfile.mkdtemp(prefix="mpgspec-bench-")
 
 import casadi as ca  # noqa: E402
 import common  # noqa: E402  (bench/common.py)
-from bench_oracle import all_points  # noqa: E402
+from bench_oracle import example, own_grid_points  # noqa: E402
 
 from mpgspec.compile.guards import Guards  # noqa: E402
 from mpgspec.oracle import SafetyOracle  # noqa: E402
 from mpgspec.oracle.judged import GUARDED_FLAGS  # noqa: E402
-from mpgspec.pipeline.reuse import compiled  # noqa: E402
-from mpgspec.pipeline.settings import settings_for  # noqa: E402
-from mpgspec.pipeline.stages import compile_project  # noqa: E402
-from mpgspec.spec.loader import load_project  # noqa: E402
 
 HEADING = "## Guards: stepping piece by piece"
 
@@ -55,15 +52,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
     t_all = time.perf_counter()
-    spec = load_project(ROOT / "specs" / args.project / "project.yaml")
-    if args.project == "a1":  # E sized by the project's verifiers, as verify sizes it
-        cp = compiled(spec)
-        prims, base, errors = cp.prims, cp.settings, (cp.settings.error,)
-    else:
-        prims, base, errors = compile_project(spec), settings_for(spec), ("local", "doubling")
-    gA = {n: p.clock_grid(max(p.grid_A, 1), "A") for n, p in prims.items()}
-    gB = {n: p.clock_grid(max(p.grid_B, 1), "B") for n, p in prims.items()}
-    pts, _src = all_points(prims, gA, gB)
+    prims, base = example(args.project)
+    errors = (base.error,) if args.project == "a1" else ("local", "doubling")  # the A1: the project's own
+    pts = own_grid_points(prims)
     plain = {n: dataclasses.replace(p, guards=Guards(), cache={}) for n, p in prims.items()}
     n_calls = sum(len(v[1]) for v in pts.values())
     rows = [("oracle calls per round (Algorithm 1's grids)", f"{n_calls}"),

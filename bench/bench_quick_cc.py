@@ -30,14 +30,10 @@ os.environ.setdefault("MPGSPEC_CACHE", tempfile.mkdtemp(prefix="mpgspec-bench-")
 
 import casadi as ca  # noqa: E402
 import common  # noqa: E402  (bench/common.py)
-from bench_oracle import all_points  # noqa: E402
+from bench_oracle import example, own_grid_points  # noqa: E402
 
 from mpgspec.oracle import SafetyOracle, jit  # noqa: E402
 from mpgspec.oracle.looplib import attach  # noqa: E402
-from mpgspec.pipeline.reuse import compiled  # noqa: E402
-from mpgspec.pipeline.settings import settings_for  # noqa: E402
-from mpgspec.pipeline.stages import compile_project  # noqa: E402
-from mpgspec.spec.loader import load_project  # noqa: E402
 
 HEADING = "## Quick compiler: tcc for unoptimised code"
 
@@ -45,6 +41,14 @@ HEADING = "## Quick compiler: tcc for unoptimised code"
 def _children_cpu() -> float:
     r = resource.getrusage(resource.RUSAGE_CHILDREN)
     return r.ru_utime + r.ru_stime
+
+
+def _set_quick(value: str | None) -> None:
+    """MPGSPEC_QUICK_CC set to value, or unset for None (the default, tcc)."""
+    if value is None:
+        os.environ.pop("MPGSPEC_QUICK_CC", None)
+    else:
+        os.environ["MPGSPEC_QUICK_CC"] = value
 
 
 def main(argv=None) -> int:
@@ -57,26 +61,16 @@ def main(argv=None) -> int:
         print("no tcc on this machine (apt-get install tcc): nothing to compare", file=sys.stderr)
         return 2
     t_all = time.perf_counter()
-    spec = load_project(ROOT / "specs" / args.project / "project.yaml")
-    if args.project == "a1":  # E sized by the project's verifiers, as verify sizes it
-        cp = compiled(spec)
-        prims, settings = cp.prims, cp.settings
-    else:
-        prims, settings = compile_project(spec), settings_for(spec)
+    prims, settings = example(args.project)
     for p in prims.values():
         attach(p)  # the loop libraries (gcc, their own flags), shared by both copies
     os.environ["MPGSPEC_CACHE"] = tempfile.mkdtemp(prefix="mpgspec-bench-")  # no chunk built while sizing E is reused
-    gA = {n: p.clock_grid(max(p.grid_A, 1), "A") for n, p in prims.items()}
-    gB = {n: p.clock_grid(max(p.grid_B, 1), "B") for n, p in prims.items()}
-    pts, _src = all_points(prims, gA, gB)
+    pts = own_grid_points(prims)
     n_calls = sum(len(v[1]) for v in pts.values())
     quick = os.environ.get("MPGSPEC_QUICK_CC")
     oracles, build_cpu, evidence = {}, {}, {}
     for kind, env in (("tcc", quick), ("gcc", "")):
-        if env is None:
-            os.environ.pop("MPGSPEC_QUICK_CC", None)
-        else:
-            os.environ["MPGSPEC_QUICK_CC"] = env
+        _set_quick(env)
         # nothing compiled before but the loop libraries (looplib* entries), so each copy builds its own chunks
         own = {n: dataclasses.replace(p, cache={k: v for k, v in p.cache.items() if str(k).startswith("looplib")})
                for n, p in prims.items()}
@@ -84,10 +78,7 @@ def main(argv=None) -> int:
         oracles[kind] = {b: SafetyOracle(own[b], settings) for b in pts}
         evidence[kind] = [e for b, (x0s, t0s) in pts.items() for e in oracles[kind][b].evaluate(x0s, t0s)]
         build_cpu[kind] = _children_cpu() - c0
-    if quick is None:
-        os.environ.pop("MPGSPEC_QUICK_CC", None)
-    else:
-        os.environ["MPGSPEC_QUICK_CC"] = quick
+    _set_quick(quick)
 
     def run(kind):
         for b, (x0s, t0s) in pts.items():
