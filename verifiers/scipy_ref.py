@@ -21,15 +21,15 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from mpgspec.compile.contacts import wrap_clock
-from mpgspec.compile.numeric import numeric
+from mpgspec.compile.numeric import numeric, numeric_map
 from mpgspec.compile.primitive import INACTIVE, CompiledPrimitive
 from mpgspec.oracle.backend import COMPILED
 from mpgspec.oracle.evidence import OracleEvidence, Reason
 from mpgspec.oracle.verdict import INCONCLUSIVE, Block, Carry, evidence, judge
 from mpgspec.settings import OracleSettings
+from verifiers.lsoda_piece import lsoda_piece
 from verifiers.rk4 import margin_gain
 
 RTOL, ATOL = 1e-10, 1e-12
@@ -54,7 +54,8 @@ class ScipyRunner:
         hdot = ca.jtimes(hv, arg, ca.vertcat(xdot, ca.DM([1.0, 1.0])))
         dh = ca.mtimes(ca.fabs(ca.jacobian(hv, x)), delta)
         self.sample = ca.Function("sample", a + [delta], [hv, hdot, dh, u_raw, u])
-        self._maps: dict[int, ca.Function] = {}
+        self._samples = numeric_map(self.sample, shared=(3,))  # x_sw: one value for every sample
+        self._margins = numeric_map(prim.roa_margin)
         self._fine: ScipyRunner | None = None
         # the solver calls these thousands of times per rollout: on numpy buffers, no DM conversions
         self.f_cl, self.margin = numeric(prim.f_cl), numeric(prim.roa_margin)
@@ -72,11 +73,6 @@ class ScipyRunner:
                 f.refined = True
                 ev[i] = f
         return ev
-
-    def _mapped(self, n: int) -> ca.Function:
-        if n not in self._maps:
-            self._maps[n] = self.sample.map(n, "serial")
-        return self._maps[n]
 
     def _cuts(self, t0: float, T: float) -> list[float]:
         """Times since switch-in, in (0, T), at which the clock crosses a switching time."""
@@ -113,19 +109,18 @@ class ScipyRunner:
             for a, b in zip(edges, edges[1:]):
                 while b - a > 1e-12:
                     try:
-                        sol = solve_ivp(rhs, (a, b), x, method="LSODA", rtol=RTOL, atol=ATOL, max_step=self.dt / 2,
-                                        dense_output=True, events=events)
+                        piece = lsoda_piece(rhs, a, b, x, events, rtol=RTOL, atol=ATOL, max_step=self.dt / 2)
                     except Exception as err:
                         return OracleEvidence(0, Reason.ERROR, a, message=str(err)[:500])
-                    end = float(sol.t[-1])
+                    end = piece.t
                     n = max(1, int(np.ceil((end - a) / (self.dt / SAMPLES_PER_STEP) - 1e-9)))
                     grid = np.linspace(a, end, n + 1)[1:]
-                    Y = sol.sol(grid) if sol.sol is not None and end > a else sol.y[:, -1:]
+                    Y = piece.sol(grid) if piece.sol is not None and end > a else piece.y[:, None]
                     ts.append(grid)
                     xs.append(Y)
                     x = Y[:, -1]
-                    status = sol.status
-                    if status != 1 or len(sol.t_events[0]) or not np.isfinite(x).all():
+                    status = piece.status
+                    if status != 1 or piece.fired[0] or not np.isfinite(x).all():
                         break  # the piece's end, E entered, a failure
                     crossings += 1  # a guard crossed: the next piece starts just after it, on its new branch
                     if crossings > MAX_CROSSINGS:
@@ -162,10 +157,8 @@ class ScipyRunner:
         p = self.prim
         N = s.size
         delta = _tolerance_error(np.nan_to_num(X, nan=np.inf))
-        F = self._mapped(N)
-        H, D, DH, UR, U = (np.asarray(v) for v in F(X, (t0 + s)[None, :], s[None, :], np.repeat(x0[:, None], N, axis=1), delta))
-        M = np.array([float(p.roa_margin(X[:, i], t0 + s[i])) for i in range(N)]) if N < 64 else \
-            np.asarray(p.roa_margin.map(N, "serial")(X, (t0 + s)[None, :])).ravel()
+        H, D, DH, UR, U = (v.T for v in self._samples(X.T, (t0 + s)[:, None], s[:, None], x0, delta.T))
+        M = self._margins(X.T, (t0 + s)[:, None])[0].ravel()
         nh = H.shape[0]
         K = max(N - 1, 1)
         step = np.diff(s) if N > 1 else np.zeros(1)

@@ -13,6 +13,8 @@ import threading
 import casadi as ca
 import numpy as np
 
+_F64 = np.dtype(float)
+
 
 class NumericFunction:
     """fn(*arrays) -> list of dense numpy arrays (column-major vec of each output, as `.full().ravel("F")`).
@@ -33,8 +35,11 @@ class NumericFunction:
 
     def _call(self, args) -> list[np.ndarray]:
         for a, g, v in zip(self._args, self._gather, args):
-            v = np.ravel(np.asarray(v, float), order="F")
-            a[:] = v if g is None else v[g]
+            if g is None and (isinstance(v, float) or v.__class__ is np.ndarray and v.ndim == 1 and v.dtype is _F64):
+                a[:] = v  # a float or a vector of doubles: copied as is (the common case, without conversions)
+            else:
+                v = np.ravel(np.asarray(v, float), order="F")
+                a[:] = v if g is None else v[g]
         self._ev()
         if self._buf.ret():
             raise RuntimeError(f"evaluating {self.fn.name()} failed")

@@ -36,3 +36,22 @@ def test_results_are_copies_and_it_pickles():
     with ca.global_unpickle_context():
         h = pickle.loads(blob)
     assert np.array_equal(h(np.ones(3), np.ones((2, 2)))[2], g(np.ones(3), np.ones((2, 2)))[2])
+
+
+def test_every_kind_of_argument_reads_as_function_call_reads_it():
+    """Floats, NumPy scalars, vectors (also strided, integer, a column, a list) and scalars spread over a
+    vector: copied as given where they are already doubles, converted otherwise; the same bits."""
+    x, t = ca.SX.sym("x", 3), ca.SX.sym("t")
+    f = ca.Function("g", [x, t], [ca.vertcat(x[0] * t, ca.cos(x[1]) - x[2], t * t)])
+    g = numeric(f)
+    base = np.array([0.3, -1.7, 2.5, 9.0, 4.25, -0.5])
+    for a, b in [(base[:3], 0.7), (base[::2], np.float64(0.7)), (base[:3].reshape(3, 1), np.array(0.7)),
+                 (np.array([1, 2, 3]), 2), ([0.1, 0.2, 0.3], [1.5]), (2.0, 0.25)]:
+        ref = np.asarray(f(np.broadcast_to(np.asarray(a, float).ravel(), 3), np.asarray(b, float)).full()).ravel()
+        assert np.array_equal(g(a, b)[0], ref), (a, b)
+    try:
+        g(np.zeros(4), 1.0)
+    except ValueError:
+        pass
+    else:
+        raise AssertionError("a vector of the wrong length was accepted")
