@@ -16,7 +16,7 @@ import numpy as np
 
 from ..compile.rigidbody.symmetry import reduced_monodromy
 from ..compile.contacts import Schedule
-from ..oracle.flow import LEFT, jump_of, rk4_jump
+from ..oracle.flow import LEFT, jump_of, rk4, rk4_jump
 from ..oracle.integrator import compiled_jump, hold_inputs, hold_size, loop_of
 from ..oracle import looplib
 from ..oracle.jit import compile_many, cse_sx
@@ -26,18 +26,24 @@ S_LONG = 1e6  # time since switch-in: long after any motion profile
 
 
 def _parts(prim, xs0: np.ndarray) -> tuple:
-    """(f(x, t), k(x, t), jump, h(x, t)) of the settled loop: through the primitive's loop library
-    (looplib.py: one compiled closed loop, h with its windows applied) when it has one, else
-    f_cl, control and h inlined."""
+    """(f(x, t), k(x, t), jump, h(x, t), start(x, t)) of the settled loop: through the primitive's loop
+    library (looplib.py: one compiled closed loop, h with its windows applied) when it has one, else
+    f_cl, control and h inlined. start(x, t) is (f, k, h) at one state: one call of the library's loop."""
     lib = looplib.attach(prim)
     if lib is not None and lib.get("loop") is not None:
         loop = lib.get("loop")
         h_of = lambda xx, tt: looplib.windowed(prim, loop(xx, tt, S_LONG, xs0)[1], xx, tt, S_LONG)  # noqa: E731
+
+        def start(xx, tt):
+            o = loop(xx, tt, S_LONG, xs0)
+            return o[0], o[3], looplib.windowed(prim, o[1], xx, tt, S_LONG)
+
         return (lambda xx, tt: loop(xx, tt, S_LONG, xs0)[0], lambda xx, tt: loop(xx, tt, S_LONG, xs0)[3],
-                lib.get("jump"), h_of)
+                lib.get("jump"), h_of, start)
     f_cl, ctrl, jump, h_fn = (cse_sx(g) for g in (prim.f_cl, prim.control, jump_of(prim), prim.h))
-    return (lambda xx, tt: f_cl(xx, tt, S_LONG, xs0), lambda xx, tt: ctrl(xx, tt, S_LONG, xs0)[1], jump,
-            lambda xx, tt: h_fn(xx, tt, S_LONG, xs0))
+    f, k, h_of = (lambda xx, tt: f_cl(xx, tt, S_LONG, xs0), lambda xx, tt: ctrl(xx, tt, S_LONG, xs0)[1],
+                  lambda xx, tt: h_fn(xx, tt, S_LONG, xs0))
+    return f, k, jump, h_of, lambda xx, tt: (f(xx, tt), k(xx, tt), h_of(xx, tt))
 
 
 def _held_step(prim, xs0: np.ndarray, x, t, h: float, left: float, hold):
@@ -50,6 +56,31 @@ def _held_step(prim, xs0: np.ndarray, x, t, h: float, left: float, hold):
                   compiled_jump(prim), x, t, h, left)
     hv = looplib.windowed(prim, loop_u(xn, t + h, S_LONG, xs0, u)[1], xn, t + h, S_LONG)
     return xn, hv, hold_next
+
+
+def _least(m, hv):
+    """The least safety function so far, with hv's."""
+    return ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
+
+
+def _period_end(f, start, jump, z, nx: int, h: float, left: float, steps: int):
+    """z after `steps` steps, as hybrid_body's fold computes it, with one evaluation of the loop per
+    state for k1, the jump's input and h: the step that leaves x_k takes h(x_k) from the loop it
+    evaluates there anyway (rather than the step before evaluating the loop at x_k a second time),
+    so the first step takes none and h(x_steps) is evaluated once at the end. The same functions at
+    the same states in the same order: the same numbers with 4 loop evaluations per step instead of 6."""
+    def step(zk, with_h: bool):
+        x, t, m = zk[:nx], zk[nx], zk[nx + 1]
+        k1, u, hx = start(x, t)
+        x_end, _ = rk4(lambda xx, tt, _s: f(xx, tt), x, (t, 0.0), h, h - min(left, h / 2), k1)
+        return ca.vertcat(jump(x_end, u, t + h, np.inf), t + h, _least(m, hx) if with_h else m)
+
+    zs = ca.MX.sym("z", nx + 2)
+    z1 = step(z, False)
+    if steps > 1:
+        z1 = ca.Function("hybrid_step", [zs], [step(zs, True)]).fold(steps - 1)(z1)
+    x_n, t_n = z1[:nx], z1[nx]
+    return ca.vertcat(x_n, t_n, _least(z1[nx + 1], start(x_n, t_n)[2]))
 
 
 class HybridFlow:
@@ -65,7 +96,7 @@ class HybridFlow:
             raise ValueError(f"the period and switching times must be multiples of dt = {dt:g}")
         nx = prim.system.nx
         xs0 = np.array(prim.setpoint(0.0), float).ravel()
-        f, k, jump, h_of = _parts(prim, xs0)
+        f, k, jump, h_of, start = _parts(prim, xs0)
         self.hold = hold_size(prim)
         z = ca.MX.sym("z", nx + 2 + self.hold)  # [x; t; min h so far (; a sampled law's hold)]
         x, t, m = z[:nx], z[nx], z[nx + 1]
@@ -76,13 +107,14 @@ class HybridFlow:
         else:
             xn, hold_next = rk4_jump(f, k, jump, x, t, h, left), ca.MX(0, 1)
             hv = h_of(xn, t + h)
-        mn = ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
+        mn = _least(m, hv)
         body = ca.Function("hybrid_body", [z], [ca.vertcat(xn, t + h, mn, hold_next)])
         xs, ts = ca.MX.sym("x", nx), ca.MX.sym("t")
         h0 = h_of(xs, ts)
         self._least_h = ca.Function("hybrid_least_h", [xs, ts], [ca.mmin(h0) if h0.shape[0] else ca.inf])
         zz = ca.MX.sym("z", nx + 2 + self.hold)  # a period with every step's state out, and with the last one only
-        fns = [ca.Function("hybrid_period_end", [zz], [body.fold(self.steps)(zz)])]
+        end = body.fold(self.steps)(zz) if self.hold else _period_end(f, start, jump, zz, nx, h, left, self.steps)
+        fns = [ca.Function("hybrid_period_end", [zz], [end])]
         if states:
             fns.append(ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)[:nx + 2, :]]))
         compiled = compile_many(fns, looplib.caller_flags(prim, ("-O1",)), libs=looplib.libs_of(prim))
