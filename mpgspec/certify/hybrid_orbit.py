@@ -52,8 +52,9 @@ def _held_step(prim, xs0: np.ndarray, x, t, h: float, left: float, hold):
     the open loop integrated under the held input, then the jump."""
     (u,), hold_next = hold_inputs(prim, h, hold, [(x, t, S_LONG, xs0)])
     loop_u = loop_of(prim, held=True)
-    xn = rk4_jump(lambda xx, tt: loop_u(xx, tt, S_LONG, xs0, u)[0], lambda xx, tt: loop_u(xx, tt, S_LONG, xs0, u)[3],
-                  compiled_jump(prim), x, t, h, left)
+    o = loop_u(x, t, S_LONG, xs0, u)  # k1 and the jump's input from one evaluation (rk4_jump's, without its second)
+    x_end, _ = rk4(lambda xx, tt, _s: loop_u(xx, tt, S_LONG, xs0, u)[0], x, (t, 0.0), h, h - min(left, h / 2), o[0])
+    xn = compiled_jump(prim)(x_end, o[3], t + h, np.inf)
     hv = looplib.windowed(prim, loop_u(xn, t + h, S_LONG, xs0, u)[1], xn, t + h, S_LONG)
     return xn, hv, hold_next
 
