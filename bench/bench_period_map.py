@@ -90,9 +90,8 @@ def main(argv=None) -> int:
             ("**6 loop evaluations per step / 4**", f"**{common.med_ratio(times['six'], times['four']):.2f}x** "
              f"({med['six'] * 1e3:.0f} ms vs {med['four'] * 1e3:.0f} ms per round)"),
             ("states and least h the same bits", "yes" if same else "**no**")]
-    mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
-    common.publish(HEADING + ("" if args.project == "a1" else f" ({args.project})"), mach, "bench_period_map.py",
-                   args.repeats, time.perf_counter() - t_all, common.markdown_table(rows), not args.no_write)
+    common.publish_rows(HEADING + ("" if args.project == "a1" else f" ({args.project})"), "bench_period_map.py",
+                        args.repeats, t_all, rows, not args.no_write)
     return 0 if same else 1
 
 

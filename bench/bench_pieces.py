@@ -34,7 +34,6 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("MPGSPEC_CACHE", tempfile.mkdtemp(prefix="mpgspec-bench-"))
 
-import casadi as ca  # noqa: E402
 import common  # noqa: E402  (bench/common.py)
 from bench_oracle import example, own_grid_points  # noqa: E402
 
@@ -97,9 +96,8 @@ def main(argv=None) -> int:
                  (f"{error}: guarded / unguarded by target (median of its rounds)",
                   ", ".join(f"{b} {np.median(per['guarded'][b][1:]) / np.median(per['plain'][b][1:]):.2f}x"
                             for b in pts))]
-    mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
-    common.publish(HEADING + ("" if args.project == "pendulum" else " (A1)"), mach, "bench_pieces.py", args.repeats, time.perf_counter() - t_all,
-                   common.markdown_table(rows), not args.no_write)
+    common.publish_rows(HEADING + ("" if args.project == "pendulum" else " (A1)"), "bench_pieces.py", args.repeats, t_all,
+                        rows, not args.no_write)
     return 0
 
 

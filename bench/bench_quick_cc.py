@@ -28,7 +28,6 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("MPGSPEC_CACHE", tempfile.mkdtemp(prefix="mpgspec-bench-"))
 
-import casadi as ca  # noqa: E402
 import common  # noqa: E402  (bench/common.py)
 from bench_oracle import example, own_grid_points  # noqa: E402
 
@@ -93,9 +92,8 @@ def main(argv=None) -> int:
             ("**oracle time, tcc's chunks / gcc's**", f"**{common.med_ratio(times['tcc'], times['gcc']):.2f}x** "
              f"({med['tcc'] * 1e3:.0f} ms vs {med['gcc'] * 1e3:.0f} ms per round)"),
             ("every verdict and margin the same float", "yes" if same else "**no**")]
-    mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
-    common.publish(HEADING + ("" if args.project == "pendulum" else " (A1)"), mach, "bench_quick_cc.py", args.repeats,
-                   time.perf_counter() - t_all, common.markdown_table(rows), not args.no_write)
+    common.publish_rows(HEADING + ("" if args.project == "pendulum" else " (A1)"), "bench_quick_cc.py", args.repeats,
+                        t_all, rows, not args.no_write)
     return 0
 
 

@@ -25,7 +25,6 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("MPGSPEC_CACHE", tempfile.mkdtemp(prefix="mpgspec-bench-"))
 
-import casadi as ca  # noqa: E402
 import common  # noqa: E402  (bench/common.py)
 from bench_oracle import example, own_grid_points, stratified  # noqa: E402
 
@@ -65,9 +64,8 @@ def main(argv=None) -> int:
              f"({med['solve_ivp'] * 1e3:.0f} ms vs {med['lean'] * 1e3:.0f} ms per round, "
              f"{med['lean'] / n * 1e3:.1f} ms per call)"),
             ("every evidence the same (verdicts, margins, times, bounds)", "yes" if same else "**no**")]
-    mach = common.machine(casadi=ca.__version__, revision=common.revision(ROOT))
-    common.publish(HEADING + ("" if args.project == "pendulum" else f" ({args.project})"), mach, "bench_scipy_ref.py",
-                   args.repeats, time.perf_counter() - t_all, common.markdown_table(rows), not args.no_write)
+    common.publish_rows(HEADING + ("" if args.project == "pendulum" else f" ({args.project})"), "bench_scipy_ref.py",
+                        args.repeats, t_all, rows, not args.no_write)
     return 0 if same else 1
 
 

@@ -128,3 +128,13 @@ def publish(heading: str, mach: dict, script: str, repeats: int, seconds: float,
     print(head + "\n\n" + table)
     if write:
         write_section(Path(__file__).parent / "RESULTS.md", heading, heading + "\n\n" + head + "\n\n" + table + "\n")
+
+
+def publish_rows(heading: str, script: str, repeats: int, t_start: float, rows: list[tuple[str, str]],
+                 write: bool) -> None:
+    """publish() of a two-column table (markdown_table(rows)) stamped with this machine, CasADi's
+    version and the revision measured; the run's wall time counted from t_start (time.perf_counter)."""
+    import casadi as ca
+
+    mach = machine(casadi=ca.__version__, revision=revision(Path(__file__).resolve().parent.parent))
+    publish(heading, mach, script, repeats, time.perf_counter() - t_start, markdown_table(rows), write)
