@@ -22,7 +22,7 @@ import numpy as np
 from ....compile.primitive import saturate
 from ....compile.rigidbody.symmetry import (NEUTRAL, lift_function, lift_jacobian, reduce_function,
                                           reduced_monodromy)
-from ....oracle.flow import LEFT, rk4_jump
+from ....oracle.flow import LEFT, rk4
 from ....oracle.jit import compile_cached, cse_sx
 from ..stance import nominal_geometry
 from ..trot import gains_of, trot_torque
@@ -74,15 +74,18 @@ class StrideMap:
         inertia, offsets = nominal_geometry(sys, dict(controller.pose))
         u = saturate(trot_torque(sys, g, t, mode, inertia, offsets), sys.u_lo, sys.u_hi)
         x = sys.x
-        f = ca.Function("f", [x, t, c], [ca.substitute(loop.xdot, sys.u, u)], {"cse": True})
-        k_u = ca.Function("k", [x, t, c], [u], {"cse": True})
+        xdot = ca.substitute(loop.xdot, sys.u, u)
+        f = ca.Function("f", [x, t, c], [xdot], {"cse": True})
+        fk = ca.Function("fk", [x, t, c], [xdot, u], {"cse": True})  # k1 and the jump's input in one evaluation
         lam = ca.vertcat(*[loop.env[f"{ft}_f{a}"] for ft in feet for a in "xyz"])
         fz = ca.vertcat(*[sys.extra_env[f"{ft}_z"] for ft in feet])
         self.aux = ca.Function("aux", [x, t, c], [u, ca.substitute(lam, sys.u, u), ca.vertcat(*mode.values()), fz])
         jump = cse_sx(schedule.jump(sys, ca.SX.sym("tj")))
         z = ca.MX.sym("z", sys.nx + 2)  # [x; t; c]: the RK4 stages call f, so its code is generated once
         xm, tm, cm = z[:sys.nx], z[sys.nx], z[sys.nx + 1]
-        xn = rk4_jump(lambda xx, tt: f(xx, tt, cm), lambda xx, tt: k_u(xx, tt, cm), jump, xm, tm, self.dt, LEFT)
+        k1, u0 = fk(xm, tm, cm)
+        x_end, _ = rk4(lambda xx, tt, _s: f(xx, tt, cm), xm, (tm, 0.0), self.dt, self.dt - min(LEFT, self.dt / 2), k1)
+        xn = jump(x_end, u0, tm + self.dt, np.inf)  # rk4_jump's step, the law evaluated once at its start
         body = ca.Function("body", [z], [ca.vertcat(xn, tm + self.dt, cm)])
         stride = ca.Function("gait_stride", [z], [body.mapaccum(n)(z)])  # every step's state out
         self.stride = compile_cached(stride, ("-O1",)) if jit else stride
