@@ -9,13 +9,17 @@ is most of the time a rollout of a small system spends outside its right-hand si
 """
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.integrate import LSODA, OdeSolution, solve_ivp
 
+_SIGNATURE = ["sol", "events", "active_events", "event_count", "max_events", "t_old", "t"]
 try:  # scipy's own event search, so that a root is found as solve_ivp finds it
     from scipy.integrate._ivp.ivp import handle_events
+    if list(inspect.signature(handle_events).parameters) != _SIGNATURE:  # another scipy's: not the one used here
+        handle_events = None
 except ImportError:  # pragma: no cover - a scipy that moved it: solve_ivp does the whole piece
     handle_events = None
 
