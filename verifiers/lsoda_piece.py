@@ -27,8 +27,9 @@ except ImportError:  # pragma: no cover - a scipy that moved it: solve_ivp does 
 @dataclass
 class Piece:
     """t: the piece's last time (an event's root when one ended it); y: the state there; sol: the
-    dense solution over [a, t] (None when the solver made no step); status: solve_ivp's (0 reached
-    b, 1 an event ended it, -1 the solver failed); fired: per event, whether it ended the piece."""
+    dense solution over [a, t] (without segments when the solver made no step: evaluate it only for
+    t > a); status: solve_ivp's (0 reached b, 1 an event ended it, -1 the solver failed); fired: per
+    event, whether it ended the piece."""
     t: float
     y: np.ndarray
     sol: OdeSolution | None

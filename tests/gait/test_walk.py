@@ -102,8 +102,9 @@ def test_a_gait_table_outside_the_project_is_refused(tmp_path):
 @pytest.mark.parametrize("name", ["Walk(in_place)", "Stand"])
 def test_a_period_map_ends_where_its_steps_end(prims, name):
     """HybridFlow's period map (one loop evaluation per state: h of x_k taken from the loop the step
-    from x_k evaluates) gives the last column of its step-by-step period bit for bit: states, clock and
-    least h, from starts inside and outside C at clocks on the dt grid; Stand holds a sampled law."""
+    from x_k evaluates) gives the last column of its step-by-step period (the fold of the step that
+    evaluates h at its end) bit for bit: states, clock and least h, from starts inside and outside C at
+    clocks on the dt grid. Stand holds a sampled law: there both are folds of the same held step."""
     from mpgspec.certify.hybrid_orbit import HybridFlow
 
     p = prims[name]
@@ -112,7 +113,10 @@ def test_a_period_map_ends_where_its_steps_end(prims, name):
     xs = np.array(p.setpoint(0.0), float).ravel()
     X0 = xs[:, None] + np.c_[np.zeros(xs.size), 0.01 * rng.standard_normal((xs.size, 3))]
     t0 = np.array([0.0, 0.0, 0.05, 0.117])
-    XT, hmin = flow.run(X0, t0)
-    last = np.stack([flow.states(X0[:, j], t0[j])[:, -1] for j in range(X0.shape[1])], 1)
-    assert np.array_equal(XT, last[:-2]) and np.array_equal(hmin, last[-1])
+    n = X0.shape[1]
+    Z = np.vstack([X0, t0[None, :], np.full((1, n), np.inf), np.zeros((flow.hold, n))])
+    end = np.array(flow.period_end.map(n)(Z), float)[:X0.shape[0] + 2]  # states, clock, least h
+    last = np.stack([flow.states(X0[:, j], t0[j])[:, -1] for j in range(n)], 1)
+    assert np.array_equal(end, last)
+    hmin = end[-1]
     assert np.isfinite(hmin).all() and (hmin < 0).any() and (hmin >= 0).any()  # both kinds of start

@@ -29,6 +29,9 @@ CASES = {
     "either way, second event": (_oscillator, (0.0, 3.0), [0.5, 1.0],
                                  lambda: [_event(lambda t, x: x[0] - 9.0, 1), _event(lambda t, x: x[1], 0)]),
     "no events": (_oscillator, (0.0, 0.7), [0.3, -0.2], lambda: []),
+    # x0 first falls through 0.5 (not an upward crossing: the event must not fire there), then rises through it
+    "upward after a downward crossing": (_oscillator, (0.0, 3.0), [1.0, 0.0], lambda: [_event(lambda t, x: x[0] - 0.5, 1)]),
+    "zero at the start": (_oscillator, (0.0, 1.0), [0.5, 1.0], lambda: [_event(lambda t, x: x[0] - 0.5, 0)]),
     "turns NaN": (lambda t, x: np.array([np.nan if t > 0.3 else 1.0]), (0.0, 1.0), [1.0],
                   lambda: [_event(lambda t, x: x[0] - 5.0, 1), _event(lambda t, x: x[0] - 1.5, 0)]),
 }
@@ -60,3 +63,7 @@ def test_a_piece_is_solve_ivps(name, lean, monkeypatch):
         assert got.status == 0 and got.t == b
     else:
         assert got.status == 1 and any(got.fired)
+    if name == "upward after a downward crossing":  # stopped at the rise, after x0 had fallen below 0.5
+        assert got.t > 0.5 and abs(got.y[0] - 0.5) < 1e-9 and got.y[1] > 0 and got.sol(0.5 * got.t)[0] < 0.5
+    if name == "zero at the start":
+        assert got.t == a

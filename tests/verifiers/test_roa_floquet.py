@@ -72,3 +72,25 @@ def test_pendulum_swing_matches_computed_torque_error_dynamics():
     # the tube covers the hand-picked 0.15 and is no wider than the tracking band |theta - theta*| <= 1.2
     # (up to the 1% resolution of the bisection: sampled starts rarely hit the band's corner exactly)
     assert swing.radius <= res.radius <= 1.2 * 1.01
+
+
+def test_a_small_loops_period_map_ends_where_its_steps_end():
+    """The pendulum's Swing loops are inlined (no loop library): HybridFlow's period map, which takes
+    f, the law and h at each state once, gives the last column of its step-by-step period bit for bit
+    (states, clock and least h) from starts inside and outside C."""
+    from mpgspec.certify.hybrid_orbit import HybridFlow
+    from mpgspec.oracle.looplib import attach
+
+    prims = compile_project(load_project("specs/pendulum/project.yaml"))
+    rng = np.random.default_rng(5)
+    for name in ("Swing(1)", "Swing(2.6)"):
+        p = prims[name]
+        assert attach(p) is None  # the inlined path of hybrid_orbit._parts
+        flow = HybridFlow(p, p.period / 100)
+        xs = np.array(p.setpoint(0.0), float).ravel()
+        X0 = xs[:, None] + np.c_[np.zeros(xs.size), 0.5 * rng.standard_normal((xs.size, 5))]
+        t0 = np.round(rng.random(6) * flow.steps) * flow.dt
+        Z = np.vstack([X0, t0[None, :], np.full((1, 6), np.inf)])
+        end = np.array(flow.period_end.map(6)(Z), float)
+        last = np.stack([flow.states(X0[:, j], t0[j])[:, -1] for j in range(6)], 1)
+        assert np.array_equal(end, last), name
