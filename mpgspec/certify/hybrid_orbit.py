@@ -16,7 +16,7 @@ import numpy as np
 
 from ..compile.rigidbody.symmetry import reduced_monodromy
 from ..compile.contacts import Schedule
-from ..oracle.flow import LEFT, jump_of, rk4, rk4_jump
+from ..oracle.flow import LEFT, jump_of, rk4_jump
 from ..oracle.integrator import compiled_jump, hold_inputs, hold_size, loop_of
 from ..oracle import looplib
 from ..oracle.jit import compile_many, cse_sx
@@ -52,9 +52,9 @@ def _held_step(prim, xs0: np.ndarray, x, t, h: float, left: float, hold):
     the open loop integrated under the held input, then the jump."""
     (u,), hold_next = hold_inputs(prim, h, hold, [(x, t, S_LONG, xs0)])
     loop_u = loop_of(prim, held=True)
-    o = loop_u(x, t, S_LONG, xs0, u)  # k1 and the jump's input from one evaluation (rk4_jump's, without its second)
-    x_end, _ = rk4(lambda xx, tt, _s: loop_u(xx, tt, S_LONG, xs0, u)[0], x, (t, 0.0), h, h - min(left, h / 2), o[0])
-    xn = compiled_jump(prim)(x_end, o[3], t + h, np.inf)
+    o = loop_u(x, t, S_LONG, xs0, u)  # k1 and the jump's input from one evaluation
+    xn = rk4_jump(lambda xx, tt: loop_u(xx, tt, S_LONG, xs0, u)[0], None, compiled_jump(prim), x, t, h, left,
+                  start=(o[0], o[3]))
     hv = looplib.windowed(prim, loop_u(xn, t + h, S_LONG, xs0, u)[1], xn, t + h, S_LONG)
     return xn, hv, hold_next
 
@@ -73,8 +73,7 @@ def _period_end(f, start, jump, z, nx: int, h: float, left: float, steps: int):
     def step(zk, with_h: bool):
         x, t, m = zk[:nx], zk[nx], zk[nx + 1]
         k1, u, hx = start(x, t)
-        x_end, _ = rk4(lambda xx, tt, _s: f(xx, tt), x, (t, 0.0), h, h - min(left, h / 2), k1)
-        return ca.vertcat(jump(x_end, u, t + h, np.inf), t + h, _least(m, hx) if with_h else m)
+        return ca.vertcat(rk4_jump(f, None, jump, x, t, h, left, start=(k1, u)), t + h, _least(m, hx) if with_h else m)
 
     zs = ca.MX.sym("z", nx + 2)
     z1 = step(z, False)

@@ -95,12 +95,14 @@ def wrap(prim: CompiledPrimitive, t):
     return wrap_clock(t, prim.period)
 
 
-def rk4_jump(f, k, jump, x, t, h: float, left: float = 0.0, s: float = np.inf):
+def rk4_jump(f, k, jump, x, t, h: float, left: float = 0.0, s: float = np.inf, start=None):
     """x after one oracle step of h from clock t, without the error bookkeeping: RK4 on
     xdot = f(x, t) with the last stage `left` before the step's end (see LEFT), then the jump with
-    the input k(x, t) of the step's start (s: time since switch-in, inf for a settled orbit)."""
-    x_end, _ = rk4(lambda xx, tt, _s: f(xx, tt), x, (t, 0.0), h, h - min(left, h / 2))
-    return jump(x_end, k(x, t), t + h, s + h)
+    the input k(x, t) of the step's start (s: time since switch-in, inf for a settled orbit).
+    start: (f(x, t), k(x, t)) when one evaluation of the loop already gave both (k is then not called)."""
+    k1, u = start if start is not None else (None, None)
+    x_end, _ = rk4(lambda xx, tt, _s: f(xx, tt), x, (t, 0.0), h, h - min(left, h / 2), k1)
+    return jump(x_end, k(x, t) if start is None else u, t + h, s + h)
 
 
 def switched_flow(prim: CompiledPrimitive, x0: np.ndarray, t0: float, dt: float, n: int) -> np.ndarray:

@@ -22,7 +22,7 @@ import numpy as np
 from ....compile.primitive import saturate
 from ....compile.rigidbody.symmetry import (NEUTRAL, lift_function, lift_jacobian, reduce_function,
                                           reduced_monodromy)
-from ....oracle.flow import LEFT, rk4
+from ....oracle.flow import LEFT, rk4_jump
 from ....oracle.jit import compile_cached, cse_sx
 from ..stance import nominal_geometry
 from ..trot import gains_of, trot_torque
@@ -83,9 +83,7 @@ class StrideMap:
         jump = cse_sx(schedule.jump(sys, ca.SX.sym("tj")))
         z = ca.MX.sym("z", sys.nx + 2)  # [x; t; c]: the RK4 stages call f, so its code is generated once
         xm, tm, cm = z[:sys.nx], z[sys.nx], z[sys.nx + 1]
-        k1, u0 = fk(xm, tm, cm)
-        x_end, _ = rk4(lambda xx, tt, _s: f(xx, tt, cm), xm, (tm, 0.0), self.dt, self.dt - min(LEFT, self.dt / 2), k1)
-        xn = jump(x_end, u0, tm + self.dt, np.inf)  # rk4_jump's step, the law evaluated once at its start
+        xn = rk4_jump(lambda xx, tt: f(xx, tt, cm), None, jump, xm, tm, self.dt, LEFT, start=fk(xm, tm, cm))
         body = ca.Function("body", [z], [ca.vertcat(xn, tm + self.dt, cm)])
         stride = ca.Function("gait_stride", [z], [body.mapaccum(n)(z)])  # every step's state out
         self.stride = compile_cached(stride, ("-O1",)) if jit else stride
