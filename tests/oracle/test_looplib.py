@@ -17,6 +17,9 @@ from mpgspec.oracle.judged import build_judged_chunk
 from mpgspec.spec.loader import load_project
 
 NAME = "Walk(slow)"
+REFERENCE_FLAGS = ("-O0",)
+"""The inlined references are compiled unoptimised (by the quick compiler when one is installed):
+IEEE arithmetic in the order written, so their bits are the same as optimised code's."""
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +43,7 @@ def _starts(prim, n: int = 6) -> tuple[np.ndarray, np.ndarray]:
 def test_judged_chunk_through_the_library_gives_the_inlined_bits(walk):
     inline, lib, s = walk
     X, t0s = _starts(inline)
-    a = build_judged_chunk(inline, s.dt, 8, s.chunk, s.h_tolerance, 1.0)
+    a = build_judged_chunk(inline, s.dt, 8, s.chunk, s.h_tolerance, 1.0, flags=REFERENCE_FLAGS)
     b = build_judged_chunk(lib, s.dt, 8, s.chunk, s.h_tolerance, 1.0)
     assert looplib.libs_of(lib) and not looplib.libs_of(inline)
     Z = np.vstack([start_states(inline, X, t0s), a.lay.start(np.full(len(t0s), 1.0))])
@@ -54,7 +57,7 @@ def test_judged_chunk_through_the_library_gives_the_inlined_bits(walk):
 def test_trace_chunk_through_the_library_gives_the_inlined_bits(walk):
     inline, lib, s = walk
     X, t0s = _starts(inline, 1)
-    a = build_chunk(inline, s.dt, 8, with_state=True, boundaries=False)
+    a = build_chunk(inline, s.dt, 8, with_state=True, boundaries=False, flags=REFERENCE_FLAGS)
     b = build_chunk(lib, s.dt, 8, with_state=True, boundaries=False)
     z = initial_state(inline, X[0], t0s[0])[:, None]
     (za, oa), (zb, ob) = a.run(z), b.run(z)
