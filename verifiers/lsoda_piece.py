@@ -13,14 +13,19 @@ import inspect
 from dataclasses import dataclass
 
 import numpy as np
+import scipy
 from scipy.integrate import LSODA, OdeSolution, solve_ivp
 
 _SIGNATURE = ["sol", "events", "active_events", "event_count", "max_events", "t_old", "t"]
+_SCIPY = (1, 17)
+"""The scipy release whose solve_ivp loop this module repeats (compared bit for bit in its tests): with
+another, every piece goes through solve_ivp itself."""
 try:  # scipy's own event search, so that a root is found as solve_ivp finds it
     from scipy.integrate._ivp.ivp import handle_events
-    if list(inspect.signature(handle_events).parameters) != _SIGNATURE:  # another scipy's: not the one used here
+    if (list(inspect.signature(handle_events).parameters) != _SIGNATURE
+            or tuple(int(v) for v in scipy.__version__.split(".")[:2]) != _SCIPY):
         handle_events = None
-except ImportError:  # pragma: no cover - a scipy that moved it: solve_ivp does the whole piece
+except (ImportError, ValueError):  # pragma: no cover - a scipy that moved it: solve_ivp does the whole piece
     handle_events = None
 
 

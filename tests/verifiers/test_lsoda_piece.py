@@ -67,3 +67,22 @@ def test_a_piece_is_solve_ivps(name, lean, monkeypatch):
         assert got.t > 0.5 and abs(got.y[0] - 0.5) < 1e-9 and got.y[1] > 0 and got.sol(0.5 * got.t)[0] < 0.5
     if name == "zero at the start":
         assert got.t == a
+
+
+@pytest.mark.parametrize("version", ["1.16.2", "1.18.0", "2.0.0rc1"])
+def test_another_scipy_release_goes_through_solve_ivp(version, monkeypatch):
+    """The loop repeated here is 1.17's: with another release (even one whose event search has the same
+    parameters) every piece is solve_ivp's own."""
+    import importlib
+
+    import scipy
+
+    import verifiers.lsoda_piece as piece
+
+    monkeypatch.setattr(scipy, "__version__", version)
+    try:
+        assert importlib.reload(piece).handle_events is None
+    finally:
+        monkeypatch.undo()
+        importlib.reload(piece)
+    assert (piece.handle_events is not None) == scipy.__version__.startswith("1.17.")
