@@ -1,0 +1,104 @@
+"""Whether a walk's E holds where its tube is thinnest: seeded starts on and inside E's sphere (as the floquet
+verifier draws them: half on the sphere, half inside, put on the contact manifold of the feet held at their
+phase, redrawn outside C) at phases in the last 20 ms before each scheduled touchdown and, for comparison,
+in two stance windows; each start runs the walk's own discrete flow (the period map the sizing runs) for
+three periods. A start fails when its least h falls below the oracle's tolerance. A count of states, not a
+timing: E is a safe region of attraction only if none fails.
+
+    python bench/bench_walk_tubes.py [--starts N] [--radii sized 0.006 ...] [--no-write]
+
+Prints a table and replaces (or appends) the section "A1 walks: E before a touchdown" of bench/RESULTS.md.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))
+from common import publish_rows  # noqa: E402
+
+HEADING = "## A1 walks: E before a touchdown"
+WINDOWS = ((0.16, 0.18), (0.34, 0.36), (0.02, 0.12), (0.20, 0.30))
+"""Phase windows (s) of the trot (period 0.36 s, touchdowns at 0.18 and 0.36 s): the last 20 ms of each
+swing, then the middle of each half period."""
+PERIODS = 3
+SEED = 1
+
+
+def starts(prim, flow, Xs: np.ndarray, W: np.ndarray, r: float, lo: float, hi: float, m: int,
+           rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(states, clocks) of m starts at phases in [lo, hi), drawn as the floquet verifier draws them."""
+    from mpgspec.compile.contacts import held_feet
+    from verifiers.roa_common import unit_sphere
+
+    w, U = np.linalg.eigh(0.5 * (W + W.T))
+    keep = w > 1e-12 * w.max()
+    Wi = (U[:, keep] / np.sqrt(w[keep])) @ U[:, keep].T
+    held = held_feet(prim.contacts)
+    k = rng.integers(int(round(lo / flow.dt)), int(round(hi / flow.dt)), m)
+    u = unit_sphere(m, W.shape[0], rng)
+    u[: m // 2] *= rng.random((m // 2, 1)) ** (1 / W.shape[0])
+    X0 = Xs[:, k] + r * (u @ Wi).T
+    X0 = np.stack([prim.system.project_to_contacts(X0[:, j], held(k[j] * flow.dt), W) for j in range(m)], 1)
+    return X0, k * flow.dt
+
+
+def count(project: Path, m: int, radii: list[float | None]) -> list[tuple[str, str]]:
+    """Table rows: per walk, radius (None: the sized one) and window, starts in C and those that leave it
+    within PERIODS periods."""
+    from mpgspec.api import compile_project, settings_for
+    from mpgspec.certify.hybrid_orbit import HybridFlow, orbit
+    from mpgspec.certify.roa import _estimate, _options
+    from mpgspec.spec.loader import load_project
+
+    spec = load_project(project)
+    prims, tol = compile_project(spec), settings_for(spec).h_tolerance
+    rows = []
+    for inst in [i for i in spec.primitives if i.name.startswith("Walk(")]:
+        name, p = inst.name, prims[inst.name]
+        flow, W = HybridFlow(p, 0.001), np.asarray(p.W)
+        Xs = orbit(flow, W)[0]
+        # the radius `mpgspec verify` sizes (its floquet verifier, as certify/roa.py calls it)
+        sized = float(_estimate(inst.spec.roa.method, p, _options(inst, tol)).radius)
+        for r in [sized if radius is None else radius for radius in radii]:
+            rows += _windows(p, flow, Xs, W, r, m, tol, f"{name}, r = {r:.4g}{' (sized)' if r == sized else ''}")
+            print(f"{name} r = {r:.4g}:", "; ".join(v for _k, v in rows[-len(WINDOWS):]), flush=True)
+    return rows
+
+
+def _windows(p, flow, Xs, W, r: float, m: int, tol: float, label: str) -> list[tuple[str, str]]:
+    """Rows of one walk and radius: m starts per window (the same seed for every radius)."""
+    rows = []
+    rng = np.random.default_rng(SEED)
+    for lo, hi in WINDOWS:
+        X0, t0 = starts(p, flow, Xs, W, r, lo, hi, m, rng)
+        inside = flow.least_h(X0, t0) >= -tol
+        _XT, hmin, _ran = flow.run_until(X0[:, inside], t0[inside], PERIODS)
+        bad = hmin < -tol
+        least = f", least h {float(hmin.min()):.2g}" if bad.any() else ""
+        rows.append((f"{label}, phases {lo:.2f}-{hi:.2f} s", f"{int(bad.sum())} of {int(inside.sum())} leave C{least}"))
+    return rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--project", default=str(ROOT / "specs" / "a1" / "project.yaml"))
+    ap.add_argument("--starts", type=int, default=200, help="starts per walk and window")
+    ap.add_argument("--radii", nargs="+", default=["sized", "0.006"],
+                    help="radii to check, 'sized' for each walk's sized one (default: sized 0.006)")
+    ap.add_argument("--no-write", action="store_true")
+    a = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    radii = [None if v == "sized" else float(v) for v in a.radii]
+    rows = count(Path(a.project), a.starts, radii)
+    publish_rows(HEADING, "bench_walk_tubes.py", 1, t0, rows, not a.no_write)
+    return 0 if all(v.startswith("0 of") for k, v in rows if "(sized)" in k) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
