@@ -1,7 +1,7 @@
 """Whether a walk's E holds where its tube is thinnest: seeded starts on and inside E's sphere (as the floquet
 verifier draws them: half on the sphere, half inside, put on the contact manifold of the feet held at their
 phase; a start outside C is left out, where the verifier draws it again) at phases in the last 20 ms before
-each scheduled touchdown and, for comparison, in two stance windows; each start runs the walk's own discrete
+each scheduled touchdown and, for comparison, in the first 100 ms of each swing; each start runs the walk's own discrete
 flow (the period map the sizing runs) for three periods. A start fails when its least h falls below the
 oracle's tolerance. A count of states, not a timing: E is a safe region of attraction only if none fails.
 
@@ -28,8 +28,8 @@ from common import publish_rows  # noqa: E402
 
 HEADING = "## A1 walks: E before a touchdown"
 WINDOWS = ((0.16, 0.18), (0.34, 0.36), (0.02, 0.12), (0.20, 0.30))
-"""Phase windows (s) of the trot (period 0.36 s, touchdowns at 0.18 and 0.36 s): the last 20 ms of each
-swing, then the middle of each half period."""
+"""Phase windows (s) of the trot (period 0.36 s; swings 0.02-0.18 and 0.20-0.36 s): the last 20 ms of each
+swing, then the first 100 ms of each."""
 PERIODS = 3
 SEED = 1
 
@@ -82,16 +82,42 @@ def _windows(p, flow, Xs, W, r: float, m: int, tol: float, label: str) -> list[t
     for lo, hi in WINDOWS:
         X0, t0 = starts(p, flow, Xs, W, r, lo, hi, m, rng)
         inside = flow.least_h(X0, t0) >= -tol
-        _XT, hmin, _ran = flow.run_until(X0[:, inside], t0[inside], PERIODS)
-        bad = hmin < -tol
-        least = f", least h {float(hmin.min()):.2g}" if bad.any() else ""
-        rows.append((f"{label}, phases {lo:.2f}-{hi:.2f} s", f"{int(bad.sum())} of {int(inside.sum())} leave C{least}"))
+        X0, t0 = X0[:, inside], t0[inside]
+        XT, hmin, _ran = flow.run_until(X0, t0, PERIODS)
+        bad = ~(hmin >= -tol) | ~np.isfinite(XT).all(axis=0)  # a blow-up fails too
+        how = ""
+        if bad.any():
+            names = sorted({_first_violated(p, X0[:, j], float(t0[j]), flow.dt, tol) for j in np.flatnonzero(bad)})
+            how = f", least h {float(np.nanmin(hmin)):.2g} ({', '.join(names)})"
+        rows.append((f"{label}, phases {lo:.2f}-{hi:.2f} s", f"{int(bad.sum())} of {int(inside.sum())} leave C{how}"))
     return rows
+
+
+def _first_violated(p, x0: np.ndarray, t0: float, dt: float, tol: float) -> str:
+    """The safety function a settled start breaks first, stepped as the period map steps (its loop library)."""
+    import casadi as ca
+
+    from mpgspec.certify.hybrid_orbit import S_LONG
+    from mpgspec.oracle import looplib
+    from mpgspec.oracle.flow import LEFT, rk4_jump
+
+    lib = looplib.attach(p)
+    loop, jump, xs0 = lib.get("loop"), lib.get("jump"), np.array(p.setpoint(0.0), float).ravel()  # as HybridFlow
+    x, t = ca.DM(x0), t0
+    for _ in range(int(round(PERIODS * float(p.period) / dt)) + 1):
+        o = loop(x, t, S_LONG, xs0)
+        hv = np.array(looplib.windowed(p, o[1], x, t, S_LONG), float).ravel()
+        if not (hv >= -tol).all():
+            return p.h_names[int(np.argmin(np.nan_to_num(hv, nan=-np.inf)))]
+        x = rk4_jump(lambda xx, tt: loop(xx, tt, S_LONG, xs0)[0], None, jump, x, t, dt, LEFT, start=(o[0], o[3]))
+        t += dt
+    return "non-finite"
 
 
 def after_entry(project: Path, report_path: Path) -> tuple[str, str]:
     """(row label, value): the safe cells into walks whose flow leaves C within PERIODS periods after
-    entering E, of all such cells (the oracle judged the flow up to the entry)."""
+    entering E, of all such cells (the oracle judged the flow up to the entry). Steps of dt throughout, as
+    the oracle takes them for the A1 (accuracy `low`: no refinement, no shortened steps in a walk)."""
     import json
 
     import casadi as ca
@@ -123,7 +149,8 @@ def after_entry(project: Path, report_path: Path) -> tuple[str, str]:
                 for k in range(entry + int(round(PERIODS * float(pb.period) / dt)) + 1):
                     o = loop(x, t, s, x0)
                     if k >= entry:
-                        least = min(least, float(np.min(np.array(looplib.windowed(pb, o[1], x, t, s), float))))
+                        hv = np.array(looplib.windowed(pb, o[1], x, t, s), float)
+                        least = min(least, float(np.min(hv)) if np.isfinite(hv).all() else -np.inf)
                     x = rk4_jump(lambda xx, tt, t=t, s=s: loop(xx, tt, s + (tt - t), x0)[0], None, jump, x, t, dt,
                                  LEFT, s=s, start=(o[0], o[3]))
                     t, s = t + dt, s + dt

@@ -14,7 +14,7 @@ NAMES = ["mass_scale", "friction"]
 
 def _rollouts(prim, settings, inline: bool, gradient: bool, monkeypatch):
     with monkeypatch.context() as m:
-        if inline:  # every part inlined, compiled unoptimised (the same bits, a fraction of gcc -O1's time)
+        if inline:  # every part inlined, its step library compiled unoptimised (the same bits, less gcc)
             m.setattr(rigid, "loop_parts", lambda p, lib, reverse: ({}, ()))
             m.setattr(rigid, "STEP_FLAGS", ("-O0",))
         return RigidRobustRollout(prim, NAMES, "trunk", True, 4, settings, 0.05, 0.04, gradient=gradient)
