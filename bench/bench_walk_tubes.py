@@ -34,24 +34,6 @@ PERIODS = 3
 SEED = 1
 
 
-def starts(prim, flow, Xs: np.ndarray, W: np.ndarray, r: float, lo: float, hi: float, m: int,
-           rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """(states, clocks) of m starts at phases in [lo, hi), drawn as the floquet verifier draws them."""
-    from mpgspec.compile.contacts import held_feet
-    from verifiers.roa_common import unit_sphere
-
-    w, U = np.linalg.eigh(0.5 * (W + W.T))
-    keep = w > 1e-12 * w.max()
-    Wi = (U[:, keep] / np.sqrt(w[keep])) @ U[:, keep].T
-    held = held_feet(prim.contacts)
-    k = rng.integers(int(round(lo / flow.dt)), int(round(hi / flow.dt)), m)
-    u = unit_sphere(m, W.shape[0], rng)
-    u[: m // 2] *= rng.random((m // 2, 1)) ** (1 / W.shape[0])
-    X0 = Xs[:, k] + r * (u @ Wi).T
-    X0 = np.stack([prim.system.project_to_contacts(X0[:, j], held(k[j] * flow.dt), W) for j in range(m)], 1)
-    return X0, k * flow.dt
-
-
 def count(project: Path, m: int, radii: list[float | None]) -> list[tuple[str, str]]:
     """Table rows: per walk, radius (None: the sized one) and window, starts in C and those that leave it
     within PERIODS periods."""
@@ -77,10 +59,14 @@ def count(project: Path, m: int, radii: list[float | None]) -> list[tuple[str, s
 
 def _windows(p, flow, Xs, W, r: float, m: int, tol: float, label: str) -> list[tuple[str, str]]:
     """Rows of one walk and radius: m starts per window (the same seed for every radius)."""
+    from verifiers.floquet_hybrid import inverse_root, sphere_starts
+
     rows = []
     rng = np.random.default_rng(SEED)
+    Wi = inverse_root(W)
     for lo, hi in WINDOWS:
-        X0, t0 = starts(p, flow, Xs, W, r, lo, hi, m, rng)
+        X0, k = sphere_starts(p, flow.dt, Xs, W, Wi, r, m, rng, (int(round(lo / flow.dt)), int(round(hi / flow.dt))))
+        t0 = k * flow.dt
         inside = flow.least_h(X0, t0) >= -tol
         X0, t0 = X0[:, inside], t0[inside]
         XT, hmin, _ran = flow.run_until(X0, t0, PERIODS)
@@ -94,22 +80,20 @@ def _windows(p, flow, Xs, W, r: float, m: int, tol: float, label: str) -> list[t
 
 
 def _first_violated(p, x0: np.ndarray, t0: float, dt: float, tol: float) -> str:
-    """The safety function a settled start breaks first, stepped as the period map steps (its loop library)."""
+    """The safety function a settled start breaks first, stepped as the period map steps it."""
     import casadi as ca
 
-    from mpgspec.certify.hybrid_orbit import S_LONG
-    from mpgspec.oracle import looplib
+    from mpgspec.certify.hybrid_orbit import _parts
     from mpgspec.oracle.flow import LEFT, rk4_jump
 
-    lib = looplib.attach(p)
-    loop, jump, xs0 = lib.get("loop"), lib.get("jump"), np.array(p.setpoint(0.0), float).ravel()  # as HybridFlow
+    f, _k, jump, _h, start = _parts(p, np.array(p.setpoint(0.0), float).ravel())  # HybridFlow's settled loop
     x, t = ca.DM(x0), t0
     for _ in range(int(round(PERIODS * float(p.period) / dt)) + 1):
-        o = loop(x, t, S_LONG, xs0)
-        hv = np.array(looplib.windowed(p, o[1], x, t, S_LONG), float).ravel()
+        k1, u, hv = start(x, t)
+        hv = np.array(hv, float).ravel()
         if not (hv >= -tol).all():
             return p.h_names[int(np.argmin(np.nan_to_num(hv, nan=-np.inf)))]
-        x = rk4_jump(lambda xx, tt: loop(xx, tt, S_LONG, xs0)[0], None, jump, x, t, dt, LEFT, start=(o[0], o[3]))
+        x = rk4_jump(f, None, jump, x, t, dt, LEFT, start=(k1, u))
         t += dt
     return "non-finite"
 

@@ -114,6 +114,29 @@ def unconverged(log: list[dict], r: float) -> bool:
     return least["unsafe"] == 0
 
 
+def inverse_root(W: np.ndarray) -> np.ndarray:
+    """W^-1/2 on W's range (pseudo-inverse root): a step r W^-1/2 u has W-norm r |u| and does not move
+    the states W does not weigh."""
+    w, U = np.linalg.eigh(0.5 * (W + W.T))
+    keep = w > 1e-12 * max(w.max(), 1e-300)
+    return (U[:, keep] / np.sqrt(w[keep])) @ U[:, keep].T
+
+
+def sphere_starts(prim, dt: float, Xs: np.ndarray, W: np.ndarray, Wi: np.ndarray, r: float, m: int,
+                  rng: np.random.Generator, steps: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """(states, step indices) of m starts x*(t_k) + r Wi u at phase steps k drawn from [steps[0], steps[1]):
+    the first half of the u inside the unit ball (uniform in volume), the rest on its sphere; each put on the
+    contact manifold of the feet the primitive holds at its phase."""
+    k = rng.integers(steps[0], steps[1], m)
+    u = unit_sphere(m, W.shape[0], rng)
+    u[: m // 2] *= rng.random((m // 2, 1)) ** (1 / W.shape[0])
+    X0 = Xs[:, k] + r * (u @ Wi).T
+    held = held_feet(prim.contacts)
+    if held is not None:
+        X0 = np.stack([prim.system.project_to_contacts(X0[:, j], held(k[j] * dt), W) for j in range(m)], 1)
+    return X0, k
+
+
 def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict):
     """Bisection on r: starts x*(t0) + r W^-1/2 u at random phases on the dt grid, put on the contact
     manifold of the feet held at t0, must stay in C and end within conv r of the orbit after
@@ -121,26 +144,16 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
     the ground just after lift-off) is drawn again: the oracle takes a rollout into E only at a sample
     where it judged every h >= -tol (tol: its h_tolerance), so E needs to hold only where C does."""
     prim = flow.prim
-    sys = prim.system
     n = int(o.get("samples", 48))
     conv = float(o.get("conv", 0.05))
     rng = np.random.default_rng(o.get("seed", 0))
-    w, U = np.linalg.eigh(0.5 * (W + W.T))
-    keep = w > 1e-12 * max(w.max(), 1e-300)
-    Wi = (U[:, keep] / np.sqrt(w[keep])) @ U[:, keep].T  # pseudo-inverse root: unweighted states are not moved
-    held = held_feet(prim.contacts)
+    Wi = inverse_root(W)
     tol = float(o.get("oracle_h_tolerance", 0.0))  # the oracle's: it judges h >= -tol safe
     redrawn = [0]
     log = []
 
     def draw(r, m):
-        k = rng.integers(0, flow.steps, m)
-        u = unit_sphere(m, W.shape[0], rng)
-        u[: m // 2] *= rng.random((m // 2, 1)) ** (1 / W.shape[0])
-        X0 = Xs[:, k] + r * (u @ Wi).T
-        if held is not None:
-            X0 = np.stack([sys.project_to_contacts(X0[:, j], held(k[j] * flow.dt), W) for j in range(m)], 1)
-        return X0, k
+        return sphere_starts(prim, flow.dt, Xs, W, Wi, r, m, rng, (0, flow.steps))
 
     def starts(r):
         X0, k = draw(r, n)
@@ -179,5 +192,6 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
                               grow=2.0)
     return r, {"samples_per_radius": n, "simulations": n * len(log), "bisection": log, "capped": capped,
                "periods": periods, "dt": flow.dt, "conv": conv, "time_s": time.perf_counter() - t0,
-               "starts": ("projected onto the contact manifold of the feet held at their phase" if held else "as drawn")
-               + ", inside C", "redrawn_outside_c": redrawn[0]}
+               "starts": ("projected onto the contact manifold of the feet held at their phase"
+                          if held_feet(prim.contacts) is not None else "as drawn") + ", inside C",
+               "redrawn_outside_c": redrawn[0]}
