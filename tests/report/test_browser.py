@@ -52,6 +52,7 @@ A1_ROBUST = """uncertainty:
   runs: 0
   assertions:
     - edge: {from: Stand, to: Lie, class: 1}
+    - edge: {from: Lie, to: Stand}
 """
 
 

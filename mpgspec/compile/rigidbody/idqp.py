@@ -123,7 +123,13 @@ def _tasks(c, ctx: ControlContext, q, v):
     a_d = yd_acc - kp * (com - yd) - kd * (comdot - yd_dot)
     S = ca.DM(np.hstack([np.zeros((nu, nv - nu)), np.eye(nu)]))
     qj, qj_star = x[nq - nu:nq], ctx.x_star[nq - nu:nq]
-    a_post = -c.posture_kp * (qj - qj_star) - c.posture_kd * ca.mtimes(S, v)
+    vj = ca.mtimes(S, v)
+    if c.posture_profile:
+        qj_sw, vj_sw = ctx.x_sw[nq - nu:nq], ca.mtimes(S, ctx.x_sw[nq:nq + nv])
+        pd_, pd_dot, pd_acc = _profile_acc(ctx.s, c.profile_duration, qj_sw, vj_sw, qj_star, ca.DM.zeros(nu))
+        a_post = pd_acc - c.posture_kp * (qj - pd_) - c.posture_kd * (vj - pd_dot)
+    else:
+        a_post = -c.posture_kp * (qj - qj_star) - c.posture_kd * vj
     return Jc, drift_c, a_d, S, a_post
 
 
