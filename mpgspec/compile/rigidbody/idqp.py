@@ -3,8 +3,9 @@
 Decision variables X_ext = [qddot (nv), u (nu), lam (3 per foot)]; qddot is eliminated with the
 dynamics, qddot = D^-1 (B u + J^T lam - H), so the QP runs over [u; lam] alone. Objective: track
 a CoM acceleration a_d = yddot_d - Kp (com - y_d) - Kd (comdot - ydot_d), where y_d is the cubic
-motion profile (eq. 7) from the CoM at switch-in to the CoM of the setpoint, plus a light
-joint-posture task and a regulariser sigma (||qddot||^2 + ||u||^2 + ||lam||^2). Constraints:
+motion profile (eq. 7) from the CoM at switch-in to the CoM of the setpoint, plus a
+joint-posture task (towards the setpoint's joints, or with `posture_profile` along a cubic from the
+joints at switch-in, at rest, to them) and a regulariser sigma (||qddot||^2 + ||u||^2 + ||lam||^2). Constraints:
 J qddot + Jdot v = gamma (the same Baumgarte target as the plant), u in U, and lam in an inner
 friction pyramid |lam_x|, |lam_y| <= mu / sqrt(2) lam_z, lam_z >= 0.
 
@@ -124,9 +125,9 @@ def _tasks(c, ctx: ControlContext, q, v):
     S = ca.DM(np.hstack([np.zeros((nu, nv - nu)), np.eye(nu)]))
     qj, qj_star = x[nq - nu:nq], ctx.x_star[nq - nu:nq]
     vj = ca.mtimes(S, v)
-    if c.posture_profile:
-        qj_sw, vj_sw = ctx.x_sw[nq - nu:nq], ca.mtimes(S, ctx.x_sw[nq:nq + nv])
-        pd_, pd_dot, pd_acc = _profile_acc(ctx.s, c.profile_duration, qj_sw, vj_sw, qj_star, ca.DM.zeros(nu))
+    if c.posture_profile:  # from the joints at switch-in, at rest: a leg's motion at the switch is damped, not carried on
+        zero = ca.DM.zeros(nu)
+        pd_, pd_dot, pd_acc = _profile_acc(ctx.s, c.profile_duration, ctx.x_sw[nq - nu:nq], zero, qj_star, zero)
         a_post = pd_acc - c.posture_kp * (qj - pd_) - c.posture_kd * (vj - pd_dot)
     else:
         a_post = -c.posture_kp * (qj - qj_star) - c.posture_kd * vj
