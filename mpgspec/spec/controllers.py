@@ -103,9 +103,13 @@ class IDQPController(Strict):
     posture_kp: Number = Field(default=50.0, ge=0)
     posture_kd: Number = Field(default=5.0, ge=0)
     posture_weight: Number = Field(default=0.01, ge=0)
+    friction: Number | None = Field(default=None, gt=0, description="friction coefficient the contact forces are "
+                                    "designed for (the inner pyramid's); omitted: the system's. Below the plant's, "
+                                    "it keeps a friction margin where the QP saturates the pyramid")
+    f_min: Number = Field(default=0.0, ge=0, description="least normal force of a held foot (N)")
     posture_profile: bool = Field(default=False, description="the posture task follows a cubic profile from the "
-                                  "joints at switch-in (at rest) to the setpoint's over profile_duration, as the CoM task does, so that "
-                                  "stiff posture gains do not jerk the legs at a switch")
+                                  "joints at switch-in (at rest) to the setpoint's over profile_duration, as the CoM "
+                                  "task does, so that stiff posture gains do not jerk the legs at a switch")
     regularization: Number = Field(default=1e-8, gt=0)
     max_iter: int = Field(default=100, ge=1)
     rate: Number | None = Field(default=None, gt=0, description="control rate (Hz): the QP is solved every "

@@ -7,7 +7,9 @@ motion profile (eq. 7) from the CoM at switch-in to the CoM of the setpoint, plu
 joint-posture task (towards the setpoint's joints, or with `posture_profile` along a cubic from the
 joints at switch-in, at rest, to them) and a regulariser sigma (||qddot||^2 + ||u||^2 + ||lam||^2). Constraints:
 J qddot + Jdot v = gamma (the same Baumgarte target as the plant), u in U, and lam in an inner
-friction pyramid |lam_x|, |lam_y| <= mu / sqrt(2) lam_z, lam_z >= 0.
+friction pyramid |lam_x|, |lam_y| <= mu / sqrt(2) lam_z, lam_z >= f_min, where mu is the system's
+coefficient or a lower design one (`friction`): the pyramid's corners touch the cone of its mu, so
+forces designed for the plant's own mu keep no margin where the QP saturates them.
 
 The QP is solved with CasADi's active-set solver qrqp, which can be code-generated, so it runs
 inside the jit-compiled oracle. Control rate: the oracle solves it at `rate` (default: at every
@@ -159,14 +161,15 @@ def _qp(c, ctx: ControlContext) -> _QP:
     gqp = 2 * ca.mtimes(Aq.T, ca.mtimes(Q, bq) - ca.mtimes(Jc.T, a_d - drift_c) - c.posture_weight * ca.mtimes(S.T, a_post))
     A_con = ca.mtimes(J, Aq)
     con = gamma - drift - ca.mtimes(J, bq)
-    A_fc = _friction_pyramid(sys.friction / np.sqrt(2.0), nu, nc)
+    mu = sys.friction if c.friction is None else c.friction  # the design coefficient: a margin below the plant's
+    A_fc = _friction_pyramid(mu / np.sqrt(2.0), nu, nc)
     A = ca.vertcat(A_con, A_fc)
     lba = ca.vertcat(con, -np.inf * ca.DM.ones(A_fc.shape[0]))
     uba = ca.vertcat(con, ca.DM.zeros(A_fc.shape[0]))
     lbx = np.full(nw, -np.inf)
     ubx = np.full(nw, np.inf)
     lbx[:nu], ubx[:nu] = sys.u_lo, sys.u_hi
-    lbx[nu + 2::3] = 0.0
+    lbx[nu + 2::3] = c.f_min
     w_eq, ok = _no_inequality_active(Aq, Q, c.regularization, gqp, A_con, con, A_fc, lbx, ubx, nu)
     return _QP(Hqp, gqp, A, lba, uba, lbx, ubx, w_eq, ok, nw, nu)
 
