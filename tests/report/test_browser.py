@@ -42,7 +42,7 @@ def chromium() -> str:
 
 
 A1_ROBUST = """uncertainty:
-  nodes: [Lie, Stand]
+  nodes: [Lie, Stand, Walk(fast)]
   parameters:
     mass_scale: {nominal: 1, range: [0.9, 1.1]}
     friction: {nominal: 0.6, range: [0.4, 0.8]}
@@ -57,8 +57,9 @@ A1_ROBUST = """uncertainty:
 
 
 def _a1_light(root: Path) -> Path:
-    """specs/a1 with its robust stage on Lie and Stand only and no cross-check variants: the page has
-    every section, built in minutes instead of the full robust stage's compile of every primitive."""
+    """specs/a1 with its robust stage on Lie, Stand and Walk(fast) only (the graph run's first walk, whose
+    edge from Stand is nominal only) and no cross-check variants: the page has every section, built in
+    minutes instead of the full robust stage's compile of every primitive."""
     dst = root / "a1"
     shutil.copytree(SPECS / "a1", dst)
     text = (dst / "project.yaml").read_text()
