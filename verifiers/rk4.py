@@ -141,6 +141,7 @@ class RK4Runner:
         order = self._first(Zstart, T, t0s, results)
         queue = np.vstack([Zstart[:, order], ch.lay.start(T[order])])
         done_row = ch.nz + ch.lay.slice("done").start
+        kind_row = ch.nz + ch.lay.slice("kind").start
         cap, n, qpos = min(self.s.batch, SIZES[-1]), order.size, 0
         Z, ids = queue[:, :0], np.zeros(0, int)
         rows: list[np.ndarray] = []
@@ -150,18 +151,24 @@ class RK4Runner:
                 take = min(n, qpos + cap - ids.size)
                 Z, ids = np.hstack([Z, queue[:, qpos:take]]), np.concatenate([ids, np.arange(qpos, take)])
                 qpos = take
+            Z_in = np.array(Z)  # Z may be a view of the chunk's output buffer, which a failed call wipes
             try:
                 Z = ch.run(Z)
             except Exception:  # a crash is the evidence of the calls that crash, each run alone
-                Z, errors = _alone_judged(ch, Z)
+                Z, errors = _alone_judged(ch, Z_in)
                 for b, err in errors.items():
                     results[order[ids[b]]] = OracleEvidence(0, Reason.ERROR, 0.0, status="inconclusive",
                                                             message=str(err)[:500])
                 ok = ~np.isin(np.arange(ids.size), list(errors))
                 Z, ids = Z[:, ok], ids[ok]
             done = Z[done_row] > 0.5
+            broken = done & ~np.isfinite(Z[kind_row])  # decided on nothing: a failed evaluation's leftovers
+            for b in np.flatnonzero(broken):
+                results[order[ids[b]]] = OracleEvidence(0, Reason.ERROR, 0.0, status="inconclusive",
+                                                        message=BROKEN_JUDGE)
             if done.any():
                 keep = np.flatnonzero(~done)
+                done &= ~broken
                 rows.append(ids[done])
                 Js.append(Z[ch.nz:, done])
                 Z, ids = Z[:, keep], ids[keep]
@@ -243,6 +250,11 @@ def _alone(ch, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
     if shape is None:
         return Zf, np.zeros((0, Z.shape[1], 0)), errors
     return Zf, np.concatenate([o if o is not None else np.full(shape, np.nan) for o in outs], axis=1), errors
+
+
+BROKEN_JUDGE = ("the compiled rollout left its judge's decision non-finite: an evaluation inside it (e.g. an "
+                "optimisation-based control law) failed")
+"""The evidence of a rollout marked decided whose decision is NaN (a call that failed without reporting it)."""
 
 
 def _alone_judged(ch, Z: np.ndarray) -> tuple[np.ndarray, dict]:

@@ -60,3 +60,63 @@ def test_a_crash_is_the_evidence_of_the_call_that_crashes_not_of_its_batch():
     assert [e.status for e in ev[:2]] == [a.status for a in alone]
     assert [e.t_stop for e in ev[:2]] == pytest.approx([a.t_stop for a in alone])
     assert ev[2].status == "inconclusive" and ev[2].reason.value == "error" and "failed" in ev[2].message
+
+
+def _pendulum_balance():
+    from pathlib import Path
+
+    from mpgspec.api import compile_project, settings_for
+    from mpgspec.oracle import SafetyOracle
+    from mpgspec.spec.loader import load_project
+
+    spec = load_project(Path(__file__).parents[2] / "specs" / "pendulum" / "project.yaml")
+    target = compile_project(spec)["Balance"]
+    x_star = target.x_star(0.0)
+    x0s = np.array([x_star + [0.5, 0.1], x_star + [0.6, 0.0], x_star + [0.55, -0.05]])
+    return SafetyOracle(target, settings_for(spec, {"jit": False})), x0s
+
+
+def test_a_batch_that_fails_after_its_first_chunk_runs_again_from_where_it_stood():
+    """A judged chunk hands back a view of its output buffer, which the next call's input then is; a
+    call that fails wipes that buffer. The calls run again alone must start from the states the failed
+    call was given, not from the wiped buffer: each gets the verdict it gets alone."""
+    oracle, x0s = _pendulum_balance()
+    alone = [oracle(x, 0.0) for x in x0s]
+    ch = oracle.runner.chunk
+    assert min(a.t_stop for a in alone) > 2 * ch.K * oracle.runner.dt  # still running at the second chunk
+    run, calls = ch.run, []
+
+    def second_batch_call_fails(Z):
+        calls.append(Z.shape[1])
+        if Z.shape[1] == 3 and calls.count(3) == 2:
+            ch._bound(3)[3][:] = np.nan  # as JudgedChunk.run leaves its buffer when the evaluation fails
+            raise RuntimeError("the compiled rollout failed (status 1)")
+        return run(Z)
+
+    ch.run = second_batch_call_fails
+    ev = oracle.evaluate(x0s, np.zeros(3))
+    assert calls[:5] == [3, 3, 1, 1, 1]  # the batch failed at its second chunk, then ran alone
+    assert [e.status for e in ev] == [a.status for a in alone]
+    assert [e.t_stop for e in ev] == pytest.approx([a.t_stop for a in alone])
+
+
+def test_a_rollout_decided_on_a_non_finite_judge_is_an_error_of_its_own():
+    """A call whose compiled chunk reports success but leaves its decision NaN (what a failed inner
+    evaluation can leave) gets error evidence; the other calls of its batch keep their verdicts."""
+    oracle, x0s = _pendulum_balance()
+    alone = [oracle(x, 0.0) for x in x0s[:2]]
+    ch = oracle.runner.chunk
+    run, lay = ch.run, ch.lay
+    kind, done = ch.nz + lay.slice("kind").start, ch.nz + lay.slice("done").start
+
+    def third_left_nan(Z):
+        out = run(Z)
+        if Z.shape[1] == 3:
+            out[kind, 2], out[done, 2] = np.nan, 1.0
+        return out
+
+    ch.run = third_left_nan
+    ev = oracle.evaluate(x0s, np.zeros(3))
+    assert [e.status for e in ev[:2]] == [a.status for a in alone]
+    assert [e.t_stop for e in ev[:2]] == pytest.approx([a.t_stop for a in alone])
+    assert ev[2].status == "inconclusive" and ev[2].reason.value == "error" and "non-finite" in ev[2].message
