@@ -106,6 +106,22 @@ def test_rate_not_a_whole_number_of_steps_is_a_spec_error(tmp_path, capsys, rate
     assert "whole number of oracle steps" in err and "Traceback" not in err
 
 
+def test_a_design_friction_above_the_systems_is_a_spec_error(tmp_path, capsys):
+    """An ID-QP designing its forces for more friction than C judges would plan them outside the cone:
+    exit 2, located at controller.friction, no traceback."""
+    path = lie_and_stand(tmp_path / "a1")
+    stand = tmp_path / "a1" / "primitives" / "stand.yaml"
+    text = stand.read_text()
+    assert text.count("\n  friction: 0.35\n") == 1
+    stand.write_text(text.replace("\n  friction: 0.35\n", "\n  friction: 0.7\n"))
+    rc = main(["verify", str(path), "--no-write", "-q"])
+    err = capsys.readouterr().err
+    line = 1 + stand.read_text().splitlines().index("  friction: 0.7")
+    assert rc == 2, err
+    assert f"{stand}:{line}" in err and "MPG104" in err and "controller.friction" in err, err
+    assert "at most the system's friction 0.6" in err and "Traceback" not in err
+
+
 def test_rate_a_multiple_of_the_step_is_accepted(tmp_path):
     spec = load_project(lie_and_stand(tmp_path / "a1", "250"))
     prims = compile_project(spec)

@@ -68,6 +68,11 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
         raise SpecError("the ID-QP needs a rigid-body system", location=ctx.ec.locate(("controller", "type")),
                         key=f"{ctx.ec.owner}: controller.type", expected="system kind rigid_body",
                         found="an analytic system", code="MPG108")
+    if c.friction is not None and c.friction > sys.friction:
+        raise SpecError("the ID-QP's design friction coefficient exceeds the system's: its forces would leave the "
+                        "friction cone C judges", location=ctx.ec.locate(("controller", "friction")),
+                        key=f"{ctx.ec.owner}: controller.friction", expected=f"at most the system's friction "
+                        f"{sys.friction:g}", found=f"{c.friction:g}", code="MPG104")
     qp = _qp(c, ctx)
     X, solve, nws, na = _warm_solve(c, qp, [sys.x, ctx.t, ctx.s, ctx.x_sw])
     where = ("controller", "rate") if c.rate is not None else ("controller", "type")
