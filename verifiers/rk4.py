@@ -151,11 +151,10 @@ class RK4Runner:
                 take = min(n, qpos + cap - ids.size)
                 Z, ids = np.hstack([Z, queue[:, qpos:take]]), np.concatenate([ids, np.arange(qpos, take)])
                 qpos = take
-            Z_in = np.array(Z)  # Z may be a view of the chunk's output buffer, which a failed call wipes
             try:
                 Z = ch.run(Z)
             except Exception:  # a crash is the evidence of the calls that crash, each run alone
-                Z, errors = _alone_judged(ch, Z_in)
+                Z, errors = _alone_judged(ch, Z)
                 for b, err in errors.items():
                     results[order[ids[b]]] = OracleEvidence(0, Reason.ERROR, 0.0, status="inconclusive",
                                                             message=str(err)[:500])

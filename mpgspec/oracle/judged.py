@@ -251,13 +251,15 @@ class JudgedChunk:
 
     def run(self, Z: np.ndarray) -> np.ndarray:
         """[z; J] of every column after K steps, as a view of an output buffer for this many columns
-        (valid until the next call with as many); a failed evaluation raises."""
+        (valid until the next call with as many); a failed evaluation raises and leaves the buffer holding
+        this call's input: no earlier call's numbers, and a caller whose Z was that view keeps its states
+        to run again from."""
         n = Z.shape[1]
         buf, ev, zin, zf = self._bound(n)
         zin.reshape(Z.shape[0], n, order="F")[:] = Z
         ev()
         if buf.ret():
-            zf[:] = np.nan
+            zf[:] = zin
             raise RuntimeError(f"the compiled rollout failed (status {buf.ret()}): an evaluation inside it "
                                "(e.g. an optimisation-based control law) returned an error")
         return zf.reshape(Z.shape[0], n, order="F")

@@ -77,9 +77,9 @@ def _pendulum_balance():
 
 
 def test_a_batch_that_fails_after_its_first_chunk_runs_again_from_where_it_stood():
-    """A judged chunk hands back a view of its output buffer, which the next call's input then is; a
-    call that fails wipes that buffer. The calls run again alone must start from the states the failed
-    call was given, not from the wiped buffer: each gets the verdict it gets alone."""
+    """A judged chunk hands back a view of its output buffer, which the next call's input then is. When
+    that call's evaluation fails, the calls run again alone must start from the states it was given, not
+    from what the failure left in the buffer: each gets the verdict it gets alone."""
     oracle, x0s = _pendulum_balance()
     alone = [oracle(x, 0.0) for x in x0s]
     ch = oracle.runner.chunk
@@ -89,8 +89,12 @@ def test_a_batch_that_fails_after_its_first_chunk_runs_again_from_where_it_stood
     def second_batch_call_fails(Z):
         calls.append(Z.shape[1])
         if Z.shape[1] == 3 and calls.count(3) == 2:
-            ch._bound(3)[3][:] = np.nan  # as JudgedChunk.run leaves its buffer when the evaluation fails
-            raise RuntimeError("the compiled rollout failed (status 1)")
+            buf, *rest = ch._bound(3)
+            ch._buffers[3] = (_Failing(buf), *rest)  # the real call, reporting the status of a failed one
+            try:
+                return run(Z)
+            finally:
+                ch._buffers[3] = (buf, *rest)
         return run(Z)
 
     ch.run = second_batch_call_fails
