@@ -1,21 +1,22 @@
-"""Stand's margins by design: how far the A1's Stand keeps from C's boundary on E and how close to x* it
-settles under model error, for the project's Stand law and, as the baseline in the same run, its earlier
-one (CoM gains 100 / 20 on every axis, a posture task at 50 / 5 pulling at the setpoint's joints from the
-switch, contact forces designed for the plant's mu, no least normal force).
+"""The rests' margins by design: how far the A1's Stand (or Lie) keeps from C's boundary on E and how close
+to x* it settles under model error, for the project's law and, as the baseline in the same run, the earlier
+one: Stand's earlier ID-QP (CoM gains 100 / 20 on every axis, a posture task at 50 / 5 pulling at the
+setpoint's joints from the switch, contact forces designed for the plant's mu, no least normal force), or
+for Lie the paper's joint PD (kp 60, kd 3, gravity compensation, the cubic profile; E of radius 0.023).
 
-    python bench/bench_stand_margins.py [--project specs/a1/project.yaml] [--no-write]
+    python bench/bench_stand_margins.py [--primitive Stand|Lie] [--project specs/a1/project.yaml] [--no-write]
 
 E inside C: 400 seeded points on E's boundary and 400 inside, on the contact manifold (as the
 roa_in_safe_set check draws them), then that check's descent from the three points nearest to leaving C
 (not its extra starts along the gradient at x*), and the least friction-cone margin (N, at the plant's mu)
-and normal force (N) found. Model error: Lie -> Stand from x*_Lie at the 8 corners of the project's uncertainty
-box (mass, friction and torque scale; no push), Stand's own flow over the oracle's horizon on the
-perturbed plant; the RoA margin r - ||x - x*||_W at the horizon (positive: inside E), the least over
+and normal force (N) found. Model error: Lie -> Stand from x*_Lie (Stand -> Lie from x*_Stand) at the 8
+corners of the project's uncertainty box (mass, friction and torque scale; no push), the target's own flow
+over the oracle's horizon on the perturbed plant; the RoA margin r - ||x - x*||_W at the horizon (positive: inside E), the least over
 the corners, and how many runs stay in C. Counts and margins, not timings (empirical: sampled points and
 rollouts).
 
-Prints a table and replaces (or appends) the section "A1 Stand: margins under model error" of
-bench/RESULTS.md.
+Prints a table and replaces (or appends) the section "A1 Stand: margins under model error" (or "A1 Lie: ...")
+of bench/RESULTS.md.
 """
 from __future__ import annotations
 
@@ -34,21 +35,37 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 from common import publish_rows  # noqa: E402
 
-HEADING = "## A1 Stand: margins under model error"
 EARLIER = {"kp": "[100, 100, 100]", "kd": "[20, 20, 20]", "posture_kp": "50", "posture_kd": "5",
            "posture_profile": "false", "friction": None, "f_min": None}
 """Stand's earlier law: these keys of its controller replaced (None: removed, the default)."""
+JOINT_PD = """controller:
+  type: pd
+  outputs: [FL_hip_joint, FL_thigh_joint, FL_calf_joint, FR_hip_joint, FR_thigh_joint, FR_calf_joint,
+            RL_hip_joint, RL_thigh_joint, RL_calf_joint, RR_hip_joint, RR_thigh_joint, RR_calf_joint]
+  kp: [60, 60, 60, 60, 60, 60, 60, 60, 60, 60, 60, 60]
+  kd: [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]
+  gravity_compensation: true
+  profile: {duration: 1.0}
+"""
+"""Lie's earlier law, the paper's: a joint PD with gravity compensation and the cubic profile."""
+SOURCE = {"Stand": "Lie", "Lie": "Stand"}
+"""The primitive each target is switched in from (its setpoint at t = 0)."""
 
 
-def earlier_copy(project: Path, dst: Path) -> Path:
-    """A copy of the project whose Stand runs the earlier law (EARLIER)."""
+def earlier_copy(project: Path, dst: Path, target: str) -> Path:
+    """A copy of the project whose `target` runs its earlier law (EARLIER, or JOINT_PD with r = 0.023)."""
     shutil.copytree(project.parent, dst)
-    stand = dst / "primitives" / "stand.yaml"
-    text = stand.read_text()
-    for key, value in EARLIER.items():
-        pattern = rf"\n  {key}: *[^\n]*"
-        text = re.sub(pattern, "" if value is None else f"\n  {key}: {value}", text)
-    stand.write_text(text)
+    path = dst / "primitives" / f"{target.lower()}.yaml"
+    text = path.read_text()
+    if target == "Stand":
+        for key, value in EARLIER.items():
+            pattern = rf"\n  {key}: *[^\n]*"
+            text = re.sub(pattern, "" if value is None else f"\n  {key}: {value}", text)
+    else:
+        head, rest = text.split("controller:\n", 1)
+        text = head + JOINT_PD + rest[rest.index("safe_set:\n"):]
+        text = re.sub(r"\n  radius: [^\n]*", "\n  radius: 0.023", text)
+    path.write_text(text)
     return dst / project.name
 
 
@@ -65,8 +82,8 @@ def _recording():
     return Recording
 
 
-def margins(project: Path, label: str) -> list[tuple[str, str]]:
-    """Rows: E_Stand's least friction and normal-force margins, and Lie -> Stand at the box's corners."""
+def margins(project: Path, label: str, target: str = "Stand") -> list[tuple[str, str]]:
+    """Rows: E_target's least friction and normal-force margins, and SOURCE -> target at the box's corners."""
     from mpgspec.api import compile_project, settings_for
     from mpgspec.check import roa_manifold
     from mpgspec.check.assumptions import _contact_projection
@@ -76,7 +93,7 @@ def margins(project: Path, label: str) -> list[tuple[str, str]]:
     _Recording = _recording()
     spec = load_project(project)
     prims, settings = compile_project(spec), settings_for(spec)
-    stand, lie = prims["Stand"], prims["Lie"]
+    stand, lie = prims[target], prims[SOURCE[target]]
     W = np.asarray(stand.W)
     w, V = np.linalg.eigh(W)
     L = V[:, w > 1e-12] / np.sqrt(w[w > 1e-12])
@@ -95,7 +112,7 @@ def margins(project: Path, label: str) -> list[tuple[str, str]]:
     for how, Hall in (("800 points", H), ("and a local search", np.vstack([H] + getattr(search, "seen", [])))):
         least = {kind: float(min(Hall[:, i].min() for i, n in enumerate(names) if n.startswith(kind)))
                  for kind in ("friction_cone", "normal_force")}
-        rows.append((f"{label}: E_Stand (r = {stand.radius:g}) on the contact manifold, {how}: least friction "
+        rows.append((f"{label}: E_{target} (r = {stand.radius:g}) on the contact manifold, {how}: least friction "
                      "margin (mu 0.6) / normal force", f"{least['friction_cone']:.2f} N / {least['normal_force']:.1f} N"))
 
     unc = spec.project.uncertainty
@@ -109,7 +126,7 @@ def margins(project: Path, label: str) -> list[tuple[str, str]]:
     full = last == rr.N  # ran to the horizon: stayed in C (a run stops where h < -tol)
     final = np.where(full, Y[np.arange(n), -1, np.minimum(last, rr.N)], np.nan)
     k = int(np.nanargmin(final)) if full.any() else 0
-    rows.append((f"{label}: Lie -> Stand at the {n} corners of {', '.join(names_th)}, RoA margin at "
+    rows.append((f"{label}: {SOURCE[target]} -> {target} at the {n} corners of {', '.join(names_th)}, RoA margin at "
                  f"{settings.horizon:g} s (least; worst corner)",
                  f"{np.nanmin(final) if full.any() else float('nan'):+.3f} ({dict(zip(names_th, corners[k]))}); "
                  f"{int(full.sum())} of {n} stay in C"))
@@ -119,15 +136,17 @@ def margins(project: Path, label: str) -> list[tuple[str, str]]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--primitive", default="Stand", choices=sorted(SOURCE))
     ap.add_argument("--project", default=str(ROOT / "specs" / "a1" / "project.yaml"))
     ap.add_argument("--no-write", action="store_true")
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     project = Path(a.project).resolve()
-    rows = margins(project, "Stand (the project's)")
+    target = a.primitive
+    rows = margins(project, f"{target} (the project's)", target)
     with tempfile.TemporaryDirectory() as tmp:
-        rows += margins(earlier_copy(project, Path(tmp) / "a1"), "Stand (earlier law)")
-    publish_rows(HEADING, "bench_stand_margins.py", 1, t0, rows, not a.no_write)
+        rows += margins(earlier_copy(project, Path(tmp) / "a1", target), f"{target} (earlier law)", target)
+    publish_rows(f"## A1 {target}: margins under model error", "bench_stand_margins.py", 1, t0, rows, not a.no_write)
     return 0
 
 

@@ -16,10 +16,12 @@ renames the items through an attribute pytest 9 no longer reads.)
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 
 import pytest
 
+from a1_lie import pd_lie as _pd_lie
 from mpgspec.api import compile_project, settings_for
 from mpgspec.spec.loader import load_project
 
@@ -57,6 +59,26 @@ COST = {
 def a1_project():
     """(spec, primitives, settings) of specs/a1; callers that edit the primitives' dict copy it."""
     spec = load_project(A1)
+    return spec, compile_project(spec), settings_for(spec)
+
+
+@pytest.fixture(scope="session")
+def pd_lie():
+    """pd_lie(folder): the Lie of a copy of specs/a1 runs the paper's joint PD (tests/a1_lie.py)."""
+    return _pd_lie
+
+
+@pytest.fixture(scope="session")
+def a1_pd_lie(tmp_path_factory):
+    """(spec, primitives, settings) of specs/a1 with Lie under the paper's joint PD (_pd_lie) and Stand,
+    the other primitives left out: the A1's continuous law on four grounded feet."""
+    import dataclasses
+
+    dst = tmp_path_factory.mktemp("pd_lie") / "a1"
+    shutil.copytree(A1.parent, dst)
+    _pd_lie(dst)
+    spec = load_project(dst / "project.yaml")
+    spec = dataclasses.replace(spec, primitives=[p for p in spec.primitives if p.name in ("Lie", "Stand")])
     return spec, compile_project(spec), settings_for(spec)
 
 

@@ -32,10 +32,11 @@ def test_task_space_pd_on_an_analytic_system(tmp_path):
     assert u == np.float64(2 * (-3 * (0.4 - 1) - 1 * (-0.6)))
 
 
-def test_task_space_pd_on_the_a1(tmp_path):
+def test_task_space_pd_on_the_a1(tmp_path, pd_lie):
     import shutil
 
     shutil.copytree(Path(__file__).parents[2] / "specs" / "a1", tmp_path / "a1")
+    pd_lie(tmp_path / "a1")  # the paper's joint PD, made a task-space PD below
     lie = tmp_path / "a1" / "primitives" / "lie.yaml"
     text = lie.read_text()
     start = text.index("  outputs:")

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,8 @@ from mpgspec.spec.loader import load_project  # noqa: E402
 from mpgspec.spec.models import GoalCommand, Sequence  # noqa: E402
 
 SPECS = Path(__file__).parents[2] / "specs"
+sys.path.insert(0, str(Path(__file__).parents[1]))
+from a1_lie import pd_lie as _pd_lie  # noqa: E402
 COM_BOUND = 0.002  # m, see the module docstring
 JOINT_BOUND = 0.02  # rad
 
@@ -162,9 +165,11 @@ def test_settings_are_checked():
 
 
 def _project(tmp_path: Path, **keys) -> Path:
-    """specs/a1 with Lie and Stand only (no walks to compile), no assertions, and `keys` set."""
+    """specs/a1 with Lie and Stand only (no walks to compile), Lie under the paper's joint PD (a
+    continuous law beside Stand's sampled ID-QP), no assertions, and `keys` set."""
     dst = tmp_path / "a1"
     shutil.copytree(SPECS / "a1", dst, ignore=shutil.ignore_patterns("gaits*", "walks.yaml"))
+    _pd_lie(dst)
     doc = yaml.safe_load((dst / "project.yaml").read_text())
     doc["primitives"] = ["primitives/lie.yaml", "primitives/stand.yaml"]
     for k in ("assertions", "sequence", "crosscheck", "uncertainty"):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
@@ -18,6 +19,8 @@ from mpgspec.oracle.executors import DaskExecutor, InProcess, ProcessPool, split
 from mpgspec.spec.loader import load_project
 
 ROOT = Path(__file__).parents[2]
+sys.path.insert(0, str(ROOT / "tests"))
+from a1_lie import pd_lie as _pd_lie  # noqa: E402
 
 
 def _untimed(v):
@@ -115,9 +118,11 @@ def test_cache_replays_every_call_and_reruns_only_the_edited_primitive(tmp_path,
 
 
 def hybrid_project(folder: Path) -> Path:
-    """The A1 with contact events: Lie on the ground and Drop, the same legs held in the air."""
+    """The A1 with contact events: Lie on the ground and Drop, the same legs held in the air (by the
+    paper's joint PD, which needs no feet on the ground)."""
     d = folder / "a1_hybrid"
     shutil.copytree(ROOT / "specs" / "a1", d)
+    _pd_lie(d)
     p = (d / "project.yaml").read_text()
     p = p.replace("  - primitives/stand.yaml\n", "  - primitives/drop.yaml\n").replace("  - primitives/walk.yaml\n", "")
     p = p.replace("  - primitives/jump.yaml\n", "").replace("  - primitives/land.yaml\n", "")

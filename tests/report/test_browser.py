@@ -303,7 +303,7 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
     radius = {p["name"]: p["roa_radius"] for p in report["primitives"]}
     walk_r = _claim(r"\(empirical: r = ([\d.]+) for every walk\)", readme)[0]
     assert all(_as_written(r, walk_r) for n, r in radius.items() if n.startswith("Walk("))
-    assert _as_written(radius["Lie"], _claim(r"outside E_Lie \(r = ([\d.]+)\)", readme)[0])
+    assert _as_written(radius["Lie"], _claim(r"ends inside E_Lie \(r = ([\d.]+)\)", readme)[0])
     assert _as_written(radius["Stand"], _claim(r"settles [\d.]+ \(in E's norm\) from its setpoint, outside E \(r = ([\d.]+)\)", readme)[0])
 
     firsts = {}
@@ -334,7 +334,7 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
 
     run = report["sequence"]["runs"]["graph"]
     to_jump, last = _claim(r"and Stand to Jump \(([\d.]+) s: it waits in Stand.*?down through Walk\(in_place\) to "
-                           r"Stand \(([\d.]+) s\), where it stays", readme)
+                           r"Lie \(([\d.]+) s\), the last goal", readme)
     switches = [(s["t"], s["to"]) for s in run["switches"]]
     assert _as_written(next(t for t, n in switches if n == "Jump"), to_jump)
-    assert switches[-1][1] == "Stand" and _as_written(switches[-1][0], last) and run["safe"]
+    assert switches[-1][1] == "Lie" and _as_written(switches[-1][0], last) and run["safe"]

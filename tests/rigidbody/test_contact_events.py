@@ -14,9 +14,10 @@ SPEC = Path(__file__).parents[2] / "specs" / "a1"
 
 
 @pytest.fixture(scope="module")
-def drop_spec(tmp_path_factory):
+def drop_spec(tmp_path_factory, pd_lie):
     d = tmp_path_factory.mktemp("drop") / "a1"
     shutil.copytree(SPEC, d)
+    pd_lie(d)  # a falling body under the joint PD
     p = (d / "project.yaml").read_text()
     p = p.replace("  - primitives/stand.yaml\n", "").replace("  - primitives/walk.yaml\n", "")
     p = p.replace("  - primitives/jump.yaml\n", "").replace("  - primitives/land.yaml\n", "")
@@ -69,10 +70,11 @@ def test_drop_touches_down_with_an_impact(drop):
     assert np.nanmin(H) > -2e-3
 
 
-def test_contact_schedule_sets_the_flags_by_the_clock(tmp_path):
+def test_contact_schedule_sets_the_flags_by_the_clock(tmp_path, pd_lie):
     """Diagonal pair lifted on [0.2, 0.4): the flags follow the clock, and rejoining feet are stopped."""
     d = tmp_path / "a1"
     shutil.copytree(SPEC, d)
+    pd_lie(d)  # the joint PD holds every leg where it is, lifted or not
     p = (d / "project.yaml").read_text()
     p = p.replace("  - primitives/stand.yaml\n", "").replace("  - primitives/walk.yaml\n", "")
     p = p.replace("  - primitives/jump.yaml\n", "").replace("  - primitives/land.yaml\n", "")

@@ -78,19 +78,19 @@ def test_e_lies_inside_c_on_the_contact_manifold(a1):
         assert n["min_h_unprojected"] < 0  # the ball in the full state lifts feet: C holds only on the manifold
 
 
-def test_e_too_large_fails_on_the_contact_manifold(a1):
-    """Lie at the radius of the full-state ball: joint offsets make the PD push the feet out of the
-    friction cone; Stand with joint offsets of 1.5 rad crosses the joint limits."""
+def test_e_too_large_fails_on_the_contact_manifold(a1, a1_pd_lie):
+    """Lie under the paper's joint PD at the radius of the ID-QP's E: joint offsets make the PD push the
+    feet out of the friction cone, where the ID-QP's forces keep a margin; Stand with joint offsets of
+    1.5 rad crosses the joint limits."""
     _, prims, _ = a1
-    c = roa_in_safe_set(prims["Lie"], 1e-9, radius=0.08)
+    c = roa_in_safe_set(a1_pd_lie[1]["Lie"], 1e-9, radius=0.08)
     assert c.status == "fail" and c.numbers["min_h"] < -1, c.message
     c = roa_in_safe_set(prims["Stand"], 1e-9, samples=50, radius=1.5)
     assert c.status == "fail" and c.numbers["min_h"] < -0.1, c.message
 
 
-def test_spec_radius_of_lie_is_within_the_largest_safe_one(a1):
-    _, prims, _ = a1
-    lie = prims["Lie"]
+def test_the_joint_pd_lies_radius_is_within_the_largest_safe_one(a1_pd_lie):
+    lie = a1_pd_lie[1]["Lie"]
     r = largest_radius_in_safe_set(lie, r_max=0.08, samples=40, rel_tol=0.05)
     assert lie.radius <= r < 0.08
 

@@ -1,0 +1,31 @@
+"""The paper's Lie for tests that need a continuous law on the A1's four grounded feet: specs/a1's Lie
+runs the ID-QP (sampled, held between solves); the paper's is a joint PD with gravity compensation and
+the cubic motion profile (eq. 7)."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+PD_LIE = """controller:
+  type: pd
+  outputs: [FL_hip_joint, FL_thigh_joint, FL_calf_joint, FR_hip_joint, FR_thigh_joint, FR_calf_joint,
+            RL_hip_joint, RL_thigh_joint, RL_calf_joint, RR_hip_joint, RR_thigh_joint, RR_calf_joint]
+  kp: [60, 60, 60, 60, 60, 60, 60, 60, 60, 60, 60, 60]
+  kd: [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]
+  gravity_compensation: true
+  profile: {duration: 1.0}
+"""
+"""The paper's Lie law: a joint PD with gravity compensation and the cubic motion profile (eq. 7)."""
+
+
+def pd_lie(folder: Path) -> Path:
+    """Rewrite the Lie of a copy of specs/a1 at `folder` to the paper's joint PD (PD_LIE) with the largest
+    radius for which its E lies inside C (0.023), for the tests of a continuous law on four grounded
+    feet; returns lie.yaml's path."""
+    path = Path(folder) / "primitives" / "lie.yaml"
+    text = path.read_text()
+    head, rest = text.split("controller:\n", 1)
+    text = head + PD_LIE + rest[rest.index("safe_set:\n"):]
+    text = re.sub(r"\n  radius: 0\.08[^\n]*", "\n  radius: 0.023", text)
+    path.write_text(text)
+    return path
