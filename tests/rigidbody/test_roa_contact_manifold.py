@@ -2,7 +2,6 @@
 and the roa_in_safe_set check of the A1 primitives on it."""
 import numpy as np
 import pinocchio as pin
-import pytest
 
 from mpgspec.check.assumptions import largest_radius_in_safe_set, roa_in_safe_set
 from mpgspec.check.roa_flows import boundary_starts

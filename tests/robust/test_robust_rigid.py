@@ -365,8 +365,6 @@ def test_a_push_needs_a_rigid_body(tmp_path):
 def test_robust_h_keeps_every_other_row_without_the_nominal_dynamics(a1_pd_lie):
     """The robust step evaluates only the h rows the perturbed plant does not replace: the same
     values as the closed loop's, without the nominal contact dynamics (a fraction of its size)."""
-    import casadi as ca
-
     from mpgspec.robust.rigid import robust_h
 
     prim = a1_pd_lie[1]["Lie"]  # a continuous law: h of (x, t, s, x_sw)
