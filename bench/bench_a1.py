@@ -87,7 +87,7 @@ os.environ["MPGSPEC_CACHE"] = _JIT_DIR
 
 import casadi as ca
 import common  # noqa: E402  (bench/common.py)
-from common import med_ratio, rounds, write_section  # noqa: E402
+from common import med_ratio, pd_lie, rounds, write_section  # noqa: E402
 import pinocchio as pin  # noqa: E402
 import yaml  # noqa: E402
 
@@ -131,6 +131,7 @@ def make_variant(tmp: Path) -> Path:
     are left out."""
     dst = tmp / "a1"
     shutil.copytree(SPEC_DIR, dst)
+    pd_lie(dst)  # Lie's controller: the paper's joint PD
     prim_dir = dst / "primitives"
     lie = yaml.safe_load((prim_dir / "lie.yaml").read_text())
     stand = yaml.safe_load((prim_dir / "stand.yaml").read_text())

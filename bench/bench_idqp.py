@@ -51,7 +51,7 @@ os.environ["MPGSPEC_CACHE"] = _JIT_DIR
 import casadi as ca  # noqa: E402
 import common  # noqa: E402  (bench/common.py)
 import yaml  # noqa: E402
-from common import markdown_table, med_ratio, rounds, stamp, write_section  # noqa: E402
+from common import markdown_table, med_ratio, pd_lie, rounds, stamp, write_section  # noqa: E402
 
 from mpgspec.api import compile_project, settings_for  # noqa: E402
 from mpgspec.oracle.integrator import build_chunk  # noqa: E402
@@ -72,6 +72,7 @@ def lie_and_stand(tmp: Path) -> Path:
     """specs/a1 copied to tmp with only Lie and Stand, without assertions and sequence."""
     dst = tmp / "a1"
     shutil.copytree(SPEC_DIR, dst, ignore=shutil.ignore_patterns("gaits", "walk*.yaml", "gaits.yaml"))
+    pd_lie(dst)  # the baseline: the paper's joint-PD Lie
     proj = yaml.safe_load((dst / "project.yaml").read_text())
     proj["primitives"] = ["primitives/lie.yaml", "primitives/stand.yaml"]
     proj.pop("assertions", None)

@@ -33,39 +33,27 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
-from common import publish_rows  # noqa: E402
+from common import pd_lie, publish_rows  # noqa: E402
 
 EARLIER = {"kp": "[100, 100, 100]", "kd": "[20, 20, 20]", "posture_kp": "50", "posture_kd": "5",
            "posture_profile": "false", "friction": None, "f_min": None}
 """Stand's earlier law: these keys of its controller replaced (None: removed, the default)."""
-JOINT_PD = """controller:
-  type: pd
-  outputs: [FL_hip_joint, FL_thigh_joint, FL_calf_joint, FR_hip_joint, FR_thigh_joint, FR_calf_joint,
-            RL_hip_joint, RL_thigh_joint, RL_calf_joint, RR_hip_joint, RR_thigh_joint, RR_calf_joint]
-  kp: [60, 60, 60, 60, 60, 60, 60, 60, 60, 60, 60, 60]
-  kd: [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3]
-  gravity_compensation: true
-  profile: {duration: 1.0}
-"""
-"""Lie's earlier law, the paper's: a joint PD with gravity compensation and the cubic profile."""
 SOURCE = {"Stand": "Lie", "Lie": "Stand"}
 """The primitive each target is switched in from (its setpoint at t = 0)."""
 
 
 def earlier_copy(project: Path, dst: Path, target: str) -> Path:
-    """A copy of the project whose `target` runs its earlier law (EARLIER, or JOINT_PD with r = 0.023)."""
+    """A copy of the project whose `target` runs its earlier law (Stand: EARLIER; Lie: the paper's joint PD)."""
     shutil.copytree(project.parent, dst)
-    path = dst / "primitives" / f"{target.lower()}.yaml"
-    text = path.read_text()
-    if target == "Stand":
-        for key, value in EARLIER.items():
-            pattern = rf"\n  {key}: *[^\n]*"
-            text = re.sub(pattern, "" if value is None else f"\n  {key}: {value}", text)
-    else:
-        head, rest = text.split("controller:\n", 1)
-        text = head + JOINT_PD + rest[rest.index("safe_set:\n"):]
-        text = re.sub(r"\n  radius: [^\n]*", "\n  radius: 0.023", text)
-    path.write_text(text)
+    if target == "Lie":
+        pd_lie(dst)
+        return dst / project.name
+    stand = dst / "primitives" / "stand.yaml"
+    text = stand.read_text()
+    for key, value in EARLIER.items():
+        pattern = rf"\n  {key}: *[^\n]*"
+        text = re.sub(pattern, "" if value is None else f"\n  {key}: {value}", text)
+    stand.write_text(text)
     return dst / project.name
 
 

@@ -1,9 +1,11 @@
-"""Helpers shared by the benchmarks: interleaved timing rounds, median ratios, machine facts."""
+"""Helpers shared by the benchmarks: interleaved timing rounds, median ratios, machine facts, the paper's
+joint-PD Lie as a continuous-law baseline."""
 from __future__ import annotations
 
 import os
 import platform
 import statistics
+import sys
 import time
 from pathlib import Path
 
@@ -138,3 +140,13 @@ def publish_rows(heading: str, script: str, repeats: int, t_start: float, rows: 
 
     mach = machine(casadi=ca.__version__, revision=revision(Path(__file__).resolve().parent.parent))
     publish(heading, mach, script, repeats, time.perf_counter() - t_start, markdown_table(rows), write)
+
+
+def pd_lie(folder: Path) -> Path:
+    """In a copy of specs/a1 at `folder`, Lie runs the paper's joint PD (r = 0.023) instead of the ID-QP:
+    the benchmarks' continuous law on four grounded feet, as the tests use it (tests/a1_lie.py)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from a1_lie import pd_lie as rewrite
+
+    return rewrite(folder)
+
