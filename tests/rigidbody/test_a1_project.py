@@ -46,10 +46,10 @@ def _variant(tmp_path, edit):
     return compile_project(spec), settings_for(spec)
 
 
-def test_unreachable_stand_is_unsafe(tmp_path):
+def test_unreachable_stand_is_unsafe(tmp_path, pd_lie):
     """Legs stretched past the calf joint limit: the flow must leave C before reaching E."""
     def edit(d):
-        lie = (d / "primitives" / "lie.yaml").read_text()
+        lie = pd_lie(d).read_text()  # the joint PD drives the joints to the setpoint's, past the limit
         tall = lie.replace("name: Lie", "name: StandTall").replace("1.25", "0.2").replace("-2.5", "-0.5")
         (d / "primitives" / "lie.yaml").write_text(tall)
         p = (d / "project.yaml").read_text().replace("  - primitives/stand.yaml\n", "").replace("  - primitives/walk.yaml\n", "")
