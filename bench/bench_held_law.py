@@ -50,6 +50,7 @@ def heading(table2: bool, mode: str) -> str:
 def _lie_stand(folder: Path) -> Path:
     dst = folder / "a1"
     shutil.copytree(ROOT / "specs" / "a1", dst, ignore=shutil.ignore_patterns("gaits*", "walks.yaml"))
+    common.pd_lie(dst)  # the run the tests replay: Lie under the paper's joint PD, Stand's ID-QP the held law
     doc = yaml.safe_load((dst / "project.yaml").read_text())
     doc["primitives"] = ["primitives/lie.yaml", "primitives/stand.yaml"]
     for k in ("assertions", "sequence", "crosscheck", "uncertainty"):

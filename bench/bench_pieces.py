@@ -15,8 +15,8 @@ bench/RESULTS.md.
   installed (bench_quick_cc.py), an unguarded one at the project's flags: the table also gives the
   ratio with the unguarded chunks at -O1, the cost of the guards alone.
 - a1 (large loops, called from their loop libraries; E sized as `mpgspec verify` sizes it): the
-  walks' 24 torque limits and their gait's clock guards, Lie's and the transients' likewise;
-  Stand's sampled ID-QP has none. The project's own error estimate (step doubling).
+  walks' 24 torque limits and their gait's clock guards, the transients' likewise; the sampled
+  ID-QP of Stand and Lie has none. The project's own error estimate (step doubling).
 """
 from __future__ import annotations
 

@@ -2,10 +2,10 @@
 joint-PD Lie as a continuous-law baseline."""
 from __future__ import annotations
 
+import importlib.util
 import os
 import platform
 import statistics
-import sys
 import time
 from pathlib import Path
 
@@ -144,9 +144,10 @@ def publish_rows(heading: str, script: str, repeats: int, t_start: float, rows: 
 
 def pd_lie(folder: Path) -> Path:
     """In a copy of specs/a1 at `folder`, Lie runs the paper's joint PD (r = 0.023) instead of the ID-QP:
-    the benchmarks' continuous law on four grounded feet, as the tests use it (tests/a1_lie.py)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    from a1_lie import pd_lie as rewrite
-
-    return rewrite(folder)
-
+    the benchmarks' continuous law on four grounded feet, as the tests use it (tests/a1_lie.py, loaded
+    by its path so that tests/ does not go onto sys.path)."""
+    path = Path(__file__).resolve().parents[1] / "tests" / "a1_lie.py"
+    spec = importlib.util.spec_from_file_location("mpgspec_tests_a1_lie", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.pd_lie(folder)

@@ -19,13 +19,15 @@ PD_LIE = """controller:
 
 
 def pd_lie(folder: Path) -> Path:
-    """Rewrite the Lie of a copy of specs/a1 at `folder` to the paper's joint PD (PD_LIE) with the largest
-    radius for which its E lies inside C (0.023), for the tests of a continuous law on four grounded
-    feet; returns lie.yaml's path."""
+    """Rewrite the Lie of a copy of specs/a1 at `folder` to the paper's joint PD (PD_LIE) with the radius it
+    had (0.023: the largest, 0.024 by bisection, for which its E lies inside C, rounded down), for the tests
+    of a continuous law on four grounded feet; returns lie.yaml's path."""
     path = Path(folder) / "primitives" / "lie.yaml"
     text = path.read_text()
     head, rest = text.split("controller:\n", 1)
     text = head + PD_LIE + rest[rest.index("safe_set:\n"):]
-    text = re.sub(r"\n  radius: 0\.08[^\n]*", "\n  radius: 0.023", text)
+    text, n = re.subn(r"\n  radius: [^\n]*", "\n  radius: 0.023", text)
+    assert n == 1, f"{path}: expected one roa radius, found {n}"
+    text = re.sub(r"\ndescription: [^\n]*", "\ndescription: Rest low on the ground with folded legs (joint PD with the cubic motion profile).", text)
     path.write_text(text)
     return path

@@ -53,6 +53,7 @@ A1_ROBUST = """uncertainty:
   assertions:
     - edge: {from: Stand, to: Lie, class: 1}
     - edge: {from: Lie, to: Stand}
+    - no_edge: {from: Stand, to: Walk(fast)}
 """
 
 
@@ -264,6 +265,22 @@ def test_the_index_page_reads_at_both_widths(browser, tmp_path, width):
                      script="({w: innerWidth, sw: document.documentElement.scrollWidth, "
                             "rows: document.querySelectorAll('tr').length})")
     assert r["errors"] == [] and r["value"]["sw"] <= width and r["value"]["rows"] >= 3
+
+
+def test_the_a1_robust_stage_keeps_the_rests_and_loses_a_walk(pages):
+    """The A1's robust stage (the light one of this module, or the full one of reports/a1) passes its
+    assertions: Lie <-> Stand survive the box of mass and friction error with the push, and Stand ->
+    Walk(fast) is lost with a worst case that says where and by how much."""
+    _, report, _ = pages("a1")
+    rob = report["robust"]
+    assert rob["assertions"] and all(a["status"] == "pass" for a in rob["assertions"]), rob["assertions"]
+    edges = {(e["from"], e["to"]): e for e in rob["edges"]}
+    for kept in (("Lie", "Stand"), ("Stand", "Lie")):
+        assert edges[kept]["survives"] and edges[kept]["worst_margin"] > 0, edges[kept]
+    lost = edges[("Stand", "Walk(fast)")]
+    assert not lost["survives"] and lost["worst_margin"] < 0 and lost["cells_robust"] == 0
+    bind = lost["worst_case"]["binding"]  # settled outside E_B, or a safety function left C
+    assert (bind["h"] is None and bind["roa_margin"] < 0) or (bind["h"] and bind["value"] < 0), bind
 
 
 def _claim(pattern: str, readme: str) -> tuple:

@@ -46,7 +46,7 @@ def _variant(tmp_path, edit):
     return compile_project(spec), settings_for(spec)
 
 
-def test_unreachable_stand_is_unsafe(tmp_path, pd_lie):
+def test_unreachable_stand_is_unsafe(tmp_path, pd_lie, a1):
     """Legs stretched past the calf joint limit: the flow must leave C before reaching E."""
     def edit(d):
         lie = pd_lie(d).read_text()  # the joint PD drives the joints to the setpoint's, past the limit
@@ -57,9 +57,7 @@ def test_unreachable_stand_is_unsafe(tmp_path, pd_lie):
         p = p[: p.index("sequence:")]
         (d / "project.yaml").write_text(p)
     prims, settings = _variant(tmp_path, edit)
-    start = load_project(SPEC / "project.yaml")
-    lie = compile_project(start)["Lie"]
-    ev = SafetyOracle(prims["StandTall"], settings)(lie.x_star(0.0), 0.0)
+    ev = SafetyOracle(prims["StandTall"], settings)(a1[1]["Lie"].x_star(0.0), 0.0)
     assert ev.verdict == 0
     assert ev.reason.value in ("left_C", "horizon_reached")
 
