@@ -341,8 +341,8 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
     assert cc["naive"]["agree"] and first["h"] == "trunk_clearance" and _as_written(first["t"], t_both)
     ex = cc["graph"]["executor"]
     t_mj, t_mpg, best = _claim(r"It is safe and reaches Walk\(fast\) at ([\d.]+) s \(mpgspec ([\d.]+) s\), then "
-                               r"waits in Walk\(fast\) to the end: MuJoCo's orbit comes inside E_Walk\(fast\) "
-                               r"\(r = [\d.]+\) by at most ([\d.]+)", readme)
+                               r"waits in Walk\(fast\) to the end: MuJoCo's orbit never enters E_Walk\(fast\) "
+                               r"\(r = [\d.]+; best E margin (-[\d.]+)\)", readme)
     assert ex["safe"] and not ex["reached_every_goal"] and ex["waiting"]["primitive"] == "Walk(fast)"
     assert _as_written(ex["waiting"]["best_roa_margin"], best)
     got = [(g["goal"], g["arrived"], g["arrived_mpgspec"]) for g in ex["goals"] if g["t"] > 0]
