@@ -1,5 +1,6 @@
-"""The A1's walks: stable orbits shown by their multipliers, gait tables that regenerate, and 20 s of
-walking at every speed from the orbit, inside C, at the commanded mean speed."""
+"""The A1's walks: stable orbits shown by their multipliers, gait tables that regenerate, 20 s of
+walking at every speed from the orbit, inside C, at the commanded mean speed, and E holding where the
+tube is thinnest, before a touchdown."""
 from pathlib import Path
 
 import numpy as np
@@ -122,3 +123,31 @@ def test_a_period_map_ends_where_its_steps_end(prims, name, spread):
     assert np.array_equal(end, last)
     hmin = end[-1]
     assert np.isfinite(hmin).all() and (hmin < 0).any() and (hmin >= 0).any()  # both kinds of start
+
+
+def _leave_c_before_touchdown(p, r: float, m: int, seed: int) -> tuple[int, int]:
+    """(starts that leave C within three periods, starts inside C) of m seeded starts on and inside E's
+    sphere of radius r at phases in the last 20 ms before the first pair's scheduled touchdown, drawn as
+    the floquet verifier draws them (put on the contact manifold of the feet held at their phase)."""
+    from mpgspec.certify.hybrid_orbit import orbit
+    from verifiers.floquet_hybrid import HybridFlow, inverse_root, sphere_starts
+
+    flow, W = HybridFlow(p, 0.001), np.asarray(p.W)
+    Xs = orbit(flow, W)[0]
+    X0, k = sphere_starts(p, flow.dt, Xs, W, inverse_root(W), r, m, np.random.default_rng(seed), (160, 180))
+    t0 = k * flow.dt
+    inside = flow.least_h(X0, t0) >= 0
+    XT, hmin, _ = flow.run_until(X0[:, inside], t0[inside], 3)
+    return int((~(hmin >= 0) | ~np.isfinite(XT).all(axis=0)).sum()), int(inside.sum())
+
+
+def test_e_of_a_walk_holds_before_a_touchdown_where_the_sized_radius_does_not(prims):
+    """E_Walk is a safe region of attraction where the tube is thinnest, the last 20 ms before a
+    touchdown: at the project's radius no start there leaves C, at the floquet sizing's 0.0121 (the
+    radius the walks had) some do (a swing foot below the ground or still up when the touchdown comes)."""
+    p = prims["Walk(medium)"]
+    assert p.radius == 0.006
+    bad, n = _leave_c_before_touchdown(p, p.radius, 160, 1)
+    assert n >= 150 and bad == 0, f"{bad} of {n} starts leave C at r = {p.radius}"
+    bad, n = _leave_c_before_touchdown(p, 0.0121, 160, 1)
+    assert bad >= 3, f"{bad} of {n} starts leave C at r = 0.0121"  # 6 of 160 with this seed
