@@ -1,6 +1,6 @@
-"""Whether a walk's E holds where its tube is thinnest: seeded starts on and inside E's sphere (as the floquet
-verifier draws them: half on the sphere, half inside, put on the contact manifold of the feet held at their
-phase; a start outside C is left out, where the verifier draws it again) at phases in the last 20 ms before
+"""Whether a walk's E holds where its tube is thinnest: seeded starts on and inside E's sphere (half on the sphere,
+half inside, put on the contact manifold of the feet held at their phase; a start outside C is left out, as
+the floquet verifier leaves it out) at phases in the last 20 ms before
 each scheduled touchdown and, for comparison, in the first 100 ms of each swing; each start runs the walk's own discrete
 flow (the period map the sizing runs) for three periods. A start fails when its least h falls below the
 oracle's tolerance. A count of states, not a timing: E is a safe region of attraction only if none fails.

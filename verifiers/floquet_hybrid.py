@@ -3,8 +3,9 @@
 The flow, its orbit defect and the monodromy of one period (with `neutral`, base_x, base_y, yaw
 of a floating base on flat ground, on the reduced state, the neutral multipliers measured along
 the symmetry's generators and reported by name) come from the core, mpgspec.certify.hybrid_orbit.
-The tube radius of E is sized by batched rollouts from random phases (starts put on the contact
-manifold of the feet held at that phase), so it is 'empirical'.
+The tube radius of E is sized by batched rollouts from seeded starts scaled to each radius tried, at
+phases over the period and, densely, in the last moments before each contact change (starts put on the
+contact manifold of the feet held at their phase), so it is 'empirical'.
 """
 from __future__ import annotations
 
@@ -61,12 +62,9 @@ def estimate(problem: PeriodicProblem, o: dict, name: str) -> RoAResult:
     neutral_txt = f"; neutral {', '.join(parts)}" if parts else ""
     return RoAResult(r, "empirical", name, ev,
                      f"multipliers inside the unit circle (max |mu| = {rho:.3g}{neutral_txt}); "
-                     f"{tube['simulations']} rollouts at random phases converged safely from W-distance {r:.4g}")
+                     f"{tube['simulations']} rollouts ({tube['near_contact_changes']} starts a radius before contact changes) "
+                     f"stayed safe and converged from W-distance {r:.4g}")
 
-
-REDRAWS = 20
-"""Rounds of drawing again the starts that fell outside C (some h < 0 at their phase: a swing foot drawn
-below the ground just after lift-off); one still outside after them is kept, and fails."""
 
 COLLAPSE = 0.1
 """A tube radius below this fraction of the first radius tried (option r0) counts as collapsed."""
@@ -128,70 +126,101 @@ def sphere_starts(prim, dt: float, Xs: np.ndarray, W: np.ndarray, Wi: np.ndarray
     the first half of the u inside the unit ball (uniform in volume), the rest on its sphere; each put on the
     contact manifold of the feet the primitive holds at its phase."""
     k = rng.integers(steps[0], steps[1], m)
-    u = unit_sphere(m, W.shape[0], rng)
-    u[: m // 2] *= rng.random((m // 2, 1)) ** (1 / W.shape[0])
+    return placed(prim, dt, Xs, Wi, r, _directions(m, W.shape[0], rng), k, W), k
+
+
+def _directions(m: int, n: int, rng: np.random.Generator) -> np.ndarray:
+    """m unit-ball directions (rows): the first half inside the ball (uniform in volume), the rest on its sphere."""
+    u = unit_sphere(m, n, rng)
+    u[: m // 2] *= rng.random((m // 2, 1)) ** (1 / n)
+    return u
+
+
+def placed(prim, dt: float, Xs: np.ndarray, Wi: np.ndarray, r: float, u: np.ndarray, k: np.ndarray,
+           W: np.ndarray) -> np.ndarray:
+    """States x*(t_k) + r Wi u, each put on the contact manifold of the feet held at its phase."""
     X0 = Xs[:, k] + r * (u @ Wi).T
     held = held_feet(prim.contacts)
     if held is not None:
-        X0 = np.stack([prim.system.project_to_contacts(X0[:, j], held(k[j] * dt), W) for j in range(m)], 1)
-    return X0, k
+        X0 = np.stack([prim.system.project_to_contacts(X0[:, j], held(k[j] * dt), W) for j in range(k.size)], 1)
+    return X0
+
+
+def contact_changes(prim, dt: float, steps: int) -> np.ndarray:
+    """Steps k of one period where the feet held by the schedule change (a touchdown or a lift-off at k)."""
+    held = held_feet(prim.contacts)
+    if held is None:
+        return np.zeros(0, int)
+    sets = [tuple(sorted(held(k * dt))) for k in range(steps)]
+    return np.array([k for k in range(steps) if sets[k] != sets[k - 1]], int)
+
+
+def near_changes(prim, dt: float, steps: int, m: int, window: float, rng: np.random.Generator) -> np.ndarray:
+    """m phase steps in the last `window` seconds before a contact change (a touchdown or a lift-off; none for
+    a loop whose contacts never change): where a gait's tube is thinnest, a swing foot a little low or late
+    there touches the ground early or misses its touchdown."""
+    changes = contact_changes(prim, dt, steps)
+    if not changes.size:
+        return np.zeros(0, int)
+    w = max(1, int(round(window / dt)))
+    return rng.choice(np.unique(np.concatenate([(c - np.arange(1, w + 1)) % steps for c in changes])), m)
 
 
 def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict):
-    """Bisection on r: starts x*(t0) + r W^-1/2 u at random phases on the dt grid, put on the contact
-    manifold of the feet held at t0, must stay in C and end within conv r of the orbit after
-    `periods` periods. A start drawn outside C (some h < 0 at its phase, such as a swing foot below
-    the ground just after lift-off) is drawn again: the oracle takes a rollout into E only at a sample
-    where it judged every h >= -tol (tol: its h_tolerance), so E needs to hold only where C does."""
+    """Bisection on r with one set of starts scaled to each radius (so a radius fails whenever a smaller one
+    did, up to the contact projection), x*(t_k) + r W^-1/2 u, each put on the contact manifold of the feet
+    held at its phase:
+    - `samples` starts at phases over the whole period, half inside the ball and half on its sphere, run
+      `periods` periods: they must stay in C and end within conv r of the orbit (r, not each start's own
+      distance: one deep inside the ball need not contract further than the sphere's);
+    - `window_samples` starts on the sphere at phases in the last `window` seconds before a contact change,
+      run one period: they must stay in C and end back inside E (within r), where the first set vouches for
+      the rest. The failures there are rare (a swing foot a little low or late: about 1 in 100 of them at
+      twice the radius the A1's walks hold), so they need many starts; one period each keeps them cheap.
+    A start outside C at its radius (some h < -tol there, such as a swing foot below the ground just after
+    lift-off) is left out at that radius: the oracle takes a rollout into E only at a sample where it judged
+    every h >= -tol (tol: its h_tolerance), so E needs to hold only where C does."""
     prim = flow.prim
-    n = int(o.get("samples", 48))
+    n, window = int(o.get("samples", 48)), float(o.get("window", 0.02))
     conv = float(o.get("conv", 0.05))
     rng = np.random.default_rng(o.get("seed", 0))
     Wi = inverse_root(W)
     tol = float(o.get("oracle_h_tolerance", 0.0))  # the oracle's: it judges h >= -tol safe
-    redrawn = [0]
+    near = near_changes(prim, flow.dt, flow.steps, int(o.get("window_samples", 384)), window, rng)
+    k = np.concatenate([rng.integers(0, flow.steps, n), near])
+    u = np.vstack([_directions(n, W.shape[0], rng), unit_sphere(near.size, W.shape[0], rng)])
+    runs = np.r_[np.full(n, periods), np.ones(near.size, int)]
+    bound = np.r_[np.full(n, conv), np.ones(near.size)]  # final distance / r each set must reach
     log = []
-
-    def draw(r, m):
-        return sphere_starts(prim, flow.dt, Xs, W, Wi, r, m, rng, (0, flow.steps))
-
-    def starts(r):
-        X0, k = draw(r, n)
-        out = ~(flow.least_h(X0, k * flow.dt) >= -tol)  # outside C: drawn again (E is entered only in C)
-        for _ in range(REDRAWS):
-            if not out.any():
-                break
-            redrawn[0] += int(out.sum())
-            X1, k1 = draw(r, int(out.sum()))
-            X0[:, out], k[out] = X1, k1
-            out[out] = ~(flow.least_h(X1, k1 * flow.dt) >= -tol)
-        return X0, k * flow.dt
 
     def decided(X, hmin):  # a start already left C or blew up: this radius fails whatever follows
         return bool((hmin < 0).any() or not np.isfinite(X).all())
 
     def ok(r):
-        X0, t0 = starts(r)
-        XT, hmin, ran = flow.run_until(X0, t0, periods, decided)
+        X0 = placed(prim, flow.dt, Xs, Wi, r, u, k, W)
+        inside = flow.least_h(X0, k * flow.dt) >= -tol
+        X0, ks = X0[:, inside], k[inside]
+        XT, hmin, ran = flow.run_until(X0, ks * flow.dt, runs[inside] if near.size else periods, decided)
+        entry = {"r": r, "outside_c": int((~inside).sum())}
         if ran < periods:
             bad = (hmin < 0) | ~np.isfinite(XT).all(axis=0)
-            log.append({"r": r, "failed": int(bad.sum()), "unsafe": int((hmin < 0).sum()), "stopped_after_periods": ran})
+            log.append({**entry, "failed": int(bad.sum()), "unsafe": int((hmin < 0).sum()), "stopped_after_periods": ran})
             return False
-        ks = np.round(t0 / flow.dt).astype(int)
-        E = XT - Xs[:, ks]
+        E = XT - Xs[:, ks]  # whole periods later: the same phase
         dist = np.sqrt(np.einsum("ij,ik,kj->j", E, W, E))
-        d0 = X0 - Xs[:, ks]
-        r0 = np.sqrt(np.einsum("ij,ik,kj->j", d0, W, d0))
-        good = np.isfinite(dist) & (dist <= conv * np.maximum(r0, 1e-12)) & (hmin >= 0)
-        log.append({"r": r, "failed": int((~good).sum()), "unsafe": int((hmin < 0).sum()),
+        good = np.isfinite(dist) & (dist <= bound[inside] * r) & (hmin >= 0)
+        log.append({**entry, "failed": int((~good).sum()), "unsafe": int((hmin < 0).sum()),
+                    "failed_near_changes": int((~good[n - int((~inside[:n]).sum()):]).sum()),
                     "worst_final_dist": float(np.nanmax(dist)) if np.isfinite(dist).any() else float("inf")})
         return bool(good.all())
 
-    t0 = time.perf_counter()
+    t_start = time.perf_counter()
     r, capped, calls = bisect(ok, 0.0, float(o.get("r0", 0.05)), float(o.get("r_max", 2.0)), float(o.get("rtol", 0.05)),
                               grow=2.0)
-    return r, {"samples_per_radius": n, "simulations": n * len(log), "bisection": log, "capped": capped,
-               "periods": periods, "dt": flow.dt, "conv": conv, "time_s": time.perf_counter() - t0,
-               "starts": ("projected onto the contact manifold of the feet held at their phase"
-                          if held_feet(prim.contacts) is not None else "as drawn") + ", inside C",
-               "redrawn_outside_c": redrawn[0]}
+    held = held_feet(prim.contacts) is not None
+    return r, {"samples_per_radius": n, "near_contact_changes": int(near.size), "window_s": window,
+               "simulations": sum(n + near.size - e["outside_c"] for e in log), "bisection": log, "capped": capped,
+               "periods": periods, "dt": flow.dt, "conv": conv, "time_s": time.perf_counter() - t_start,
+               "starts": "the same starts scaled to each radius" + (", projected onto the contact manifold of the "
+                                                                     "feet held at their phase" if held else "")
+               + ", inside C"}

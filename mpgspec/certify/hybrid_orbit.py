@@ -135,17 +135,20 @@ class HybridFlow:
         XT, hmin, _ = self.run_until(X0, t0, periods)
         return XT, hmin
 
-    def run_until(self, X0: np.ndarray, t0: np.ndarray, periods: int, stop=None) -> tuple[np.ndarray, np.ndarray, int]:
+    def run_until(self, X0: np.ndarray, t0: np.ndarray, periods, stop=None) -> tuple[np.ndarray, np.ndarray, int]:
         """(states, least h, periods run) of rollouts from the columns of X0 at clocks t0: `periods`
-        periods, or fewer when stop(states, least h) says after one that the outcome is decided."""
+        periods (an int, or one count per column: a column stops at its own), or fewer when stop(states,
+        least h) says after one that the outcome is decided."""
         n, nx = X0.shape[1], X0.shape[0]
         Z = np.vstack([X0, t0[None, :], np.full((1, n), np.inf), np.zeros((self.hold, n))])  # a solve due at once
-        fn = self.period_end.map(n)
-        for k in range(periods):
-            Z = np.array(fn(Z), float)
-            if stop is not None and k + 1 < periods and stop(Z[:nx], Z[nx + 1]):
+        counts = np.broadcast_to(np.asarray(periods, int), (n,))
+        last = int(counts.max(initial=0))
+        for k in range(last):
+            live = np.flatnonzero(counts > k)
+            Z[:, live] = np.array(self.period_end.map(live.size)(Z[:, live]), float)
+            if stop is not None and k + 1 < last and stop(Z[:nx], Z[nx + 1]):
                 return Z[:nx], Z[nx + 1], k + 1
-        return Z[:nx], Z[nx + 1], periods
+        return Z[:nx], Z[nx + 1], last
 
 
 def orbit(flow: HybridFlow, W: np.ndarray) -> tuple[np.ndarray, float, float]:

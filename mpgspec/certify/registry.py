@@ -22,7 +22,7 @@ _SEARCH = ("r0", "r_max", "rtol", "confirm_rounds", "samples", "seed", "conv", "
 BUILTIN_OPTIONS: dict[str, frozenset[str]] = {
     **{name: frozenset(model.model_fields) for name, model in OPTION_MODELS.items()},
     "sampling": frozenset(_SEARCH + ("horizon",)),
-    "floquet": frozenset(_SEARCH + ("t0", "steps", "tol", "orbit_tol", "periods", "steps_per_period", "neutral")),
+    "floquet": frozenset(_SEARCH + ("t0", "steps", "tol", "orbit_tol", "periods", "steps_per_period", "neutral", "window", "window_samples")),
 }
 """Keys of `roa.options` each built-in verifier reads (verifiers/*.py)."""
 

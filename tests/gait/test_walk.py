@@ -141,10 +141,10 @@ def _leave_c_before_touchdown(p, r: float, m: int, seed: int) -> tuple[int, int]
     return int((~(hmin >= 0) | ~np.isfinite(XT).all(axis=0)).sum()), int(inside.sum())
 
 
-def test_e_of_a_walk_holds_before_a_touchdown_where_the_sized_radius_does_not(prims):
+def test_e_of_a_walk_holds_before_a_touchdown_where_a_radius_sized_over_the_period_does_not(prims):
     """E_Walk is a safe region of attraction where the tube is thinnest, the last 20 ms before a
-    touchdown: at the project's radius no start there leaves C, at the floquet sizing's 0.0121 (the
-    radius the walks had) some do (a swing foot below the ground or still up when the touchdown comes)."""
+    touchdown: at the project's radius no start there leaves C, at 0.0121 (what a sizing with its starts
+    spread over the whole period finds) some do (a swing foot below the ground or still up when the touchdown comes)."""
     p = prims["Walk(medium)"]
     assert p.radius == 0.006
     bad, n = _leave_c_before_touchdown(p, p.radius, 160, 1)

@@ -215,13 +215,13 @@ class _HalfPlane(_LinearFlow):
         return X, hmin, periods
 
 
-def test_starts_drawn_outside_c_are_drawn_again():
-    """E is entered only where the oracle judged every h >= 0 (-tol): a tube start outside C is drawn
-    again, so the radius is set by the flow, not by the part of the ball that lies outside C."""
+def test_starts_outside_c_are_left_out():
+    """E is entered only where the oracle judged every h >= 0 (-tol): a tube start outside C at its radius
+    is left out there, so the radius is set by the flow, not by the part of the ball that lies outside C."""
     M = np.diag([0.4, 0.3])
     flow = _HalfPlane(M)
     r, tube = floquet_hybrid._size(flow, None, np.zeros((2, flow.steps)), np.eye(2), 0.4, {})
-    assert tube["redrawn_outside_c"] > 0 and "inside C" in tube["starts"]
+    assert max(e["outside_c"] for e in tube["bisection"]) > 0 and "inside C" in tube["starts"]
     radius = lambda X: float(np.linalg.norm(X, axis=0).max())  # noqa: E731 (half the starts lie on the sphere)
     assert all((flow.least_h(X, None) >= 0).all() for X in flow.starts if radius(X) <= 0.9)
     assert r > 0.6  # the ball reaches x_0 = -0.3 from r = 0.3 on: drawn as they fall, starts there would fail
@@ -230,3 +230,43 @@ def test_starts_drawn_outside_c_are_drawn_again():
     floquet_hybrid._size(tol_flow, None, np.zeros((2, tol_flow.steps)), np.eye(2), 0.4, {"oracle_h_tolerance": 0.05})
     lows = [float(tol_flow.least_h(X, None).min()) for X in tol_flow.starts if radius(X) <= 0.9]
     assert min(lows) >= -0.05 and min(lows) < 0
+
+
+class _ThinBeforeTouchdown(_LinearFlow):
+    """The fast flow with a touchdown at step 50 of 100: a start in the last step before it leaves C when it
+    lies more than 0.2 from the orbit (a swing foot a little low or late), anywhere else only at |x|_inf >= 1.
+    The true tube radius is 0.2; starts spread over the period meet the thin phase 1 time in 100."""
+
+    def __init__(self, M):
+        super().__init__(M, steps=100)
+
+    def run_until(self, X0, t0, periods, stop=None):
+        counts = np.broadcast_to(np.asarray(periods, int), (X0.shape[1],))
+        k = np.round(np.asarray(t0) / self.dt).astype(int) % self.steps
+        thin = (k == 49) & (np.linalg.norm(X0, axis=0) > 0.2)
+        X, hmin = X0.copy(), np.where(thin, -1.0, 1 - np.abs(X0).max(0))
+        for j in range(int(counts.max())):
+            live = counts > j
+            X[:, live] = self.M @ X[:, live]
+            hmin = np.minimum(hmin, 1 - np.abs(X).max(0))
+            if stop is not None and j + 1 < counts.max() and stop(X, hmin):
+                return X, hmin, j + 1
+        return X, hmin, int(counts.max())
+
+
+def test_a_gaits_tube_finds_the_thin_phases_before_a_contact_change(monkeypatch):
+    """Known answer: the tube is 0.2 wide in the step before a contact change and 1 elsewhere. The sizing
+    puts `window_samples` starts in the last `window` seconds before each change and finds at most 0.2; the
+    same flow sized with no starts there (window_samples 0: 48 phases over the whole period only, as the
+    sizing used to draw them; none falls on the thin step with this seed) reports a radius from which starts
+    before the touchdown leave C."""
+    monkeypatch.setattr(floquet_hybrid, "contact_changes", lambda prim, dt, steps: np.array([50]))
+    M = np.diag([0.4, 0.3])
+    o = {"window": 0.05, "rtol": 0.02}
+    r, tube = floquet_hybrid._size(_ThinBeforeTouchdown(M), None, np.zeros((2, 100)), np.eye(2), 0.4, o)
+    assert 0.18 <= r <= 0.2 and tube["near_contact_changes"] == 384
+    assert any(e["failed_near_changes"] for e in tube["bisection"] if "failed_near_changes" in e) or \
+        any(e.get("stopped_after_periods") for e in tube["bisection"])
+    blind, _ = floquet_hybrid._size(_ThinBeforeTouchdown(M), None, np.zeros((2, 100)), np.eye(2), 0.4,
+                                    {**o, "window_samples": 0})
+    assert blind > 0.3  # 48 starts over the period: the thin phases missed
