@@ -177,6 +177,8 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
       run one period: they must stay in C and end back inside E (within r), where the first set vouches for
       the rest. The failures there are rare (a swing foot a little low or late: about 1 in 100 of them at
       twice the radius the A1's walks hold), so they need many starts; one period each keeps them cheap.
+    Then up to `confirm_rounds` fresh sets of both at the radius found, 10 % less after each that fails (as
+    the sampling verifier confirms its radius); none passing leaves no radius.
     A start outside C at its radius (some h < -tol there, such as a swing foot below the ground just after
     lift-off) is left out at that radius: the oracle takes a rollout into E only at a sample where it judged
     every h >= -tol (tol: its h_tolerance), so E needs to hold only where C does."""
@@ -186,41 +188,53 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
     rng = np.random.default_rng(o.get("seed", 0))
     Wi = inverse_root(W)
     tol = float(o.get("oracle_h_tolerance", 0.0))  # the oracle's: it judges h >= -tol safe
-    near = near_changes(prim, flow.dt, flow.steps, int(o.get("window_samples", 384)), window, rng)
-    k = np.concatenate([rng.integers(0, flow.steps, n), near])
-    u = np.vstack([_directions(n, W.shape[0], rng), unit_sphere(near.size, W.shape[0], rng)])
-    runs = np.r_[np.full(n, periods), np.ones(near.size, int)]
-    bound = np.r_[np.full(n, conv), np.ones(near.size)]  # final distance / r each set must reach
-    log = []
+    n_near = int(o.get("window_samples", 384))
+    log, confirm = [], []
+
+    def draw():  # phases, directions, periods run and the final distance / r each start must reach
+        near = near_changes(prim, flow.dt, flow.steps, n_near, window, rng)
+        k = np.concatenate([rng.integers(0, flow.steps, n), near])
+        u = np.vstack([_directions(n, W.shape[0], rng), unit_sphere(near.size, W.shape[0], rng)])
+        return k, u, np.r_[np.full(n, periods), np.ones(near.size, int)], np.r_[np.full(n, conv), np.ones(near.size)]
 
     def decided(X, hmin):  # a start already left C or blew up: this radius fails whatever follows
         return bool((hmin < 0).any() or not np.isfinite(X).all())
 
-    def ok(r):
+    def passes(r, starts, into):
+        k, u, runs, bound = starts
         X0 = placed(prim, flow.dt, Xs, Wi, r, u, k, W)
         inside = flow.least_h(X0, k * flow.dt) >= -tol
         X0, ks = X0[:, inside], k[inside]
-        XT, hmin, ran = flow.run_until(X0, ks * flow.dt, runs[inside] if near.size else periods, decided)
+        XT, hmin, ran = flow.run_until(X0, ks * flow.dt, runs[inside] if k.size > n else periods, decided)
         entry = {"r": r, "outside_c": int((~inside).sum())}
         if ran < periods:
             bad = (hmin < 0) | ~np.isfinite(XT).all(axis=0)
-            log.append({**entry, "failed": int(bad.sum()), "unsafe": int((hmin < 0).sum()), "stopped_after_periods": ran})
+            into.append({**entry, "failed": int(bad.sum()), "unsafe": int((hmin < 0).sum()), "stopped_after_periods": ran})
             return False
         E = XT - Xs[:, ks]  # whole periods later: the same phase
         dist = np.sqrt(np.einsum("ij,ik,kj->j", E, W, E))
         good = np.isfinite(dist) & (dist <= bound[inside] * r) & (hmin >= 0)
-        log.append({**entry, "failed": int((~good).sum()), "unsafe": int((hmin < 0).sum()),
-                    "failed_near_changes": int((~good[n - int((~inside[:n]).sum()):]).sum()),
-                    "worst_final_dist": float(np.nanmax(dist)) if np.isfinite(dist).any() else float("inf")})
+        into.append({**entry, "failed": int((~good).sum()), "unsafe": int((hmin < 0).sum()),
+                     "failed_near_changes": int((~good[n - int((~inside[:n]).sum()):]).sum()),
+                     "worst_final_dist": float(np.nanmax(dist)) if np.isfinite(dist).any() else float("inf")})
         return bool(good.all())
 
     t_start = time.perf_counter()
-    r, capped, calls = bisect(ok, 0.0, float(o.get("r0", 0.05)), float(o.get("r_max", 2.0)), float(o.get("rtol", 0.05)),
-                              grow=2.0)
+    starts = draw()
+    r, capped, calls = bisect(lambda r: passes(r, starts, log), 0.0, float(o.get("r0", 0.05)),
+                              float(o.get("r_max", 2.0)), float(o.get("rtol", 0.05)), grow=2.0)
+    for _ in range(int(o.get("confirm_rounds", 5))):  # fresh starts at the radius found, 10 % less until they pass
+        if r <= 0 or passes(r, draw(), confirm):
+            break
+        r *= 0.9
+    else:
+        r = 0.0 if confirm else r
     held = held_feet(prim.contacts) is not None
-    return r, {"samples_per_radius": n, "near_contact_changes": int(near.size), "window_s": window,
-               "simulations": sum(n + near.size - e["outside_c"] for e in log), "bisection": log, "capped": capped,
-               "periods": periods, "dt": flow.dt, "conv": conv, "time_s": time.perf_counter() - t_start,
+    near = int(starts[0].size - n)
+    return r, {"samples_per_radius": n, "near_contact_changes": near, "window_s": window,
+               "simulations": sum(n + near - e["outside_c"] for e in log + confirm), "bisection": log,
+               "confirm": confirm, "capped": capped, "periods": periods, "dt": flow.dt, "conv": conv,
+               "time_s": time.perf_counter() - t_start,
                "starts": "the same starts scaled to each radius" + (", projected onto the contact manifold of the "
                                                                      "feet held at their phase" if held else "")
-               + ", inside C"}
+               + ", inside C; then fresh ones at the radius found, 10 % less until they pass (confirm_rounds)"}

@@ -265,6 +265,7 @@ def test_a_gaits_tube_finds_the_thin_phases_before_a_contact_change(monkeypatch)
     o = {"window": 0.05, "rtol": 0.02}
     r, tube = floquet_hybrid._size(_ThinBeforeTouchdown(M), None, np.zeros((2, 100)), np.eye(2), 0.4, o)
     assert 0.18 <= r <= 0.2 and tube["near_contact_changes"] == 384
+    assert tube["confirm"][-1]["r"] == r and tube["confirm"][-1]["failed"] == 0  # fresh starts at r pass
     assert any(e["failed_near_changes"] for e in tube["bisection"] if "failed_near_changes" in e) or \
         any(e.get("stopped_after_periods") for e in tube["bisection"])
     blind, _ = floquet_hybrid._size(_ThinBeforeTouchdown(M), None, np.zeros((2, 100)), np.eye(2), 0.4,
