@@ -31,7 +31,7 @@ def estimate(problem: PeriodicProblem, o: dict, name: str) -> RoAResult:
     if bad or (neutral and not getattr(prim.system, "is_rigid_body", False)):
         return RoAResult(0.0, "failed", name, {"neutral": neutral},
                          f"neutral directions must be among {', '.join(NEUTRAL)} of a floating base; got {bad or neutral}")
-    flow = HybridFlow(prim, dt)
+    flow = HybridFlow(prim, dt, stretch=2 * max(1, int(round(float(o.get("window", 0.02)) / dt))))
     W = problem.W
     Xs, defect, least_h = orbit(flow, W)
     ev = {"period": T, "dt": dt, "orbit_defect": defect, "least_h_on_orbit": least_h, "hybrid": True}
@@ -62,7 +62,7 @@ def estimate(problem: PeriodicProblem, o: dict, name: str) -> RoAResult:
     neutral_txt = f"; neutral {', '.join(parts)}" if parts else ""
     return RoAResult(r, "empirical", name, ev,
                      f"multipliers inside the unit circle (max |mu| = {rho:.3g}{neutral_txt}); "
-                     f"{tube['simulations']} rollouts ({tube['near_contact_changes']} starts a radius before contact changes) "
+                     f"{tube['simulations']} rollouts ({tube['before_changes']} starts a radius before contact changes) "
                      f"stayed safe and converged from W-distance {r:.4g}")
 
 
@@ -151,14 +151,14 @@ def contact_changes(prim, dt: float, steps: int) -> np.ndarray:
     held = held_feet(prim.contacts)
     if held is None:
         return np.zeros(0, int)
-    sets = [tuple(sorted(held(k * dt))) for k in range(steps)]
+    sets = [set(held(k * dt)) for k in range(steps)]
     return np.array([k for k in range(steps) if sets[k] != sets[k - 1]], int)
 
 
-def near_changes(prim, dt: float, steps: int, m: int, window: float, rng: np.random.Generator) -> np.ndarray:
-    """m phase steps in the last `window` seconds before a contact change (a touchdown or a lift-off; none for
-    a loop whose contacts never change): where a gait's tube is thinnest, a swing foot a little low or late
-    there touches the ground early or misses its touchdown."""
+def before_changes(prim, dt: float, steps: int, m: int, window: float, rng: np.random.Generator) -> np.ndarray:
+    """m phase steps in the last `window` seconds before a scheduled contact change (none for a loop whose
+    contacts never change): where a gait's tube is thinnest, a swing foot a little low or late there touches
+    the ground early or misses its touchdown, and a foot just planted is loaded as the other pair lifts."""
     changes = contact_changes(prim, dt, steps)
     if not changes.size:
         return np.zeros(0, int)
@@ -173,10 +173,11 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
     - `samples` starts at phases over the whole period, half inside the ball and half on its sphere, run
       `periods` periods: they must stay in C and end within conv r of the orbit (r, not each start's own
       distance: one deep inside the ball need not contract further than the sphere's);
-    - `window_samples` starts on the sphere at phases in the last `window` seconds before a contact change,
-      run one period: they must stay in C and end back inside E (within r), where the first set vouches for
-      the rest. The failures there are rare (a swing foot a little low or late: about 1 in 100 of them at
-      twice the radius the A1's walks hold), so they need many starts; one period each keeps them cheap.
+    - `window_samples` starts on the sphere at phases in the last `window` seconds before a contact change
+      (a touchdown or a lift-off), run through it and `window` beyond (2 window in all): they must stay in C,
+      where the change is passed and the first set vouches for the rest. The failures there are rare (a swing foot a little low or
+      late: about 1 in 100 of them at twice the radius the A1's walks hold), so they need many starts; the
+      short run keeps them cheap, and they go first: a radius they fail needs no full periods.
     Then up to `confirm_rounds` fresh sets of both at the radius found, 10 % less after each that fails (as
     the sampling verifier confirms its radius); none passing leaves no radius.
     A start outside C at its radius (some h < -tol there, such as a swing foot below the ground just after
@@ -188,34 +189,44 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
     rng = np.random.default_rng(o.get("seed", 0))
     Wi = inverse_root(W)
     tol = float(o.get("oracle_h_tolerance", 0.0))  # the oracle's: it judges h >= -tol safe
-    n_near = int(o.get("window_samples", 384))
-    log, confirm = [], []
+    n_near = int(o.get("window_samples", 512))
+    log, confirm, rollouts = [], [], [0]
 
-    def draw():  # phases, directions, periods run and the final distance / r each start must reach
-        near = near_changes(prim, flow.dt, flow.steps, n_near, window, rng)
+    def draw():  # phases and directions: over the period, then before contact changes
+        near = before_changes(prim, flow.dt, flow.steps, n_near, window, rng)
         k = np.concatenate([rng.integers(0, flow.steps, n), near])
-        u = np.vstack([_directions(n, W.shape[0], rng), unit_sphere(near.size, W.shape[0], rng)])
-        return k, u, np.r_[np.full(n, periods), np.ones(near.size, int)], np.r_[np.full(n, conv), np.ones(near.size)]
+        return k, np.vstack([_directions(n, W.shape[0], rng), unit_sphere(near.size, W.shape[0], rng)])
 
     def decided(X, hmin):  # a start already left C or blew up: this radius fails whatever follows
         return bool((hmin < 0).any() or not np.isfinite(X).all())
 
     def passes(r, starts, into):
-        k, u, runs, bound = starts
+        k, u = starts
         X0 = placed(prim, flow.dt, Xs, Wi, r, u, k, W)
         inside = flow.least_h(X0, k * flow.dt) >= -tol
-        X0, ks = X0[:, inside], k[inside]
-        XT, hmin, ran = flow.run_until(X0, ks * flow.dt, runs[inside] if k.size > n else periods, decided)
         entry = {"r": r, "outside_c": int((~inside).sum())}
+        near = inside.copy()
+        near[:n] = False
+        if near.any():  # first the cheap and telling ones: through the change and `window` beyond
+            rollouts[0] += int(near.sum())
+            XT, hmin = flow.run_stretch(X0[:, near], k[near] * flow.dt)
+            bad = ~(hmin >= 0) | ~np.isfinite(XT).all(axis=0)
+            entry["failed_before_changes"] = int(bad.sum())
+            if bad.any():
+                into.append({**entry, "failed": int(bad.sum()), "unsafe": int((hmin < 0).sum())})
+                return False
+        inside[n:] = False
+        X0, ks = X0[:, inside], k[inside]
+        rollouts[0] += int(inside.sum())
+        XT, hmin, ran = flow.run_until(X0, ks * flow.dt, periods, decided)
         if ran < periods:
             bad = (hmin < 0) | ~np.isfinite(XT).all(axis=0)
             into.append({**entry, "failed": int(bad.sum()), "unsafe": int((hmin < 0).sum()), "stopped_after_periods": ran})
             return False
         E = XT - Xs[:, ks]  # whole periods later: the same phase
         dist = np.sqrt(np.einsum("ij,ik,kj->j", E, W, E))
-        good = np.isfinite(dist) & (dist <= bound[inside] * r) & (hmin >= 0)
+        good = np.isfinite(dist) & (dist <= conv * r) & (hmin >= 0)
         into.append({**entry, "failed": int((~good).sum()), "unsafe": int((hmin < 0).sum()),
-                     "failed_near_changes": int((~good[n - int((~inside[:n]).sum()):]).sum()),
                      "worst_final_dist": float(np.nanmax(dist)) if np.isfinite(dist).any() else float("inf")})
         return bool(good.all())
 
@@ -231,8 +242,8 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
         r = 0.0 if confirm else r
     held = held_feet(prim.contacts) is not None
     near = int(starts[0].size - n)
-    return r, {"samples_per_radius": n, "near_contact_changes": near, "window_s": window,
-               "simulations": sum(n + near - e["outside_c"] for e in log + confirm), "bisection": log,
+    return r, {"samples_per_radius": n, "before_changes": near, "window_s": window,
+               "simulations": rollouts[0], "bisection": log,
                "confirm": confirm, "capped": capped, "periods": periods, "dt": flow.dt, "conv": conv,
                "time_s": time.perf_counter() - t_start,
                "starts": "the same starts scaled to each radius" + (", projected onto the contact manifold of the "

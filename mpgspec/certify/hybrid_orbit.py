@@ -64,31 +64,36 @@ def _least(m, hv):
     return ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
 
 
-def _period_end(f, start, jump, z, nx: int, h: float, left: float, steps: int):
+def _period_end(f, start, jump, z, nx: int, h: float, left: float, steps: int, *more: int):
     """z after `steps` steps, as hybrid_body's fold computes it, with one evaluation of the loop per
     state for k1, the jump's input and h: the step that leaves x_k takes h(x_k) from the loop it
     evaluates there anyway (rather than the step before evaluating the loop at x_k a second time),
     so the first step takes none and h(x_steps) is evaluated once at the end. The same functions at
-    the same states in the same order: the same numbers with 4 loop evaluations per step instead of 6."""
+    the same states in the same order: the same numbers with 4 loop evaluations per step instead of 6.
+    With `more` step counts, a list of the ends after each count, sharing one compiled step."""
     def step(zk, with_h: bool):
         x, t, m = zk[:nx], zk[nx], zk[nx + 1]
         k1, u, hx = start(x, t)
         return ca.vertcat(rk4_jump(f, None, jump, x, t, h, left, start=(k1, u)), t + h, _least(m, hx) if with_h else m)
 
     zs = ca.MX.sym("z", nx + 2)
-    z1 = step(z, False)
-    if steps > 1:
-        z1 = ca.Function("hybrid_step", [zs], [step(zs, True)]).fold(steps - 1)(z1)
-    x_n, t_n = z1[:nx], z1[nx]
-    return ca.vertcat(x_n, t_n, _least(z1[nx + 1], start(x_n, t_n)[2]))
+    z0 = step(z, False)
+    stepper = ca.Function("hybrid_step", [zs], [step(zs, True)])
+    ends = []
+    for n in (steps, *more):
+        z1 = stepper.fold(n - 1)(z0) if n > 1 else z0
+        x_n, t_n = z1[:nx], z1[nx]
+        ends.append(ca.vertcat(x_n, t_n, _least(z1[nx + 1], start(x_n, t_n)[2])))
+    return ends if more else ends[0]
 
 
 class HybridFlow:
     """Compiled steps, periods and tubes of a compiled primitive's discrete flow. `period` (default:
     the primitive's) is the stretch one call runs: a fixed primitive's flow is run in such chunks;
-    `states`: also compile the period with every step's state out (orbit, monodromy), not only its end."""
+    `states`: also compile the period with every step's state out (orbit, monodromy), not only its end;
+    `stretch` > 0: also a run of that many steps (run_stretch), in the same library."""
 
-    def __init__(self, prim, dt: float, period: float | None = None, states: bool = True):
+    def __init__(self, prim, dt: float, period: float | None = None, states: bool = True, stretch: int = 0):
         self.prim, self.dt = prim, float(dt)
         T = float(prim.period if period is None else period)
         self.steps = int(round(T / dt))
@@ -113,12 +118,19 @@ class HybridFlow:
         h0 = h_of(xs, ts)
         self._least_h = ca.Function("hybrid_least_h", [xs, ts], [ca.mmin(h0) if h0.shape[0] else ca.inf])
         zz = ca.MX.sym("z", nx + 2 + self.hold)  # a period with every step's state out, and with the last one only
-        end = body.fold(self.steps)(zz) if self.hold else _period_end(f, start, jump, zz, nx, h, left, self.steps)
-        fns = [ca.Function("hybrid_period_end", [zz], [end])]
+        self.stretch = int(stretch)
+        lengths = (self.steps, self.stretch) if self.stretch > 0 else (self.steps,)
+        ends = [body.fold(n)(zz) for n in lengths] if self.hold else \
+            list(_period_end(f, start, jump, zz, nx, h, left, *lengths)) if len(lengths) > 1 else \
+            [_period_end(f, start, jump, zz, nx, h, left, self.steps)]
+        fns = [ca.Function("hybrid_period_end", [zz], [ends[0]])]
         if states:
             fns.append(ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)[:nx + 2, :]]))
+        if self.stretch > 0:
+            fns.append(ca.Function("hybrid_stretch_end", [zz], [ends[1]]))
         compiled = compile_many(fns, looplib.caller_flags(prim, ("-O1",)), libs=looplib.libs_of(prim))
         self.period_end, self.period_fn = compiled[0], (compiled[1] if states else None)
+        self.stretch_end = compiled[-1] if self.stretch > 0 else None
 
     def states(self, x0: np.ndarray, t0: float = 0.0) -> np.ndarray:
         """[x; t; least h] after each step of one period from x0 at clock t0 (columns)."""
@@ -134,6 +146,13 @@ class HybridFlow:
         """End states and least h of rollouts from the columns of X0 at clocks t0."""
         XT, hmin, _ = self.run_until(X0, t0, periods)
         return XT, hmin
+
+    def run_stretch(self, X0: np.ndarray, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(states, least h) of rollouts from the columns of X0 at clocks t0 after `stretch` steps."""
+        n, nx = X0.shape[1], X0.shape[0]
+        Z = np.vstack([X0, t0[None, :], np.full((1, n), np.inf), np.zeros((self.hold, n))])
+        Z = np.array(self.stretch_end.map(n)(Z), float)
+        return Z[:nx], Z[nx + 1]
 
     def run_until(self, X0: np.ndarray, t0: np.ndarray, periods, stop=None) -> tuple[np.ndarray, np.ndarray, int]:
         """(states, least h, periods run) of rollouts from the columns of X0 at clocks t0: `periods`

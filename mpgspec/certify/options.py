@@ -103,8 +103,8 @@ class FloquetOptions(SearchOptions):
     neutral: list[StrictStr] = Field(default_factory=list, description="neutral directions of a floating base")
     window: Annotated[Number, Field(gt=0, le=10)] = Field(
         default=0.02, description="seconds before each contact change where a gait's tube puts window_samples starts")
-    window_samples: StrictInt = Field(default=384, ge=0, le=MAX_SAMPLES,
-                                      description="starts of a gait's tube before contact changes, run one period")
+    window_samples: StrictInt = Field(default=512, ge=0, le=MAX_SAMPLES,
+                                      description="starts of a gait's tube before contact changes, run 2 window")
 
 
 OPTION_MODELS: dict[str, type[BaseModel]] = {"sos": LevelSetOptions, "lyapunov": LyapunovOptions,
