@@ -87,13 +87,19 @@ def _period_end(f, start, jump, z, nx: int, h: float, left: float, steps: int, *
     return ends if more else ends[0]
 
 
+STRETCH = 40
+"""Steps of HybridFlow.run_stretch by default: the gait tube's starts before a contact change run through it
+and as far beyond (2 x its 20 ms window at dt = 1 ms; verifiers/floquet_hybrid.py)."""
+
+
 class HybridFlow:
     """Compiled steps, periods and tubes of a compiled primitive's discrete flow. `period` (default:
     the primitive's) is the stretch one call runs: a fixed primitive's flow is run in such chunks;
     `states`: also compile the period with every step's state out (orbit, monodromy), not only its end;
-    `stretch` > 0: also a run of that many steps (run_stretch), in the same library."""
+    `stretch` > 0: also a run of that many steps (run_stretch), in the same library; by default STRETCH
+    with `states` (the flow of a whole period, which the gait tube and the Definition 1 checks share), else none."""
 
-    def __init__(self, prim, dt: float, period: float | None = None, states: bool = True, stretch: int = 0):
+    def __init__(self, prim, dt: float, period: float | None = None, states: bool = True, stretch: int | None = None):
         self.prim, self.dt = prim, float(dt)
         T = float(prim.period if period is None else period)
         self.steps = int(round(T / dt))
@@ -118,7 +124,7 @@ class HybridFlow:
         h0 = h_of(xs, ts)
         self._least_h = ca.Function("hybrid_least_h", [xs, ts], [ca.mmin(h0) if h0.shape[0] else ca.inf])
         zz = ca.MX.sym("z", nx + 2 + self.hold)  # a period with every step's state out, and with the last one only
-        self.stretch = int(stretch)
+        self.stretch = (STRETCH if states else 0) if stretch is None else int(stretch)
         lengths = (self.steps, self.stretch) if self.stretch > 0 else (self.steps,)
         ends = [body.fold(n)(zz) for n in lengths] if self.hold else \
             list(_period_end(f, start, jump, zz, nx, h, left, *lengths)) if len(lengths) > 1 else \
