@@ -141,8 +141,11 @@ def placed(prim, dt: float, Xs: np.ndarray, Wi: np.ndarray, r: float, u: np.ndar
     """States x*(t_k) + r Wi u, each put on the contact manifold of the feet held at its phase."""
     X0 = Xs[:, k] + r * (u @ Wi).T
     held = held_feet(prim.contacts)
-    if held is not None:
-        X0 = np.stack([prim.system.project_to_contacts(X0[:, j], held(k[j] * dt), W) for j in range(k.size)], 1)
+    if held is not None:  # the starts of each set of held feet at once (each as it would be alone)
+        sets = [tuple(held(j * dt)) for j in k]
+        for feet in set(sets):
+            cols = [j for j, f in enumerate(sets) if f == feet]
+            X0[:, cols] = prim.system.project_to_contacts_many(X0[:, cols].T, feet, W).T
     return X0
 
 
