@@ -177,10 +177,10 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
       `periods` periods: they must stay in C and end within conv r of the orbit (r, not each start's own
       distance: one deep inside the ball need not contract further than the sphere's);
     - `window_samples` starts on the sphere at phases in the last `window` seconds before a contact change
-      (a touchdown or a lift-off), run through it and `window` beyond (2 window in all): they must stay in C,
-      where the change is passed and the first set vouches for the rest. The failures there are rare (a swing foot a little low or
-      late: about 1 in 100 of them at twice the radius the A1's walks hold), so they need many starts; the
-      short run keeps them cheap, and they go first: a radius they fail needs no full periods.
+      (a touchdown or a lift-off), run through it and `window` beyond (2 window in all): they must stay in C;
+      past the change the first set vouches for the rest. The failures there are rare (a swing foot a little
+      low or late: about 1 in 100 of them at 0.01 on the A1's walks), so they need many starts; the short
+      run keeps them cheap, and they go first: a radius they fail needs no full periods.
     Then up to `confirm_rounds` fresh sets of both at the radius found, 10 % less after each that fails (as
     the sampling verifier confirms its radius); none passing leaves no radius.
     A start outside C at its radius (some h < -tol there, such as a swing foot below the ground just after
