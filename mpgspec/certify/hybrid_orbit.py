@@ -96,7 +96,7 @@ class HybridFlow:
     """Compiled steps, periods and tubes of a compiled primitive's discrete flow. `period` (default:
     the primitive's) is the stretch one call runs: a fixed primitive's flow is run in such chunks;
     `states`: also compile the period with every step's state out (orbit, monodromy), not only its end;
-    `stretch` > 0: also a run of that many steps (run_stretch), in the same library; by default STRETCH
+    `stretch` > 0: also a run of that many steps (run_stretch), compiled with the others; by default STRETCH
     with `states` (the flow of a whole period, which the gait tube and the Definition 1 checks share), else none."""
 
     def __init__(self, prim, dt: float, period: float | None = None, states: bool = True, stretch: int | None = None):
