@@ -50,7 +50,7 @@ def main(argv=None) -> int:
     rows, runs, missed = [], {}, 0
     for n in walks:
         p = prims[n]
-        flow, W = ho.HybridFlow(p, 0.001, states=True, stretch=int(round(2 * WINDOW / 0.001))), np.asarray(p.W)
+        flow, W = ho.HybridFlow(p, 0.001, stretch=2 * fh.window_steps(WINDOW, 0.001)), np.asarray(p.W)
         Xs = ho.orbit(flow, W)[0]
         rng = np.random.default_rng(0)
         for r in args.radii:

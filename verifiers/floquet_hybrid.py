@@ -31,7 +31,7 @@ def estimate(problem: PeriodicProblem, o: dict, name: str) -> RoAResult:
     if bad or (neutral and not getattr(prim.system, "is_rigid_body", False)):
         return RoAResult(0.0, "failed", name, {"neutral": neutral},
                          f"neutral directions must be among {', '.join(NEUTRAL)} of a floating base; got {bad or neutral}")
-    flow = HybridFlow(prim, dt, stretch=2 * max(1, int(round(float(o.get("window", 0.02)) / dt))))
+    flow = HybridFlow(prim, dt, stretch=2 * window_steps(float(o.get("window", 0.02)), dt))  # through and as far beyond
     W = problem.W
     Xs, defect, least_h = orbit(flow, W)
     ev = {"period": T, "dt": dt, "orbit_defect": defect, "least_h_on_orbit": least_h, "hybrid": True}
@@ -158,6 +158,11 @@ def contact_changes(prim, dt: float, steps: int) -> np.ndarray:
     return np.array([k for k in range(steps) if sets[k] != sets[k - 1]], int)
 
 
+def window_steps(window: float, dt: float) -> int:
+    """Steps of the window before a contact change where a gait's tube puts its dense starts (at least one)."""
+    return max(1, int(round(window / dt)))
+
+
 def before_changes(prim, dt: float, steps: int, m: int, window: float, rng: np.random.Generator) -> np.ndarray:
     """m phase steps in the last `window` seconds before a scheduled contact change (none for a loop whose
     contacts never change): where a gait's tube is thinnest, a swing foot a little low or late there touches
@@ -165,7 +170,7 @@ def before_changes(prim, dt: float, steps: int, m: int, window: float, rng: np.r
     changes = contact_changes(prim, dt, steps)
     if not changes.size:
         return np.zeros(0, int)
-    w = max(1, int(round(window / dt)))
+    w = window_steps(window, dt)
     return rng.choice(np.unique(np.concatenate([(c - np.arange(1, w + 1)) % steps for c in changes])), m)
 
 

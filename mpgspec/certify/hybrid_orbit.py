@@ -64,13 +64,13 @@ def _least(m, hv):
     return ca.fmin(m, ca.mmin(hv)) if hv.shape[0] else m
 
 
-def _period_end(f, start, jump, z, nx: int, h: float, left: float, steps: int, *more: int):
-    """z after `steps` steps, as hybrid_body's fold computes it, with one evaluation of the loop per
-    state for k1, the jump's input and h: the step that leaves x_k takes h(x_k) from the loop it
+def _period_ends(f, start, jump, z, nx: int, h: float, left: float, *lengths: int) -> list:
+    """z after each count of steps in `lengths`, as hybrid_body's fold computes it, with one evaluation of the
+    loop per state for k1, the jump's input and h: the step that leaves x_k takes h(x_k) from the loop it
     evaluates there anyway (rather than the step before evaluating the loop at x_k a second time),
     so the first step takes none and h(x_steps) is evaluated once at the end. The same functions at
     the same states in the same order: the same numbers with 4 loop evaluations per step instead of 6.
-    With `more` step counts, a list of the ends after each count, sharing one compiled step."""
+    Every count folds the same step function."""
     def step(zk, with_h: bool):
         x, t, m = zk[:nx], zk[nx], zk[nx + 1]
         k1, u, hx = start(x, t)
@@ -80,26 +80,20 @@ def _period_end(f, start, jump, z, nx: int, h: float, left: float, steps: int, *
     z0 = step(z, False)
     stepper = ca.Function("hybrid_step", [zs], [step(zs, True)])
     ends = []
-    for n in (steps, *more):
+    for n in lengths:
         z1 = stepper.fold(n - 1)(z0) if n > 1 else z0
         x_n, t_n = z1[:nx], z1[nx]
         ends.append(ca.vertcat(x_n, t_n, _least(z1[nx + 1], start(x_n, t_n)[2])))
-    return ends if more else ends[0]
-
-
-STRETCH = 40
-"""Steps of HybridFlow.run_stretch by default: the gait tube's starts before a contact change run through it
-and as far beyond (2 x its 20 ms window at dt = 1 ms; verifiers/floquet_hybrid.py)."""
+    return ends
 
 
 class HybridFlow:
     """Compiled steps, periods and tubes of a compiled primitive's discrete flow. `period` (default:
     the primitive's) is the stretch one call runs: a fixed primitive's flow is run in such chunks;
     `states`: also compile the period with every step's state out (orbit, monodromy), not only its end;
-    `stretch` > 0: also a run of that many steps (run_stretch), compiled with the others; by default STRETCH
-    with `states` (the flow of a whole period, which the gait tube and the Definition 1 checks share), else none."""
+    `stretch` > 0: also a run of that many steps (run_stretch), compiled with the others."""
 
-    def __init__(self, prim, dt: float, period: float | None = None, states: bool = True, stretch: int | None = None):
+    def __init__(self, prim, dt: float, period: float | None = None, states: bool = True, stretch: int = 0):
         self.prim, self.dt = prim, float(dt)
         T = float(prim.period if period is None else period)
         self.steps = int(round(T / dt))
@@ -124,11 +118,9 @@ class HybridFlow:
         h0 = h_of(xs, ts)
         self._least_h = ca.Function("hybrid_least_h", [xs, ts], [ca.mmin(h0) if h0.shape[0] else ca.inf])
         zz = ca.MX.sym("z", nx + 2 + self.hold)  # a period with every step's state out, and with the last one only
-        self.stretch = (STRETCH if states else 0) if stretch is None else int(stretch)
+        self.stretch = int(stretch)
         lengths = (self.steps, self.stretch) if self.stretch > 0 else (self.steps,)
-        ends = [body.fold(n)(zz) for n in lengths] if self.hold else \
-            list(_period_end(f, start, jump, zz, nx, h, left, *lengths)) if len(lengths) > 1 else \
-            [_period_end(f, start, jump, zz, nx, h, left, self.steps)]
+        ends = [body.fold(n)(zz) for n in lengths] if self.hold else _period_ends(f, start, jump, zz, nx, h, left, *lengths)
         fns = [ca.Function("hybrid_period_end", [zz], [ends[0]])]
         if states:
             fns.append(ca.Function("hybrid_period", [zz], [body.mapaccum(self.steps)(zz)[:nx + 2, :]]))
@@ -153,27 +145,28 @@ class HybridFlow:
         XT, hmin, _ = self.run_until(X0, t0, periods)
         return XT, hmin
 
+    def _packed(self, X0: np.ndarray, t0: np.ndarray) -> np.ndarray:
+        """[x; t; least h; hold] columns of rollouts from X0 at clocks t0, least h not yet taken, a solve due at once."""
+        n = X0.shape[1]
+        return np.vstack([X0, t0[None, :], np.full((1, n), np.inf), np.zeros((self.hold, n))])
+
     def run_stretch(self, X0: np.ndarray, t0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(states, least h) of rollouts from the columns of X0 at clocks t0 after `stretch` steps."""
-        n, nx = X0.shape[1], X0.shape[0]
-        Z = np.vstack([X0, t0[None, :], np.full((1, n), np.inf), np.zeros((self.hold, n))])
-        Z = np.array(self.stretch_end.map(n)(Z), float)
+        nx = X0.shape[0]
+        Z = np.array(self.stretch_end.map(X0.shape[1])(self._packed(X0, t0)), float)
         return Z[:nx], Z[nx + 1]
 
-    def run_until(self, X0: np.ndarray, t0: np.ndarray, periods, stop=None) -> tuple[np.ndarray, np.ndarray, int]:
+    def run_until(self, X0: np.ndarray, t0: np.ndarray, periods: int, stop=None) -> tuple[np.ndarray, np.ndarray, int]:
         """(states, least h, periods run) of rollouts from the columns of X0 at clocks t0: `periods`
-        periods (an int, or one count per column: a column stops at its own), or fewer when stop(states,
-        least h) says after one that the outcome is decided."""
-        n, nx = X0.shape[1], X0.shape[0]
-        Z = np.vstack([X0, t0[None, :], np.full((1, n), np.inf), np.zeros((self.hold, n))])  # a solve due at once
-        counts = np.broadcast_to(np.asarray(periods, int), (n,))
-        last = int(counts.max(initial=0))
-        for k in range(last):
-            live = np.flatnonzero(counts > k)
-            Z[:, live] = np.array(self.period_end.map(live.size)(Z[:, live]), float)
-            if stop is not None and k + 1 < last and stop(Z[:nx], Z[nx + 1]):
+        periods, or fewer when stop(states, least h) says after one that the outcome is decided."""
+        nx = X0.shape[0]
+        Z = self._packed(X0, t0)
+        fn = self.period_end.map(X0.shape[1])
+        for k in range(periods):
+            Z = np.array(fn(Z), float)
+            if stop is not None and k + 1 < periods and stop(Z[:nx], Z[nx + 1]):
                 return Z[:nx], Z[nx + 1], k + 1
-        return Z[:nx], Z[nx + 1], last
+        return Z[:nx], Z[nx + 1], periods
 
 
 def orbit(flow: HybridFlow, W: np.ndarray) -> tuple[np.ndarray, float, float]:
