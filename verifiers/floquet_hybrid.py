@@ -60,10 +60,11 @@ def estimate(problem: PeriodicProblem, o: dict, name: str) -> RoAResult:
                          f"{tube['periods']} periods (roa.options.periods, periods_max)")
     parts = [f"{k} {v['multiplier']:.6f}" for k, v in found.items()]
     neutral_txt = f"; neutral {', '.join(parts)}" if parts else ""
+    bound = f"; {tube['bounded_by']['text']}" if tube.get("bounded_by") else ""
     return RoAResult(r, "empirical", name, ev,
                      f"multipliers inside the unit circle (max |mu| = {rho:.3g}{neutral_txt}); "
                      f"{tube['simulations']} rollouts ({tube['before_changes']} starts a radius before contact changes) "
-                     f"stayed safe and converged from W-distance {r:.4g}")
+                     f"stayed safe and converged from W-distance {r:.4g}{bound}")
 
 
 COLLAPSE = 0.1
@@ -174,6 +175,58 @@ def before_changes(prim, dt: float, steps: int, m: int, window: float, rng: np.r
     return rng.choice(np.unique(np.concatenate([(c - np.arange(1, w + 1)) % steps for c in changes])), m)
 
 
+LOCATE = 8
+"""Failing starts of the least radius that failed whose exit from C the sizing locates (one period each)."""
+
+
+def bounded_by(flow: HybridFlow, r: float, X: np.ndarray, k: np.ndarray, periods: int) -> dict:
+    """What bounds the tube: for up to LOCATE of the starts that failed at r (the least radius that failed), the
+    safety function at which each first leaves C within a period, its value, its clock and its place against
+    the next scheduled contact change (seconds, negative before it); a start that stays in C for the period
+    failed later or by not converging within `periods` periods."""
+    changes = contact_changes(flow.prim, flow.dt, flow.steps)
+    exits, later = [], 0
+    for j in range(min(LOCATE, X.shape[1])):
+        e = flow.first_exit(X[:, j], float(k[j] * flow.dt))
+        if e is None:
+            later += 1
+            continue
+        if changes.size:  # the step that ended at e["t"] against the next change at or after it
+            p = int(round(e["t"] / flow.dt)) % flow.steps
+            nxt = changes[changes >= p]
+            c = int(nxt[0]) if nxt.size else int(changes[0]) + flow.steps
+            e["from_change_s"] = round((p - c) * flow.dt, 9)
+        exits.append(e)
+    funcs: dict[str, int] = {}
+    for e in exits:
+        funcs[e["h"]] = funcs.get(e["h"], 0) + 1
+    out = {"r": r, "failed": int(X.shape[1]), "located": len(exits), "exits": exits,
+           "functions": dict(sorted(funcs.items(), key=lambda kv: -kv[1])), "not_in_c_within_a_period": later}
+    out["text"] = bounded_text(out, periods)
+    return out
+
+
+def bounded_text(b: dict, periods: int) -> str:
+    """One sentence on what bounds the tube, from bounded_by's record."""
+    seen = min(LOCATE, b["failed"])
+    parts = []
+    if b["exits"]:
+        names = ", ".join(h if c == 1 else f"{h} ({c})" for h, c in b["functions"].items())
+        where = [e["from_change_s"] for e in b["exits"] if "from_change_s" in e]
+        when = ""
+        if where:
+            lo, hi = round(min(where) * 1e3), round(max(where) * 1e3)
+            span = f"{-hi}" if lo == hi else f"{-hi}-{-lo}"
+            when = (f", {span} ms before a scheduled contact change" if hi < 0 else
+                    ", at a scheduled contact change" if lo == 0 == hi else f", {lo:+d} to {hi:+d} ms from a contact change")
+        parts.append(f"{len(b['exits'])} of {seen} left C at {names}{when}")
+    if b["not_in_c_within_a_period"]:
+        parts.append(f"{b['not_in_c_within_a_period']} of {seen} stayed in C for a period (left it later or did not "
+                     f"converge within {periods} periods)")
+    more = f" (the first {seen} of {b['failed']} located)" if b["failed"] > seen else ""
+    return f"bounded where starts at r = {b['r']:.4g} fail{more}: " + "; ".join(parts)
+
+
 def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict):
     """Bisection on r with one set of starts scaled to each radius (so a radius fails whenever a smaller one
     did, up to the contact projection), x*(t_k) + r W^-1/2 u, each put on the contact manifold of the feet
@@ -198,7 +251,7 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
     Wi = inverse_root(W)
     tol = float(o.get("oracle_h_tolerance", 0.0))  # the oracle's: it judges h >= -tol safe
     n_near = int(o.get("window_samples", 512))
-    log, confirm, rollouts = [], [], [0]
+    log, confirm, rollouts, least_fail = [], [], [0], [None]
 
     def draw():  # phases and directions: over the period, then before contact changes
         near = before_changes(prim, flow.dt, flow.steps, n_near, window, rng)
@@ -222,6 +275,7 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
             entry["failed_before_changes"] = int(bad.sum())
             if bad.any():
                 into.append({**entry, "failed": int(bad.sum()), "unsafe": int((hmin < 0).sum())})
+                failed(r, X0[:, near][:, bad], k[near][bad])
                 return False
         inside[n:] = False
         X0, ks = X0[:, inside], k[inside]
@@ -230,13 +284,20 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
         if ran < periods:
             bad = (hmin < 0) | ~np.isfinite(XT).all(axis=0)
             into.append({**entry, "failed": int(bad.sum()), "unsafe": int((hmin < 0).sum()), "stopped_after_periods": ran})
+            failed(r, X0[:, bad], ks[bad])
             return False
         E = XT - Xs[:, ks]  # whole periods later: the same phase
         dist = np.sqrt(np.einsum("ij,ik,kj->j", E, W, E))
         good = np.isfinite(dist) & (dist <= conv * r) & (hmin >= 0)
         into.append({**entry, "failed": int((~good).sum()), "unsafe": int((hmin < 0).sum()),
                      "worst_final_dist": float(np.nanmax(dist)) if np.isfinite(dist).any() else float("inf")})
+        if not good.all():
+            failed(r, X0[:, ~good], ks[~good])
         return bool(good.all())
+
+    def failed(r, X, k):  # the failing starts of the least radius that failed: what bounds the tube
+        if least_fail[0] is None or r < least_fail[0][0]:
+            least_fail[0] = (r, X, k)
 
     t_start = time.perf_counter()
     starts = draw()
@@ -250,7 +311,9 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
         r = 0.0 if confirm else r
     held = held_feet(prim.contacts) is not None
     near = int(starts[0].size - n)
+    bounded = bounded_by(flow, *least_fail[0], periods) if least_fail[0] is not None else None
     return r, {"samples_per_radius": n, "before_changes": near, "window_s": window,
+               **({"bounded_by": bounded} if bounded else {}),
                "simulations": rollouts[0], "bisection": log,
                "confirm": confirm, "capped": capped, "periods": periods, "dt": flow.dt, "conv": conv,
                "time_s": time.perf_counter() - t_start,

@@ -117,6 +117,7 @@ class HybridFlow:
         xs, ts = ca.MX.sym("x", nx), ca.MX.sym("t")
         h0 = h_of(xs, ts)
         self._least_h = ca.Function("hybrid_least_h", [xs, ts], [ca.mmin(h0) if h0.shape[0] else ca.inf])
+        self._h = ca.Function("hybrid_h", [xs, ts], [h0])
         zz = ca.MX.sym("z", nx + 2 + self.hold)  # a period with every step's state out, and with the last one only
         self.stretch = int(stretch)
         lengths = (self.steps, self.stretch) if self.stretch > 0 else (self.steps,)
@@ -139,6 +140,22 @@ class HybridFlow:
         of the flow judges its end state."""
         n = X.shape[1]
         return np.array(self._least_h.map(n)(X, np.asarray(t, float)[None, :]), float).ravel()
+
+    def first_exit(self, x0: np.ndarray, t0: float) -> dict | None:
+        """Where the rollout from x0 at clock t0 first leaves C within one period: the clock at the end of
+        the step whose state the flow judged unsafe, the safety function that is least there and its value;
+        None when it stays in C for the period."""
+        S = self.states(np.asarray(x0, float), float(t0))
+        nx = S.shape[0] - 2
+        out = np.flatnonzero(~(S[nx + 1] >= 0))
+        if not out.size:
+            return None
+        j = int(out[0])
+        hv = np.array(self._h(S[:nx, j], S[nx, j]), float).ravel()
+        names = list(getattr(self.prim, "h_names", []))
+        i = int(np.nanargmin(hv)) if np.isfinite(hv).any() else -1
+        return {"t": float(S[nx, j]), "h": names[i] if 0 <= i < len(names) else "?",
+                "value": float(hv[i]) if i >= 0 else float("nan")}
 
     def run(self, X0: np.ndarray, t0: np.ndarray, periods: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """End states and least h of rollouts from the columns of X0 at clocks t0."""

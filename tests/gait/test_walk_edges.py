@@ -53,6 +53,24 @@ def test_definition_1_takes_the_verifiers_orbit_bit_for_bit(sized):
         assert np.array_equal(a["mu"], b["mu"]) and len(a["neutral"]) == 3
 
 
+def test_the_walks_tube_is_bounded_just_before_a_touchdown(sized):
+    """What bounds Walk(in_place)'s E, as its evidence and message say: the starts that failed at the least
+    radius that failed leave C at a swing foot's ground functions (above_ground, touchdown_gap) in the last
+    milliseconds before a scheduled contact change, where the flow judged them below 0."""
+    prims, _s, res = sized
+    b = res.evidence["tube"]["bounded_by"]
+    assert b["r"] > res.radius and b["located"] >= 1 and b["failed"] >= b["located"]
+    for e in b["exits"]:
+        assert e["h"].split("[")[0] in ("above_ground", "touchdown_gap") and e["value"] < 0, e
+        assert -0.02 <= e["from_change_s"] <= 0, e
+    assert b["text"] in res.message and "before a scheduled contact change" in b["text"]
+    # the located exit is the flow's own: a start at the orbit stays in C over the period
+    from mpgspec.certify.hybrid_orbit import HybridFlow
+
+    walk = prims["Walk(in_place)"]
+    assert HybridFlow(walk, 0.001).first_exit(np.asarray(walk.x_star(0.0), float).ravel(), 0.0) is None
+
+
 def _call(prims, settings, a, b, t_a, t_b, **kw):
     return SafetyOracle(prims[b], settings.replace(**kw)).evaluate(prims[a].x_star(t_a)[None], np.array([t_b]))[0]
 

@@ -151,6 +151,22 @@ def test_floquet_multipliers_are_tabulated(sample_text):
     assert f"Floquet multipliers of {p['name']}" in html and "Neutral directions: phase" in html
 
 
+def test_what_bounds_a_tube_is_shown_beside_its_radius(sample_text):
+    """A gait's E column names the safety functions its failing starts left C at and where against the
+    contact changes (the floquet verifier's bounded_by); a long sizing message folds away; names are escaped."""
+    report = json.loads(sample_text)
+    p = next(p for p in report["primitives"] if p["roa_method"] == "floquet")
+    exits = [{"t": 0.179, "h": "above_ground[FR_foot]", "value": -2.5e-4, "from_change_s": -0.001},
+             {"t": 0.358, "h": EVIL, "value": -1e-4, "from_change_s": -0.002}]
+    p["roa_evidence"]["tube"]["bounded_by"] = {"r": 0.0078125, "failed": 2, "located": 2, "exits": exits,
+                                               "functions": {}, "not_in_c_within_a_period": 0, "text": "t"}
+    p["roa_message"] = "m" * 200
+    html = render_html(report)
+    assert "starts leave C from r = 0.007812: <code>above_ground[FR_foot]</code>" in html
+    assert "1-2 ms before a contact change" in html and EVIL not in html
+    assert "<summary>how it was sized</summary>" + "m" * 200 in html
+
+
 def test_sequence_runs_share_their_y_axes(sample_text):
     from mpgspec.report.compact import run_rows
     from mpgspec.report.svg import run_limits

@@ -94,6 +94,13 @@ class _LinearFlow:
     def least_h(self, X, t):
         return 1 - np.abs(X).max(0)
 
+    def first_exit(self, x0, t0):
+        """Where a start leaves C within its first period: x -> M x happens at the period's end."""
+        for x in (x0, self.M @ x0):
+            if np.abs(x).max() >= 1:
+                return {"t": t0 + self.steps * self.dt, "h": "box", "value": float(1 - np.abs(x).max())}
+        return None
+
     def run(self, X0, t0, periods):
         return self.run_until(X0, t0, periods)[:2]
 
@@ -247,6 +254,11 @@ class _ThinBeforeTouchdown(_LinearFlow):
     def run_stretch(self, X0, t0):
         return X0.copy(), np.where(self._thin(X0, t0), -1.0, 1 - np.abs(X0).max(0))
 
+    def first_exit(self, x0, t0):
+        if self._thin(x0[:, None], np.array([t0]))[0]:  # at the end of its step, 49 -> 50: the touchdown
+            return {"t": 50 * self.dt, "h": "touchdown_gap", "value": -1.0}
+        return super().first_exit(x0, t0)
+
     def run_until(self, X0, t0, periods, stop=None):
         X, hmin = super().run_until(X0, t0, periods, stop)[:2]
         return X, np.where(self._thin(X0, t0), -1.0, hmin), periods
@@ -265,6 +277,10 @@ def test_a_gaits_tube_finds_the_thin_phases_before_a_touchdown(monkeypatch):
     assert 0.18 <= r <= 0.2 and tube["before_changes"] == 512
     assert tube["confirm"][-1]["r"] == r and tube["confirm"][-1]["failed"] == 0  # fresh starts at r pass
     assert any(e.get("failed_before_changes") for e in tube["bisection"])  # what set the radius
+    # and the evidence says so: the least radius that failed, its starts leaving C at the touchdown step
+    b = tube["bounded_by"]
+    assert 0.2 - 1e-9 <= b["r"] <= 0.22 and b["located"] >= 1 and set(b["functions"]) == {"touchdown_gap"}
+    assert all(e["from_change_s"] == 0 for e in b["exits"]) and "at a scheduled contact change" in b["text"]
     blind, _ = floquet_hybrid._size(_ThinBeforeTouchdown(M), None, np.zeros((2, 100)), np.eye(2), 0.4,
                                     {**o, "window_samples": 0})
     assert blind > 0.3  # 48 starts over the period: the thin phases missed
