@@ -137,10 +137,18 @@ def _directions(m: int, n: int, rng: np.random.Generator) -> np.ndarray:
     return u
 
 
+def radius_scale(prim, t: np.ndarray) -> np.ndarray:
+    """E(t)'s radius over r at clocks t: smaller before a touchdown when the spec narrows it there
+    (roa.before_touchdown), else 1."""
+    scale = getattr(prim, "radius_scale", None)
+    return np.asarray(scale(t), float) * np.ones(np.shape(t)) if scale is not None else np.ones(np.shape(t))
+
+
 def placed(prim, dt: float, Xs: np.ndarray, Wi: np.ndarray, r: float, u: np.ndarray, k: np.ndarray,
            W: np.ndarray) -> np.ndarray:
-    """States x*(t_k) + r Wi u, each put on the contact manifold of the feet held at its phase."""
-    X0 = Xs[:, k] + r * (u @ Wi).T
+    """States x*(t_k) + r(t_k) Wi u (r(t) = r, or less before a touchdown: radius_scale), each put on the
+    contact manifold of the feet held at its phase."""
+    X0 = Xs[:, k] + r * radius_scale(prim, k * dt)[None, :] * (u @ Wi).T
     held = held_feet(prim.contacts)
     if held is not None:  # the starts of each set of held feet at once (each as it would be alone)
         sets = [tuple(held(j * dt)) for j in k]
@@ -166,9 +174,13 @@ def window_steps(window: float, dt: float) -> int:
 
 def before_changes(prim, dt: float, steps: int, m: int, window: float, rng: np.random.Generator) -> np.ndarray:
     """m phase steps in the last `window` seconds before a scheduled contact change (none for a loop whose
-    contacts never change): where a gait's tube is thinnest, a swing foot a little low or late there touches
-    the ground early or misses its touchdown, and a foot just planted is loaded as the other pair lifts."""
+    contacts never change), and before each stretch where E(t) narrows (roa.before_touchdown): where a gait's
+    tube is thinnest, a swing foot a little low or late there touches the ground early or misses its
+    touchdown, and a foot just planted is loaded as the other pair lifts."""
     changes = contact_changes(prim, dt, steps)
+    narrow = [int(round(lo / dt)) % steps for lo, _hi in getattr(prim, "narrow", ())]
+    if narrow:  # E(t) narrows before a touchdown: the full radius is thinnest just before it does
+        changes = np.unique(np.r_[changes, narrow]).astype(int)
     if not changes.size:
         return np.zeros(0, int)
     w = window_steps(window, dt)
@@ -231,6 +243,8 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
     """Bisection on r with one set of starts scaled to each radius (so a radius fails whenever a smaller one
     did, up to the contact projection), x*(t_k) + r W^-1/2 u, each put on the contact manifold of the feet
     held at its phase:
+    Where the spec narrows E(t) before the touchdowns (roa.before_touchdown), a start's radius there is r times
+    that ratio, and the search sizes r with the ratio kept.
     - `samples` starts at phases over the whole period, half inside the ball and half on its sphere, run
       `periods` periods: they must stay in C and end within conv r of the orbit (r, not each start's own
       distance: one deep inside the ball need not contract further than the sphere's);
@@ -288,7 +302,7 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
             return False
         E = XT - Xs[:, ks]  # whole periods later: the same phase
         dist = np.sqrt(np.einsum("ij,ik,kj->j", E, W, E))
-        good = np.isfinite(dist) & (dist <= conv * r) & (hmin >= 0)
+        good = np.isfinite(dist) & (dist <= conv * r * radius_scale(prim, ks * flow.dt)) & (hmin >= 0)
         into.append({**entry, "failed": int((~good).sum()), "unsafe": int((hmin < 0).sum()),
                      "worst_final_dist": float(np.nanmax(dist)) if np.isfinite(dist).any() else float("inf")})
         if not good.all():

@@ -183,7 +183,8 @@ def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: 
     With contact constraints the flows stay on the contact manifold (feet on the ground and still),
     so E is checked where they can reach it: points of E, on its boundary and inside, are projected
     onto the manifold of the primitive's contact mode and h is evaluated there. `radius` overrides
-    the primitive's radius of E.
+    the primitive's radius of E (a narrower stretch of E(t) before touchdowns keeps its ratio), and the clock
+    times include one in each such stretch.
     """
     rng = np.random.default_rng(seed)
     W = np.asarray(p.W)
@@ -198,7 +199,7 @@ def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: 
     for t in clock(p, 8):
         xs = p.x_star(t)
         d = rng.normal(size=(samples, L.shape[1]))
-        d = r * d / np.linalg.norm(d, axis=1, keepdims=True)
+        d = r * float(p.radius_scale(t)) * d / np.linalg.norm(d, axis=1, keepdims=True)
         for k, m in enumerate(least(h_many(p, offsets(xs, L, d), t))):
             if m < worst:
                 worst, arg = float(m), (t, d[k])
@@ -207,7 +208,7 @@ def roa_in_safe_set(p: CompiledPrimitive, tol: float, samples: int = 400, seed: 
         xs = p.x_star(t)
 
         def obj(z):
-            z = r * z / max(np.linalg.norm(z), 1e-12)
+            z = r * float(p.radius_scale(t)) * z / max(np.linalg.norm(z), 1e-12)
             h = h_active(p, xs + L @ z, t)
             return float(h.min()) if h.size else 0.0
 

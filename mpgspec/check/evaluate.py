@@ -18,9 +18,13 @@ S_SETTLED = 1e3  # time since switch-in at which every motion profile has finish
 
 
 def clock(p: CompiledPrimitive, n: int) -> np.ndarray:
-    """n clock times over p's domain (t = 0 alone for fixed primitives)."""
+    """n clock times over p's domain (t = 0 alone for fixed primitives), and the middle of each phase interval
+    where E(t) is narrower (CompiledPrimitive.narrow)."""
     a, b = p.t_range
-    return np.zeros(1) if p.cls is PrimitiveClass.FIXED else np.linspace(a, b, n, endpoint=False)
+    if p.cls is PrimitiveClass.FIXED:
+        return np.zeros(1)
+    ts = np.linspace(a, b, n, endpoint=False)
+    return np.sort(np.r_[ts, [0.5 * (lo + hi) for lo, hi in p.narrow]]) if p.narrow else ts
 
 
 def _cached(p: CompiledPrimitive, key: tuple, make):

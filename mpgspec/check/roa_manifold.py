@@ -122,11 +122,13 @@ def roa_on_contact_manifold(p, samples, rng, W, L, r, project, starts: int = 3, 
     k = L.shape[1]
     worst, raw_worst = np.inf, np.inf
     dist, spread, feet = [], [], set()
+    r0 = r
     for t in clock(p, 8):
         xs = p.x_star(t)
         scale = np.maximum(h_active(p, xs, t), 1e-9)
         if not scale.size:
             continue
+        r = r0 * float(p.radius_scale(t))  # E(t)'s radius (narrower before a touchdown)
         s = _Search(p, project, L, r, xs, t, scale, worst, feet)
         d = rng.normal(size=(2 * samples, k))
         d = d / np.linalg.norm(d, axis=1, keepdims=True)

@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 
 from ..spec.models import PrimitiveClass
-from .contacts import ContactPlan
+from .contacts import ContactPlan, wrap_clock
 from .events import EventWindow
 from .guards import Guards
 from .hold import SampledLaw
@@ -63,6 +63,8 @@ class CompiledPrimitive:
     # an input the law did not ask at x (a law reading a delayed or noisy state); made of loop_raw's expressions,
     # so not part of the digest
     grid_phase: float = 0.0  # clock of a periodic primitive's first grid sample (spec: grid.phase)
+    narrow: tuple[tuple[float, float], ...] = ()  # phase intervals [lo, hi) where E(t) is narrower (roa.before_touchdown)
+    narrow_ratio: float = 1.0  # E's radius there over `radius`
     cache: dict = field(default_factory=dict, repr=False)  # compiled oracle chunks by settings
 
     def __reduce__(self):
@@ -98,7 +100,7 @@ class CompiledPrimitive:
             if self.sampled is not None:
                 parts += [self.sampled.solve.serialize(), repr(self.sampled.period)]
             nums = repr((self.name, self.cls.value, self.period, self.domain, self.next, self.horizon, self.h_names,
-                         self.radius, self.windows, self.boundaries, self.hybrid, self.W.tolist(),
+                         self.radius, self.narrow, self.narrow_ratio, self.windows, self.boundaries, self.hybrid, self.W.tolist(),
                          self.system.u_lo.tolist(), self.system.u_hi.tolist()))
             self.cache["digest"] = hashlib.sha256("\n".join([*parts, nums]).encode()).hexdigest()
         return self.cache["digest"]
@@ -135,9 +137,18 @@ class CompiledPrimitive:
     def x_star(self, t) -> np.ndarray:
         return np.array(self.setpoint(t)).ravel()
 
+    def radius_scale(self, t):
+        """E(t)'s radius over `radius` at clock(s) t: narrow_ratio in the `narrow` phase intervals, else 1."""
+        return narrowing(t, self.narrow, self.narrow_ratio, self.period)
+
+    def radius_at(self, t):
+        """E(t)'s radius at clock(s) t."""
+        return self.radius * self.radius_scale(t)
+
     def with_radius(self, radius: float) -> "CompiledPrimitive":
-        """The same primitive with E resized; only the RoA margin is rebuilt."""
-        margin = roa_margin_function(self.system, self.setpoint, self.W, radius, function_name(self.name))
+        """The same primitive with E resized (a narrower stretch keeps its ratio); only the RoA margin is rebuilt."""
+        margin = roa_margin_function(self.system, self.setpoint, self.W, radius, function_name(self.name),
+                                     self.narrow, self.narrow_ratio, self.period)
         return dataclasses.replace(self, radius=radius, roa_margin=margin, cache={})
 
 
@@ -147,17 +158,33 @@ def _restore(blob: bytes) -> "CompiledPrimitive":
     return CompiledPrimitive(**state)
 
 
-def roa_margin_function(sys: CompiledSystem, setpoint: ca.Function, W: np.ndarray, radius: float, ident: str) -> ca.Function:
-    """(x, t) -> r - ||x - x*(t)||_W, positive inside E; wrapped states measured the short way round."""
-    if not setpoint.is_a("SXFunction"):  # a table lookup: an MX Function
-        x, t = ca.MX.sym("x", sys.nx), ca.MX.sym("t")
-        dx = sys.wrapped_error(x - setpoint(t))
-        margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
-        return ca.Function(f"roa_{ident}", [x, t], [margin], ["x", "t"], ["margin"])
-    t = ca.SX.sym("t")
-    dx = sys.wrapped_error(sys.x - setpoint(t))
-    margin = radius - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
-    return ca.Function(f"roa_{ident}", [sys.x, t], [margin], ["x", "t"], ["margin"])
+def narrowing(t, narrow: tuple, ratio: float, period: float | None):
+    """ratio where the clock t (a number, numpy array or CasADi expression), wrapped into the period, lies in
+    one of the `narrow` intervals [lo, hi), else 1."""
+    if not narrow:
+        return ca.DM(1.0) if isinstance(t, (ca.SX, ca.MX)) else np.ones_like(np.asarray(t, float))[()]
+    ph = wrap_clock(t, period)
+    if isinstance(t, (ca.SX, ca.MX)):
+        inside = ca.logic_or(*[ca.logic_and(ph >= lo, ph < hi) for lo, hi in narrow]) if len(narrow) > 1 else \
+            ca.logic_and(ph >= narrow[0][0], ph < narrow[0][1])
+        return ca.if_else(inside, ratio, 1.0)
+    ph = np.asarray(ph, float)
+    inside = np.zeros(ph.shape, bool)
+    for lo, hi in narrow:
+        inside |= (ph >= lo) & (ph < hi)
+    return np.where(inside, ratio, 1.0)[()]
+
+
+def roa_margin_function(sys: CompiledSystem, setpoint: ca.Function, W: np.ndarray, radius: float, ident: str,
+                        narrow: tuple = (), ratio: float = 1.0, period: float | None = None) -> ca.Function:
+    """(x, t) -> r(t) - ||x - x*(t)||_W, positive inside E(t); wrapped states measured the short way round.
+    r(t) is `radius`, times `ratio` in the `narrow` phase intervals of the period."""
+    sym = ca.MX if not setpoint.is_a("SXFunction") else ca.SX  # a table lookup is an MX Function
+    x, t = (ca.MX.sym("x", sys.nx) if sym is ca.MX else sys.x), sym.sym("t")
+    dx = sys.wrapped_error(x - setpoint(t))
+    r = radius * narrowing(t, narrow, ratio, period) if narrow else radius
+    margin = r - ca.sqrt(ca.mtimes([dx.T, ca.DM(W), dx]))
+    return ca.Function(f"roa_{ident}", [x, t], [margin], ["x", "t"], ["margin"])
 
 
 def function_name(name: str) -> str:

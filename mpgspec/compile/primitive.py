@@ -150,6 +150,44 @@ def _contact_mode(inst: PrimitiveInstance, sys: CompiledSystem, loop: OpenLoop, 
     return _Mode(loop, None)
 
 
+def touchdowns(schedule: Schedule) -> list[float]:
+    """Clock times within the period at which a scheduled phase adds a foot to the held set."""
+    phases = schedule.phases
+    out = []
+    for k, (until, feet) in enumerate(phases):
+        after = phases[(k + 1) % len(phases)][1]
+        if set(after) - set(feet):
+            out.append(float(until) % float(schedule.period) if schedule.period else float(until))
+    return sorted(out)
+
+
+def _narrow(inst: PrimitiveInstance, cm: _Mode, period: float | None) -> tuple[tuple, float]:
+    """(phase intervals [lo, hi) of the last roa.before_touchdown.window seconds before each scheduled touchdown,
+    E's radius there over roa.radius); none without before_touchdown. A located SpecError (MPG108) when the
+    primitive has no periodic contact schedule with touchdowns."""
+    nb = inst.spec.roa.before_touchdown
+    if nb is None:
+        return (), 1.0
+    sched = cm.schedule
+    tds = touchdowns(sched) if sched is not None and sched.period else []
+    if not tds:
+        raise SpecError("roa.before_touchdown needs scheduled touchdowns", location=inst.locate(("roa", "before_touchdown")),
+                        key=f"primitive '{inst.name}': roa.before_touchdown",
+                        expected="a periodic primitive whose contact schedule puts a foot down (a gait)",
+                        found="no scheduled touchdown" if sched is not None else "no contact schedule", code="MPG108")
+    w, T = float(nb.window), float(period)
+    if not w < T:
+        raise SpecError("the window before a touchdown must be shorter than the period",
+                        location=inst.locate(("roa", "before_touchdown", "window")),
+                        key=f"primitive '{inst.name}': roa.before_touchdown.window", expected=f"< {T:g} s",
+                        found=f"{w:g}", code="MPG104")
+    out = []
+    for td in tds:
+        lo = td - w
+        out += [(lo, td)] if lo >= 0 else [(0.0, td), (lo + T, T)] if td > 0 else [(lo + T, T)]
+    return tuple(sorted((round(a, 12), round(b, 12)) for a, b in out if b > a)), float(nb.radius) / float(inst.spec.roa.radius)
+
+
 def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, clock: _Clock, cm: _Mode,
               ctx: ControlContext, u_raw, setpoint: ca.Function, ident: str) -> CompiledPrimitive:
     """Close the loop: saturate the law, compose dynamics and safety functions with it, size E."""
@@ -171,12 +209,13 @@ def _assemble(inst: PrimitiveInstance, sys: CompiledSystem, ec: ExprCompiler, cl
     W = _roa_metric(inst, sys)
     radius = float(p.roa.radius) if p.roa.radius is not None else 0.0  # 0 until a verifier sizes E
     info = {**ctx.info, "roa_W": W.tolist()}  # the report's record
-    roa_margin = roa_margin_function(sys, setpoint, W, radius, ident)
+    narrow, ratio = _narrow(inst, cm, clock.period)
+    roa_margin = roa_margin_function(sys, setpoint, W, radius, ident, narrow, ratio, clock.period)
     grid = p.grid
     return CompiledPrimitive(
         name=inst.name, cls=p.class_, system=sys, period=clock.period, domain=clock.domain, next=p.next,
         horizon=p.horizon, grid_A=grid.t_A if grid else 0, grid_B=grid.t_B if grid else 0, h_names=names,
-        grid_phase=float(grid.phase) if grid else 0.0,
+        grid_phase=float(grid.phase) if grid else 0.0, narrow=narrow, narrow_ratio=ratio,
         radius=radius, f_cl=f_cl, control=control, h=h, roa_margin=roa_margin, setpoint=setpoint, W=W, info=info,
         contacts=cm.plan, jump=jump, loop=loop_fn, loop_raw=loop_raw, windows=windows,
         boundaries=_boundaries(windows, cm.plan, clock.period, clock.domain),

@@ -347,7 +347,7 @@ class _Simulation:
             return None
         c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clk, p.period)
         t_B = self.plan.switch_clock(self.cur, nxt, c, self.dt / 2)
-        if t_B is None or not self.plan.admits(self.cur, nxt, c, self.dt / 2, margin, p.radius):
+        if t_B is None or not self.plan.admits(self.cur, nxt, c, self.dt / 2, margin, p.radius_at(clk)):
             return None
         return (i, "graph", (nxt, t_B))
 

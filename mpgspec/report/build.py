@@ -50,6 +50,8 @@ def primitive_entry(p: CompiledPrimitive, spec, roa=None) -> dict:
         "name": p.name, "class": p.cls.value, "period": _f(p.period),
         "domain": list(p.domain) if p.domain else None, "next": p.next,
         "controller": c.type, "safety_functions": p.h_names, "roa_radius": _f(p.radius),
+        **({"roa_before_touchdown": {"window": float(spec.roa.before_touchdown.window),
+                                     "radius": _f(p.radius * p.narrow_ratio)}} if p.narrow else {}),
         "roa_method": rec["method"], "roa_level": rec["level"], "roa_message": rec["message"],
         "roa_evidence": rnd(finite_json(rec["evidence"])), "horizon": _f(p.horizon), "setpoint_t0": [float(v) for v in p.x_star(p.t_range[0])],
         "description": spec.description.strip(), "info": p.info, "guards": p.guards.record(),

@@ -90,6 +90,10 @@ class Primitive(_Strict):
     controller: str
     safety_functions: list[str]
     roa_radius: float | None = Field(description="radius of the region of attraction E (null when not finite)")
+    roa_before_touchdown: dict[str, float] | None = Field(default=None, description="where E(t) is narrower: "
+                                                          "{window: seconds before each scheduled touchdown, radius: "
+                                                          "E's radius there}; absent when E's radius is the same at "
+                                                          "every phase")
     roa_method: str = Field(description="how E was obtained: 'given' in the spec, or a verifier's name")
     roa_level: Literal["certified", "empirical", "given", "failed"] = "given"
     roa_message: str = ""

@@ -300,7 +300,7 @@ class _Runs:
                 c = 0.0 if p.cls is PrimitiveClass.FIXED else grid_clock(clk, p.period)
                 tb = self.plan.switch_clock(cur, nxt, c, self.ds.settings.dt / 2)
                 if tb is not None and self.plan.admits(cur, nxt, c, self.ds.settings.dt / 2, float(self.margin[r]),
-                                                       p.radius):
+                                                       p.radius_at(clk)):
                     return (nxt, tb)
         return None
 

@@ -43,7 +43,7 @@ def boundary_starts(prim: CompiledPrimitive, t_A: float, n: int, seed: int) -> l
     """
     xs = prim.x_star(t_A)
     W = metric(prim)
-    r = float(prim.radius)
+    r = float(prim.radius_at(t_A))
     if n <= 0 or r <= 0 or not (np.linalg.eigvalsh(W) > 1e-12).any():
         return []
     rng = np.random.default_rng([int(seed), zlib.crc32(prim.name.encode("utf-8", "surrogatepass"))])

@@ -146,14 +146,25 @@ class SafetyFunction(Strict):
         return self
 
 
+class NarrowE(Strict):
+    """E's radius in the last `window` seconds before each scheduled touchdown (a gait's E(t) narrows there)."""
+
+    window: Number = Field(gt=0, description="seconds before each scheduled touchdown")
+    radius: Number = Field(gt=0, description="E's radius there (at most roa.radius)")
+
+
 class ExplicitRoA(Strict):
     """E = {x : ||W^(1/2) (x - x*(t))|| < radius}; weights give a diagonal W, matrix a full one.
 
     method 'given' takes the radius as written; lyapunov, sos, sampling (fixed primitives) and
-    floquet (periodic) compute it, and `require` demands a level of evidence for it.
+    floquet (periodic) compute it, and `require` demands a level of evidence for it. With
+    `before_touchdown` the radius of E(t) is smaller in the last moments before each scheduled
+    touchdown, where a landing foot a few millimetres off leaves C, than over the rest of the period.
     """
 
     radius: Number | None = Field(default=None, gt=0)
+    before_touchdown: NarrowE | None = Field(default=None, description="a smaller radius of E(t) in the last "
+                                             "`window` seconds before each scheduled touchdown; needs `radius`")
     weights: list[Number] | None = None
     matrix: list[list[Number]] | None = None
     method: Text = Field(default="given", description="given | lyapunov | sos | sampling | floquet | a plug-in")
@@ -171,6 +182,9 @@ class ExplicitRoA(Strict):
     def _one_metric(self):
         if self.method == "given" and self.radius is None:
             raise ValueError("give 'radius', or a 'method' that computes it")
+        if self.before_touchdown is not None and (self.radius is None or self.before_touchdown.radius > self.radius):
+            raise ValueError("before_touchdown.radius must be at most 'radius' (give both: E away from the touchdowns "
+                             "and just before them)")
         if self.weights is not None and self.matrix is not None:
             raise ValueError("give at most one of 'weights' or 'matrix'")
         if self.weights is not None and any(w < 0 for w in self.weights):

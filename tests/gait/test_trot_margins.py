@@ -99,3 +99,28 @@ def test_a_swing_foot_lifts_before_it_is_pulled_over(prims):
         fid = pm.getFrameId(f)
         acc = pin.getFrameClassicalAcceleration(pm, data, fid, pin.LOCAL_WORLD_ALIGNED).linear
         assert abs(acc[2]) > 2 * np.hypot(acc[0], acc[1]), (f, acc)
+
+
+def test_e_narrows_before_each_scheduled_touchdown(a1_project):
+    """roa.before_touchdown: E(t) of a walk has the narrow radius in the last `window` seconds before each
+    scheduled touchdown (the trot's at 0.18 s and 0.36 s = 0) and roa.radius elsewhere; the RoA margin the
+    oracle and the executors read is r(t) - ||x - x*(t)||_W, and a share of E (with_radius) keeps the ratio."""
+    import dataclasses
+
+    from mpgspec.compile.primitive import compile_primitive, touchdowns
+    from mpgspec.spec.primitive import NarrowE
+
+    spec, prims, _s = a1_project
+    walk = prims["Walk(fast)"]
+    assert touchdowns(walk.contacts) == [0.0, 0.18]
+    inst = spec.primitive("Walk(fast)")
+    roa = inst.spec.roa.model_copy(update={"radius": 0.025, "before_touchdown": NarrowE(window=0.03, radius=0.006)})
+    p = compile_primitive(dataclasses.replace(inst, spec=inst.spec.model_copy(update={"roa": roa})), walk.system)
+    assert p.narrow == ((0.15, 0.18), (0.33, 0.36)) and p.narrow_ratio == pytest.approx(0.24)
+    for t, r in [(0.01, 0.025), (0.149, 0.025), (0.151, 0.006), (0.179, 0.006), (0.181, 0.025), (0.34, 0.006),
+                 (0.37, 0.025), (0.36 + 0.16, 0.006)]:
+        assert float(p.roa_margin(walk.x_star(t), t)) == pytest.approx(r, abs=1e-12), t
+        assert float(p.radius_at(t)) == pytest.approx(r, abs=1e-12), t
+    half = p.with_radius(0.0125)
+    assert float(half.radius_at(0.16)) == pytest.approx(0.003) and float(half.radius_at(0.1)) == pytest.approx(0.0125)
+    assert p.digest() != walk.with_radius(0.025).digest()  # the narrowing is part of what decides a verdict

@@ -14,6 +14,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from mpgspec.compile.closed_loop import narrowing
 from mpgspec.api import verify
 from mpgspec.check.region_size import COLLAPSE
 from verifiers import floquet_hybrid
@@ -284,3 +285,31 @@ def test_a_gaits_tube_finds_the_thin_phases_before_a_touchdown(monkeypatch):
     blind, _ = floquet_hybrid._size(_ThinBeforeTouchdown(M), None, np.zeros((2, 100)), np.eye(2), 0.4,
                                     {**o, "window_samples": 0})
     assert blind > 0.3  # 48 starts over the period: the thin phases missed
+
+
+class _NarrowBeforeTouchdown(_ThinBeforeTouchdown):
+    """The flow above whose E(t) the spec narrows to a tenth of r in the 5 steps before the touchdown
+    (roa.before_touchdown: CompiledPrimitive.narrow and radius_scale)."""
+
+    def __init__(self, M):
+        super().__init__(M)
+        narrow = ((0.45, 0.5),)
+        self.prim = SimpleNamespace(system=None, contacts=None, narrow=narrow,
+                                    radius_scale=lambda t: narrowing(t, narrow, 0.1, 1.0))
+
+
+def test_a_tube_narrowed_before_its_touchdown_is_as_wide_as_the_rest_allows(monkeypatch):
+    """Known answer: with E(t) a tenth as wide in the steps before the touchdown, the thin step (0.2 wide)
+    bounds r at 2 (a tenth of it there is 0.2; elsewhere the contracting flow keeps every start that lies in C
+    inside it), where the same flow with one radius for every phase gets at most 0.2. Starts also go just
+    before the narrowed stretch, where the full radius meets it."""
+    monkeypatch.setattr(floquet_hybrid, "contact_changes", lambda prim, dt, steps: np.array([50]))
+    M = np.diag([0.4, 0.3])
+    o = {"window": 0.05, "rtol": 0.02}
+    r, tube = floquet_hybrid._size(_NarrowBeforeTouchdown(M), None, np.zeros((2, 100)), np.eye(2), 0.4, o)
+    assert 1.8 <= r <= 2.0 and tube["bounded_by"]["functions"] == {"touchdown_gap": tube["bounded_by"]["located"]}
+    one, _ = floquet_hybrid._size(_ThinBeforeTouchdown(M), None, np.zeros((2, 100)), np.eye(2), 0.4, o)
+    assert one <= 0.2
+    k = floquet_hybrid.before_changes(_NarrowBeforeTouchdown(M).prim, 0.01, 100, 2000, 0.05,
+                                      np.random.default_rng(0))
+    assert set(k) == set(range(40, 50))  # before the narrowed stretch (45) and before the touchdown (50)

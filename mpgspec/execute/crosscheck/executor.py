@@ -116,7 +116,8 @@ class StateExecutor:
         t_B = plan.switch_clock(self.cur, nxt, c, self.dt / 2)
         if t_B is None:
             return None
-        if not plan.admits(self.cur, nxt, c, self.dt / 2, self._margin(p, x, clock) if m is None else m, p.radius):
+        if not plan.admits(self.cur, nxt, c, self.dt / 2, self._margin(p, x, clock) if m is None else m,
+                          p.radius_at(clock)):
             return None
         return self._switch(t, nxt, t_B)
 
