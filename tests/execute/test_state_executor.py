@@ -10,7 +10,7 @@ from mpgspec.spec.models import PrimitiveClass
 
 
 def _prim(cls, margin, period=None, domain=None, nxt=None):
-    return SimpleNamespace(cls=cls, period=period, domain=domain, next=nxt, radius=1.0,
+    return SimpleNamespace(cls=cls, period=period, domain=domain, next=nxt, radius=1.0, radius_at=lambda t: 1.0,
                            roa_margin=lambda x, t: np.array([[margin(x, t)]]))
 
 

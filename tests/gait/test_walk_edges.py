@@ -78,7 +78,7 @@ def _call(prims, settings, a, b, t_a, t_b, **kw):
 def test_stand_to_walk_in_place_is_safe_at_double_support_only(setup):
     prims, s = setup
     ev = _call(prims, s, "Stand", "Walk(in_place)", 0.0, 0.0)
-    assert ev.status == "safe" and 0.3 < ev.t_enter < 1.0
+    assert ev.status == "safe" and 0.1 < ev.t_enter < 1.0
     assert ev.entry_margin > ev.entry_error > 0
     # a pair is lifted from standing at once: never safe. The oracle's first sample already finds a
     # swing foot 10 um inside `aerial` against an error of 2.7e-4 (inconclusive); eight times finer,
@@ -128,6 +128,9 @@ def test_doubling_error_estimate_covers_the_true_error(setup):
         Mr.append(out[ref.rows.margin][0])
         Tr.append(out[ref.rows.s][0])
     Mr, Tr = np.concatenate(Mr), np.concatenate(Tr)
+    # E(t)'s radius is exact at every sample and steps at the narrowed stretches before the touchdowns: the
+    # integration error is the distance's, so compare -||x - x*(t)||_W, which the interpolation below assumes smooth
+    M, Mr = M - p.radius_at(T), Mr - p.radius_at(Tr)
     # the reference at the judged rollout's sample times: the two step grids part where a located
     # torque-limit crossing cuts a step, so the reference is interpolated between its samples, with
     # the interpolation's own error bound (its second differences / 8) added to the estimate
