@@ -220,18 +220,19 @@ def _crosscheck(cp: CompiledProject, g: MotionPrimitiveGraph, table: dict, runs:
     return xc
 
 
-SEQUENCE_RECORD = 2
+SEQUENCE_RECORD = 3
 """Layout of the memoised goal-sequence run (part of its key)."""
 
 
 def _sequence_runs(cp: CompiledProject, g: MotionPrimitiveGraph, table: dict, memo=None):
     """mode -> the goal sequence's run, naive and through the graph, as a stage: each kept in the memo
-    by what decides it (the closed loops, the oracle's grid and settings, which decide the graph and
-    its table, the sequence and the mode); the others one map, a mode per item."""
+    by what decides it (the closed loops, the project's oracle block and settings, which decide the graph,
+    its table and the shares of E_A each switch was checked from, the sequence and the mode); the others
+    one map, a mode per item."""
     spec, prims, settings = cp.spec, cp.prims, cp.settings
     modes = ("naive", "graph")
     keys = {mode: memo.key("sequence", SEQUENCE_RECORD, mode, *(p.digest() for p in prims.values()),
-                           spec.project.oracle.grid.model_dump_json(), spec.project.sequence.model_dump_json(),
+                           spec.project.oracle.model_dump_json(), spec.project.sequence.model_dump_json(),
                            sorted(dataclasses.asdict(settings).items())) for mode in modes} if memo is not None else {}
     known = {mode: memo.get(keys[mode]) for mode in keys}
     runs = {mode: SequenceRun(**known[mode]) for mode in modes if known.get(mode) is not None}

@@ -40,7 +40,7 @@ from .scenarios import Scenarios, scenarios, searched
 from .sequence import uncertain_stage
 
 LABEL = "empirical"
-RECORD = 11
+RECORD = 12
 """Layout of the memoised robust record and the rule that made it (part of its key): 10 runs a cell's scenarios in
 waves; 11 runs a target's own flow past its first wave only when an edge into it depends on it."""
 SAMPLED = "empirical (sampled)"
@@ -130,13 +130,15 @@ def robust_steps(cp, vg, progress=None, memo=None, workers: int = 1):
 
 
 def _key(spec, prims: dict, settings, memo) -> str | None:
-    """The memo key of the robust record: the closed loops, the system, the uncertainty, the sequence
+    """The memo key of the robust record: the closed loops, the system, the uncertainty, the sequence,
+    the project's oracle block (its grid and `from_roa` decide the nominal graph the uncertain runs follow)
     and the settings."""
     if memo is None:
         return None
     seq_spec = spec.project.sequence
     return memo.key("robust", RECORD, *(p.digest() for p in prims.values()), spec.system.model_dump_json(),
                     spec.project.uncertainty.model_dump_json(), seq_spec.model_dump_json() if seq_spec else None,
+                    spec.project.oracle.model_dump_json(),
                     sorted(dataclasses.asdict(settings).items()))
 
 

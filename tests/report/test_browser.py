@@ -340,29 +340,20 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
     first = cc["naive"]["mujoco"]["first_violation"]
     assert cc["naive"]["agree"] and first["h"] == "trunk_clearance" and _as_written(first["t"], t_both)
     ex = cc["graph"]["executor"]
-    (t_mj, t_mpg, t_leave, m_leave, t_stand, m_stand, share_m, t_up, t_up_mpg, t_lie, t_lie_mpg) = _claim(
-        r"It is safe and reaches Walk\(fast\) at ([\d.]+) s \(mpgspec ([\d.]+) s\), leaves it at ([\d.]+) s "
-        r"\(E margin ([\d.]+) at t_A = 0.01 s\) through Walk\(in_place\) to Stand \(([\d.]+) s\), and there waits "
-        r"for Jump until the next goal: .*? \(E margin ([\d.]+) at 11 s, where a quarter needs ([\d.]+)\); it goes up "
-        r"to Walk\(fast\) at ([\d.]+) s \(mpgspec ([\d.]+) s, from its landing\) and down through Walk\(in_place\) "
-        r"to Lie at ([\d.]+) s \(mpgspec ([\d.]+) s\)", readme)
-    assert ex["safe"] and not ex["reached_every_goal"]
-    sw = {}
-    for s in ex["switches"]:  # the first switch of each pair
-        sw.setdefault((s["from"], s["to"]), s)
-    assert _as_written(sw[("Walk(fast)", "Walk(in_place)")]["t"], t_leave)
-    assert _as_written(sw[("Walk(fast)", "Walk(in_place)")]["roa_margin"], m_leave)
-    assert _as_written(sw[("Walk(in_place)", "Stand")]["t"], t_stand)
-    up = [s for s in ex["switches"] if (s["from"], s["to"]) == ("Stand", "Walk(fast)")][-1]  # towards the second
-    assert up["t"] == pytest.approx(11.0) and _as_written(up["roa_margin"], m_stand)
-    stand = next(p for p in report["primitives"] if p["name"] == "Stand")
-    share = next(t for t in report["transitions"] if (t["from"], t["to"]) == ("Stand", "Jump"))["from_roa"]["rows"][0][0]
-    assert _as_written((1 - share) * stand["roa_radius"], share_m) and up["roa_margin"] < (1 - share) * stand["roa_radius"]
+    lag, t_mj, t_mpg, t_leave, m_leave, t_jump, t_jump_mpg, t_up, t_up_mpg, t_lie, t_lie_mpg = _claim(
+        r"It is safe and reaches every goal of Table II, at most ([\d.]+) s from mpgspec's run: Walk\(fast\) at "
+        r"([\d.]+) s \(mpgspec ([\d.]+) s\), down through Walk\(in_place\) \(leaving Walk\(fast\) at ([\d.]+) s with "
+        r"an E margin of ([\d.]+) at t_A = 0.01 s\) and Stand to Jump at ([\d.]+) s \(mpgspec ([\d.]+) s\), back up "
+        r"to Walk\(fast\) at ([\d.]+) s \(mpgspec ([\d.]+) s\) and down to Lie at ([\d.]+) s \(mpgspec ([\d.]+) s\)",
+        readme)
+    assert ex["safe"] and ex["reached_every_goal"] and _as_written(ex["largest_lag_s"], lag)
+    leave = next(s for s in ex["switches"] if (s["from"], s["to"]) == ("Walk(fast)", "Walk(in_place)"))
+    assert _as_written(leave["t"], t_leave) and _as_written(leave["roa_margin"], m_leave)
     got = [(g["goal"], g["arrived"], g["arrived_mpgspec"]) for g in ex["goals"] if g["t"] > 0]
-    assert got[0] == ("Walk(fast)", pytest.approx(float(t_mj), abs=5e-4), pytest.approx(float(t_mpg), abs=5e-5))
-    assert got[1][1] is None  # Jump never reached
-    assert _as_written(got[2][1], t_up) and _as_written(got[2][2], t_up_mpg)
-    assert _as_written(got[3][1], t_lie) and _as_written(got[3][2], t_lie_mpg)
+    assert [g[0] for g in got] == ["Walk(fast)", "Jump", "Walk(fast)", "Lie"]
+    for (_g, mj, mpg), (w_mj, w_mpg) in zip(got, [(t_mj, t_mpg), (t_jump, t_jump_mpg), (t_up, t_up_mpg),
+                                               (t_lie, t_lie_mpg)]):
+        assert _as_written(mj, w_mj) and _as_written(mpg, w_mpg), (mj, w_mj, mpg, w_mpg)
 
     run = report["sequence"]["runs"]["graph"]
     to_jump, last = _claim(r"and Stand to Jump \(([\d.]+) s: it waits in Stand.*?down through Walk\(in_place\) to "
