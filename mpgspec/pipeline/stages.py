@@ -129,9 +129,11 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
         certify_windows(g, prims, settings, executor, cb)
     samples = from_roa_samples(spec)
     t_roa = time.perf_counter()
-    if samples:
+    counts = sorted({n for n in samples.values() if n})
+    if counts:
         if progress:
-            progress(spec.name, f"switches from E_A's boundary ({samples} samples a row)", 0, 0)
+            many = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+            progress(spec.name, f"switches from E_A's boundary ({many} samples a row)", 0, 0)
         seq = spec.project.sequence
         from_roa_calls = check_from_roa(g, prims, settings, samples, executor, cb, seq.switch if seq else "first",
                                         seq.reserve if seq else None)
@@ -143,7 +145,7 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
     memo = getattr(executor, "memo", None)
     edges, failures = run(traces_stage(g, prims, settings, pairs, memo), executor, cb)
     calls = sum(len(tr.t_A) * len(tr.t_B) for tr in g.transitions.values())
-    timing = {"graph_s": t1 - t0, **({"from_roa_s": t1 - t_roa, "from_roa_calls": from_roa_calls} if samples else {}),
+    timing = {"graph_s": t1 - t0, **({"from_roa_s": t1 - t_roa, "from_roa_calls": from_roa_calls} if counts else {}),
               "oracle_calls": calls, "oracle_calls_per_s": calls / max(t1 - t0, 1e-9),
               "traces_s": time.perf_counter() - t1,
               **{k: v - before.get(k, 0) for k, v in getattr(executor, "stats", {}).items()}}  # this project's
@@ -232,7 +234,8 @@ def _sequence_runs(cp: CompiledProject, g: MotionPrimitiveGraph, table: dict, me
     spec, prims, settings = cp.spec, cp.prims, cp.settings
     modes = ("naive", "graph")
     keys = {mode: memo.key("sequence", SEQUENCE_RECORD, mode, *(p.digest() for p in prims.values()),
-                           spec.project.oracle.model_dump_json(), spec.project.sequence.model_dump_json(),
+                           spec.project.oracle.model_dump_json(), sorted(from_roa_samples(spec).items()),
+                           spec.project.sequence.model_dump_json(),
                            sorted(dataclasses.asdict(settings).items())) for mode in modes} if memo is not None else {}
     known = {mode: memo.get(keys[mode]) for mode in keys}
     runs = {mode: SequenceRun(**known[mode]) for mode in modes if known.get(mode) is not None}

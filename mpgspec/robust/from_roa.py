@@ -27,13 +27,23 @@ RIGID_BODY_SAMPLES = 8
 """Samples per row when the project does not say (oracle.from_roa), for rigid bodies; other systems: none."""
 
 
-def from_roa_samples(spec) -> int:
-    """Samples of E_A's boundary per row for a project (ProjectSpec): its oracle.from_roa, else
-    RIGID_BODY_SAMPLES for a rigid body and 0 (no check) for other systems."""
+def from_roa_samples(spec) -> dict[str, int]:
+    """Samples of E_A's boundary per row, by source primitive, for a project (ProjectSpec): the primitive's
+    roa.boundary_samples, else the project's oracle.from_roa, else RIGID_BODY_SAMPLES for a rigid body and 0
+    (no check) for other systems."""
     n = spec.project.oracle.from_roa
-    if n is not None:
-        return int(n)
-    return RIGID_BODY_SAMPLES if getattr(spec.system, "kind", None) == "rigid_body" else 0
+    if n is None:
+        n = RIGID_BODY_SAMPLES if getattr(spec.system, "kind", None) == "rigid_body" else 0
+    out = {}
+    for inst in spec.primitives:
+        own = inst.spec.roa.boundary_samples
+        out[inst.name] = int(n if own is None else own)
+    return out
+
+
+def samples_of(samples: int | dict[str, int], source: str) -> int:
+    """Samples a row out of `source` is checked from (one count for every source, or a count by source)."""
+    return int(samples.get(source, 0)) if isinstance(samples, dict) else int(samples)
 
 
 def _rows(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], rule: str, reserve: float | None):
@@ -53,11 +63,11 @@ FRACTIONS = (1.0, 0.5, 0.25)
 
 
 def check_from_roa(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
-                   samples: int, executor: Executor | None = None, progress=None, rule: str = "first",
+                   samples: int | dict[str, int], executor: Executor | None = None, progress=None, rule: str = "first",
                    reserve: float | None = None) -> int:
     """Fill each edge's row_from_roa (per t_A: [share of r_A, safe samples, samples drawn on E_A's
     boundary], None where the row is not checked) and from_roa_worst (the worst sample on E_A's
-    boundary that was not safe); returns the oracle calls made.
+    boundary that was not safe); returns the oracle calls made. `samples`: per row, or by source primitive.
 
     A row is checked at r_A; when a sample there is not safe, at each smaller share of FRACTIONS in
     turn. Its share is the first at which every sample is safe (0 when none is: the row is refused),
@@ -110,7 +120,7 @@ def _run(g, prims, settings, samples: int, share: float, rows: list, executor, p
     for row in rows:
         a, b, _i, t_a, t_b = row
         src = prims[a] if share == 1.0 else prims[a].with_radius(share * float(prims[a].radius))
-        for s in boundary_starts(src, t_a, samples, SEED):
+        for s in boundary_starts(src, t_a, samples_of(samples, a), SEED):
             points.setdefault(b, []).append((s.x, t_b, row))
     if not points:
         return {}

@@ -29,6 +29,7 @@ from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
 from ..plan.planner import lookup_table
 from ..spec.uncertainty_refs import latency_steps, rigid_nominal
 from ..progress import of_project
+from .from_roa import from_roa_samples
 from ..oracle.executors import InProcess
 from ..oracle.joint import Map, concurrently, run
 from ..oracle.tasks import Failed
@@ -138,7 +139,7 @@ def _key(spec, prims: dict, settings, memo) -> str | None:
     seq_spec = spec.project.sequence
     return memo.key("robust", RECORD, *(p.digest() for p in prims.values()), spec.system.model_dump_json(),
                     spec.project.uncertainty.model_dump_json(), seq_spec.model_dump_json() if seq_spec else None,
-                    spec.project.oracle.model_dump_json(),
+                    spec.project.oracle.model_dump_json(), sorted(from_roa_samples(spec).items()),
                     sorted(dataclasses.asdict(settings).items()))
 
 

@@ -165,6 +165,9 @@ class ExplicitRoA(Strict):
     radius: Number | None = Field(default=None, gt=0)
     before_touchdown: NarrowE | None = Field(default=None, description="a smaller radius of E(t) in the last "
                                              "`window` seconds before each scheduled touchdown; needs `radius`")
+    boundary_samples: int | None = Field(default=None, ge=0, description="samples of E(t_A)'s boundary each switch "
+                                         "out of this primitive is checked from; default: the project's "
+                                         "oracle.from_roa")
     weights: list[Number] | None = None
     matrix: list[list[Number]] | None = None
     method: Text = Field(default="given", description="given | lyapunov | sos | sampling | floquet | a plug-in")

@@ -1,6 +1,6 @@
 """The goal-sequence runs kept between verifies are taken again only when everything that decides them is
-unchanged: the closed loops, the sequence, and the project's oracle block, whose `from_roa` decides the share
-of E_A each switch of the graph run was checked from."""
+unchanged: the closed loops, the sequence, and the project's oracle block and its primitives' roa.boundary_samples,
+whose counts decide the share of E_A each switch of the graph run was checked from."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -37,3 +37,10 @@ def test_a_changed_from_roa_runs_the_sequence_again(tmp_path, monkeypatch):
     (project / "project.yaml").write_text(text.replace("\noracle:\n", "\noracle:\n  from_roa: 4\n", 1))
     run()
     assert len(calls) == 4  # the graph run follows shares checked from E_A's boundary now: both run again
+    hang = project / "primitives" / "hang.yaml"
+    text = hang.read_text()
+    assert "roa: {radius: 0.15, method: lyapunov}" in text
+    hang.write_text(text.replace("roa: {radius: 0.15, method: lyapunov}",
+                                 "roa: {radius: 0.15, method: lyapunov, boundary_samples: 6}"))
+    run()
+    assert len(calls) == 6  # switches out of Hang checked from 6 samples: both run again

@@ -127,3 +127,21 @@ def test_only_the_rows_the_sequences_rule_takes_are_checked(tmp_path):
             i = min(range(len(t["t_A"])), key=lambda k: abs(t["t_A"][k] - c))
             assert t["from_roa"]["rows"][i][0] > 0 and t["from_roa"]["rows"][i][2] == 4
         since = (s["t"], s["clock"])
+
+
+def test_a_primitive_may_be_checked_from_more_samples_than_the_project(tmp_path, line_spec):
+    """roa.boundary_samples of the source primitive overrides the project's oracle.from_roa for the rows out
+    of it (the rows record the samples drawn), and the checks' count goes into the memo keys of the runs."""
+    path = tmp_path / "project.yaml"
+    text = line_spec("escape", 100, [("Hold", "-4*x", "16 - x^2", 0.9), ("Go", "-2*x + x^3", "16 - x^2", 0.2)],
+                     TAIL.format(extra=", from_roa: 4"))
+    path.write_text(text.replace("    roa: {radius: 0.9}\n", "    roa: {radius: 0.9, boundary_samples: 12}\n", 1))
+    (p,) = api.verify([path], out_dir=None, overrides={"jit": False}).projects
+    assert not p.errors, p.errors
+    rows = {(t["from"], t["to"]): t["from_roa"]["rows"] for t in p.report["transitions"] if "from_roa" in t}
+    assert rows[("Hold", "Go")][0] == [1.0, 12, 12]  # from Hold: its own 12
+    assert all(r[2] == 4 for r in rows.get(("Go", "Hold"), []) if r)  # from Go: the project's 4
+    from mpgspec.robust.from_roa import from_roa_samples
+    from mpgspec.spec.loader import load_project
+
+    assert from_roa_samples(load_project(path)) == {"Hold": 12, "Go": 4}
