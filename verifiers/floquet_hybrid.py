@@ -10,6 +10,7 @@ contact manifold of the feet held at their phase), so it is 'empirical'.
 from __future__ import annotations
 
 import time
+from collections import Counter
 
 import numpy as np
 
@@ -209,11 +210,9 @@ def bounded_by(flow: HybridFlow, r: float, X: np.ndarray, k: np.ndarray, periods
             c = int(nxt[0]) if nxt.size else int(changes[0]) + flow.steps
             e["from_change_s"] = round((p - c) * flow.dt, 9)
         exits.append(e)
-    funcs: dict[str, int] = {}
-    for e in exits:
-        funcs[e["h"]] = funcs.get(e["h"], 0) + 1
+    funcs = Counter(e["h"] for e in exits).most_common()
     out = {"r": r, "failed": int(X.shape[1]), "located": len(exits), "exits": exits,
-           "functions": dict(sorted(funcs.items(), key=lambda kv: -kv[1])), "not_in_c_within_a_period": later}
+           "functions": dict(funcs), "not_in_c_within_a_period": later}
     out["text"] = bounded_text(out, periods)
     return out
 

@@ -122,23 +122,22 @@ def roa_on_contact_manifold(p, samples, rng, W, L, r, project, starts: int = 3, 
     k = L.shape[1]
     worst, raw_worst = np.inf, np.inf
     dist, spread, feet = [], [], set()
-    r0 = r
     for t in clock(p, 8):
         xs = p.x_star(t)
         scale = np.maximum(h_active(p, xs, t), 1e-9)
         if not scale.size:
             continue
-        r = r0 * float(p.radius_scale(t))  # E(t)'s radius (narrower before a touchdown)
-        s = _Search(p, project, L, r, xs, t, scale, worst, feet)
+        rt = r * float(p.radius_scale(t))  # E(t)'s radius (narrower before a touchdown)
+        s = _Search(p, project, L, rt, xs, t, scale, worst, feet)
         d = rng.normal(size=(2 * samples, k))
         d = d / np.linalg.norm(d, axis=1, keepdims=True)
-        d *= r * np.r_[np.ones(samples), rng.uniform(size=samples)][:, None]
+        d *= rt * np.r_[np.ones(samples), rng.uniform(size=samples)][:, None]
         X0, X, H = s.h_projected(d)
         dist += _wnorms(W, X - X0)
         spread += _wnorms(W, X - xs)
         raw_worst = fold_min(raw_worst, least(h_many(p, X0, t)))
         cands = list(zip(s.rel(H), d, H))
-        if r > 0:
+        if rt > 0:
             H0 = s.hv(np.zeros((1, k)))
             bounds = [z for z in (s.to_boundary(g) for g in s.jac(np.zeros((1, k)), H0)[0]) if z is not None]
             if bounds:

@@ -8,6 +8,7 @@ CasADi's serialisation, so the compile cache and worker processes can store and 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import pickle
 import re
@@ -164,9 +165,8 @@ def narrowing(t, narrow: tuple, ratio: float, period: float | None):
     if not narrow:
         return ca.DM(1.0) if isinstance(t, (ca.SX, ca.MX)) else np.ones_like(np.asarray(t, float))[()]
     ph = wrap_clock(t, period)
-    if isinstance(t, (ca.SX, ca.MX)):
-        inside = ca.logic_or(*[ca.logic_and(ph >= lo, ph < hi) for lo, hi in narrow]) if len(narrow) > 1 else \
-            ca.logic_and(ph >= narrow[0][0], ph < narrow[0][1])
+    if isinstance(t, (ca.SX, ca.MX)):  # logic_or takes two operands: fold over the intervals
+        inside = functools.reduce(ca.logic_or, [ca.logic_and(ph >= lo, ph < hi) for lo, hi in narrow])
         return ca.if_else(inside, ratio, 1.0)
     ph = np.asarray(ph, float)
     inside = np.zeros(ph.shape, bool)

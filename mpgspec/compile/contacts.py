@@ -126,6 +126,15 @@ class Schedule:
         """Clock times at which the contact set switches."""
         return tuple(float(until) for until, _ in self.phases)
 
+    @property
+    def touchdowns(self) -> list[float]:
+        """Clock times within the period at which the next phase adds a foot to the held set."""
+        out = []
+        for k, (until, feet) in enumerate(self.phases):
+            if set(self.phases[(k + 1) % len(self.phases)][1]) - set(feet):
+                out.append(float(until) % float(self.period) if self.period else float(until))
+        return sorted(out)
+
     def held(self, t: float) -> tuple[str, ...]:
         """The feet held at clock t, read as `mode` reads it (a clock within SNAP of a switch is at it)."""
         tc = clock_phase(t + SNAP, float(self.period) if self.period is not None else float("inf"))

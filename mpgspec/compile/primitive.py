@@ -150,17 +150,6 @@ def _contact_mode(inst: PrimitiveInstance, sys: CompiledSystem, loop: OpenLoop, 
     return _Mode(loop, None)
 
 
-def touchdowns(schedule: Schedule) -> list[float]:
-    """Clock times within the period at which a scheduled phase adds a foot to the held set."""
-    phases = schedule.phases
-    out = []
-    for k, (until, feet) in enumerate(phases):
-        after = phases[(k + 1) % len(phases)][1]
-        if set(after) - set(feet):
-            out.append(float(until) % float(schedule.period) if schedule.period else float(until))
-    return sorted(out)
-
-
 def _narrow(inst: PrimitiveInstance, cm: _Mode, period: float | None) -> tuple[tuple, float]:
     """(phase intervals [lo, hi) of the last roa.before_touchdown.window seconds before each scheduled touchdown,
     E's radius there over roa.radius); none without before_touchdown. A located SpecError (MPG108) when the
@@ -169,7 +158,7 @@ def _narrow(inst: PrimitiveInstance, cm: _Mode, period: float | None) -> tuple[t
     if nb is None:
         return (), 1.0
     sched = cm.schedule
-    tds = touchdowns(sched) if sched is not None and sched.period else []
+    tds = sched.touchdowns if sched is not None and sched.period else []
     if not tds:
         raise SpecError("roa.before_touchdown needs scheduled touchdowns", location=inst.locate(("roa", "before_touchdown")),
                         key=f"primitive '{inst.name}': roa.before_touchdown",

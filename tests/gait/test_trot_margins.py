@@ -107,12 +107,12 @@ def test_e_narrows_before_each_scheduled_touchdown(a1_project):
     oracle and the executors read is r(t) - ||x - x*(t)||_W, and a share of E (with_radius) keeps the ratio."""
     import dataclasses
 
-    from mpgspec.compile.primitive import compile_primitive, touchdowns
+    from mpgspec.compile.primitive import compile_primitive
     from mpgspec.spec.primitive import NarrowE
 
     spec, prims, _s = a1_project
     walk = prims["Walk(fast)"]
-    assert touchdowns(walk.contacts) == [0.0, 0.18]
+    assert walk.contacts.touchdowns == [0.0, 0.18]
     inst = spec.primitive("Walk(fast)")
     roa = inst.spec.roa.model_copy(update={"radius": 0.025, "before_touchdown": NarrowE(window=0.03, radius=0.006)})
     p = compile_primitive(dataclasses.replace(inst, spec=inst.spec.model_copy(update={"roa": roa})), walk.system)
