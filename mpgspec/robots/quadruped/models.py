@@ -69,8 +69,6 @@ class TrotController(Strict):
     lift_fraction: Number = Field(default=0.0, ge=0, lt=1, description="share of the swing over which the swing "
                                   "foot's horizontal pull ramps in from 0: the foot lifts before it moves over; "
                                   "0: the path's pull from lift-off")
-    liftoff_speed: Number = Field(default=0.0, ge=0, description="upward foot speed the swing path starts with at "
-                                  "lift-off (m/s): the foot clears the ground sooner after it is released")
     swing_feedforward: bool = Field(default=False, description="add the swing path's acceleration through the "
                                     "leg's inertia (tau += M_leg J_leg^-1 a_d): the foot follows its path with "
                                     "low swing gains, which a law that reads its state late or noisy needs")

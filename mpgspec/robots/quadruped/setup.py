@@ -74,7 +74,7 @@ def gait_header(path) -> dict[str, str]:
 
 LEGACY = {"kz": 100.0, "dz": 20.0, "d_yaw": 10.0, "f_min": 10.0, "regularization": 1e-4, "moment_weight": 10.0,
           "cone_fraction": 0.9, "placement_fraction": 0.8, "lift_fraction": 0.0,
-          "touchdown_height": 0.0, "swing_feedforward": 0.0, "liftoff_speed": 0.0}
+          "touchdown_height": 0.0, "swing_feedforward": 0.0}
 """Settings the trot's law had as fixed numbers before they were spec fields: the hash of the inputs
 holds them only when they differ, so that tables generated before stay valid."""
 OPTIONAL = ("accel_limit", "friction")

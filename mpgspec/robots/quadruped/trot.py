@@ -56,7 +56,6 @@ class TrotGains:
     apex: float = 0.07  # swing foot apex
     touchdown_speed: float = 0.3  # downward foot speed at the scheduled touchdown
     touchdown_height: float = 0.0  # swing foot height asked at the scheduled touchdown
-    liftoff_speed: float = 0.0  # upward foot speed the swing path starts with
     kv: float = 10.0  # CoM velocity gain (1/s)
     kz: float = 100.0  # height stiffness (1/s^2)
     dz: float = 20.0  # height damping (1/s)
@@ -160,11 +159,11 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
     tc = wrap_clock(t, period)
     tau_swing = {g.pair_b: tc - g.double_support, g.pair_a: tc - half - g.double_support}
     if g.swing_feedforward:  # minimum-jerk pieces: the path's acceleration is continuous, 0 at both ends and the apex
-        z_up = lambda s: quintic_profile(s, g.swing / 2, 0.0, g.liftoff_speed, g.apex, 0.0)  # noqa: E731
+        z_up = lambda s: quintic_profile(s, g.swing / 2, 0.0, 0.0, g.apex, 0.0)  # noqa: E731
         z_dn = lambda s: quintic_profile(s, g.swing / 2, g.apex, 0.0, g.touchdown_height, -g.touchdown_speed)  # noqa: E731
         step = _smootherstep
     else:
-        z_up = lambda s: cubic_profile(s, g.swing / 2, ca.DM(0), ca.DM(g.liftoff_speed), ca.DM(g.apex), ca.DM(0))  # noqa: E731
+        z_up = lambda s: cubic_profile(s, g.swing / 2, ca.DM(0), ca.DM(0), ca.DM(g.apex), ca.DM(0))  # noqa: E731
         z_dn = lambda s: cubic_profile(s, g.swing / 2, ca.DM(g.apex), ca.DM(0), ca.DM(g.touchdown_height),
                                         ca.DM(-g.touchdown_speed))  # noqa: E731
         step = _smoothstep
@@ -256,7 +255,7 @@ def gains_of(c, speed: float, sys, ec=None) -> TrotGains:
     height = stance_height(sys, dict(c.pose)) if c.height is None else float(c.height)
     return TrotGains(speed=speed, swing=float(c.swing), double_support=float(c.double_support),
                      height=height, apex=float(c.apex), touchdown_speed=float(c.touchdown_speed),
-                     touchdown_height=float(c.touchdown_height), liftoff_speed=float(c.liftoff_speed),
+                     touchdown_height=float(c.touchdown_height),
                      kv=float(c.kv), raibert=float(c.raibert), kp_swing=float(c.kp_swing),
                      kd_swing=float(c.kd_swing), k_tilt=float(c.k_tilt), d_tilt=float(c.d_tilt),
                      kz=float(c.kz), dz=float(c.dz), d_yaw=float(c.d_yaw), f_min=min_normal_force(c, sys),
