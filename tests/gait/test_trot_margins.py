@@ -137,7 +137,7 @@ def test_the_swing_feedforward_path_is_minimum_jerk_pieces():
     for T, p0, v0, pf, vf in [(0.08, 0.0, 0.0, 0.07, 0.0), (0.08, 0.07, 0.0, 0.0007, -0.3)]:
         f = ca.Function("q", [s], list(quintic_profile(s, T, p0, v0, pf, vf)))
         for t in np.linspace(0.001, T - 0.001, 9):
-            (_p, v_, a_), (pp, vp, _), (pm, vm, _) = (f(t), f(t + 1e-6), f(t - 1e-6))
+            (v_, a_), (pp, vp), (pm, vm) = f(t)[1:], f(t + 1e-6)[:2], f(t - 1e-6)[:2]
             assert float(v_) == pytest.approx(float(pp - pm) / 2e-6, rel=1e-6, abs=1e-9)
             assert float(a_) == pytest.approx(float(vp - vm) / 2e-6, rel=1e-5, abs=1e-6)
         start, end = [np.array([float(v) for v in f(x)]) for x in (0.0, T)]
@@ -145,7 +145,7 @@ def test_the_swing_feedforward_path_is_minimum_jerk_pieces():
         assert [float(v) for v in f(T + 0.01)] == pytest.approx([pf, vf, 0.0])
     g = ca.Function("g", [s], list(_smootherstep(s)))
     for sig in np.linspace(0.01, 0.99, 9):
-        (_y, dy, ddy), (yp, dyp, _), (ym, dym, _) = g(sig), g(sig + 1e-6), g(sig - 1e-6)
+        (dy, ddy), (yp, dyp), (ym, dym) = g(sig)[1:], g(sig + 1e-6)[:2], g(sig - 1e-6)[:2]
         assert float(dy) == pytest.approx(float(yp - ym) / 2e-6, rel=1e-6, abs=1e-9)
         assert float(ddy) == pytest.approx(float(dyp - dym) / 2e-6, rel=1e-5, abs=1e-6)
     assert [float(v) for v in g(0.0)] == [0.0, 0.0, 0.0] and [float(v) for v in g(1.0)] == [1.0, 0.0, 0.0]
