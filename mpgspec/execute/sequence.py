@@ -194,6 +194,10 @@ class _Simulation:
         self.converged = False
         self.goal, self.cmd_i = self.cur, 0
         self.nsteps = int(round(seq.duration / self.dt))
+        # time is the switch-in time plus the time since switch-in the steps report (s), not steps x dt: a
+        # step that ends on a switching time or a window's edge is shorter than dt, and the clock the law
+        # and a replay of the run read advances by the steps' own lengths
+        self.t_sw, self.c_sw, self.S = 0.0, 0.0, None
         self.stride = max(1, self.nsteps // max_points)
         self.k = 0
         self.seen = False  # a violation recorded since the last switch
@@ -213,6 +217,7 @@ class _Simulation:
         x = self.prims[cur].x_star(clock)
         self.z = initial_state(self.prims[cur], x, clock)
         run.switches.append({"t": 0.0, "to": cur, "clock": clock, "reason": "start"})
+        self.c_sw = clock
         run.final_primitive = cur
         if not np.isfinite(x).all():
             run.safe = False
@@ -229,6 +234,7 @@ class _Simulation:
         self.cur, self.converged = to, False
         self.run.final_primitive = self.cur
         self.z = initial_state(self.prims[to], x_now, t_B)
+        self.t_sw, self.c_sw = t_now, float(t_B)
 
     def advance(self) -> bool:
         """Run one chunk of the active primitive and act on its first event; False when the run ends."""
@@ -241,7 +247,7 @@ class _Simulation:
             run.failed = f"{self.cur} at t = {self.k * self.dt:.3f} s: {err}"
             return False
         r = ch.rows
-        H, M, X = out[r.h, 0], out[r.margin, 0], out[r.x, 0]
+        H, M, X, self.S = out[r.h, 0], out[r.margin, 0], out[r.x, 0], out[r.s, 0]
         event = self._scan(p, ch.K, r.nh, H, M, X)
         if event is None:
             self.z = zf[:, 0]
@@ -251,13 +257,11 @@ class _Simulation:
 
     def _scan(self, p: CompiledPrimitive, K: int, nh: int, H, M, X):
         """The chunk's first event (step, kind, argument), monitoring and storing each sample before it."""
-        nx = p.system.nx
         for i in range(K):
-            if self.k + i >= self.nsteps:
+            t_now, clk = self.t_sw + self.S[i], self.c_sw + self.S[i]
+            if t_now >= (self.nsteps - 0.5) * self.dt:
                 return (i, "end", None)
-            t_now = (self.k + i) * self.dt
             xi = X[:, i]
-            clk = self.z[nx] + i * self.dt
             if not np.isfinite(xi).all():
                 self.run.safe = False
                 self.run.failed = f"non-finite state at t = {t_now:.3f} s in {self.cur}"
@@ -354,7 +358,7 @@ class _Simulation:
     def _act(self, event, X) -> bool:
         """Switch (or end) at the event's step; False when the run ends."""
         i, kind, arg = event
-        t_now = (self.k + i) * self.dt
+        t_now = self.t_sw + self.S[i]
         self.k += i
         xi = X[:, i]
         if kind == "end":

@@ -222,7 +222,7 @@ def _crosscheck(cp: CompiledProject, g: MotionPrimitiveGraph, table: dict, runs:
     return xc
 
 
-SEQUENCE_RECORD = 3
+SEQUENCE_RECORD = 4
 """Layout of the memoised goal-sequence run (part of its key)."""
 
 
