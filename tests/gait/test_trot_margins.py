@@ -149,3 +149,29 @@ def test_the_swing_feedforward_path_is_minimum_jerk_pieces():
         assert float(dy) == pytest.approx(float(yp - ym) / 2e-6, rel=1e-6, abs=1e-9)
         assert float(ddy) == pytest.approx(float(dyp - dym) / 2e-6, rel=1e-5, abs=1e-6)
     assert [float(v) for v in g(0.0)] == [0.0, 0.0, 0.0] and [float(v) for v in g(1.0)] == [1.0, 0.0, 0.0]
+
+
+def test_a_sequence_runs_clock_is_its_time(a1_project):
+    """A goal-sequence run's time is the time its steps took: Walk(fast) run from its orbit for one
+    second (0.5 ms steps, some shortened to the touchdown windows' edges) is on the orbit at the clock
+    of each sample's own time, x(t) = x*(c0 + t) (counting a shortened step as a whole one drifted by
+    2.5 ms a stride)."""
+    from mpgspec.execute.sequence import simulate_sequence
+    from mpgspec.spec.project import Sequence
+
+    spec, prims, settings = a1_project
+    p = prims["Walk(fast)"]
+    seq = Sequence(start="Walk(fast)", commands=[{"t": 0, "goal": "Walk(fast)"}], duration=1.0, dt=0.0005)
+    run = simulate_sequence(prims, None, None, seq, settings, "naive")
+    assert run.safe and run.t[-1] > 0.99
+    W, c0 = np.asarray(p.W), p.start_clock()
+    changes = np.array([0.0, 0.02, 0.18, 0.2, 0.36])  # lift-offs and touchdowns: x*(t) is a table across them
+
+    def off(t, x):
+        e = np.asarray(x) - p.x_star(c0 + t)
+        return float(np.sqrt(e @ W @ e))
+
+    far = [(t, x) for t, x in zip(run.t, run.x) if np.abs((c0 + t) % p.period - changes).min() > 2e-3]
+    assert len(far) > 1500
+    worst = max(off(t, x) for t, x in far)
+    assert worst < 0.01, worst  # 0.64 when a shortened step counted as a whole one
