@@ -90,10 +90,11 @@ def test_stand_to_walk_in_place_is_safe_at_double_support_only(setup):
 
 
 def test_summed_local_estimates_cannot_resolve_the_walks_tube(setup):
-    """The same switch judged with summed per-step estimates stays inconclusive: their sum on E's
-    margin outgrows the tube while the flow converges."""
+    """Stand -> Walk(fast), which step doubling verifies, judged with summed per-step estimates stays
+    inconclusive: their sum on E's margin outgrows the fast walk's tube while the flow converges."""
     prims, s = setup
-    ev = _call(prims, s, "Stand", "Walk(in_place)", 0.0, 0.0, error="local")
+    assert _call(prims, s, "Stand", "Walk(fast)", 0.0, 0.19).status == "safe"
+    ev = _call(prims, s, "Stand", "Walk(fast)", 0.0, 0.19, error="local")
     assert ev.status == "inconclusive"
 
 

@@ -207,7 +207,10 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
             a_z = ca.if_else(up, z_up(tau)[2], z_dn(tau - g.swing / 2)[2])
             tau_sw = tau_sw + ca.mtimes(M[list(leg.v), list(leg.v)], ca.solve(J, ca.vertcat(a_xy, a_z)))
         c = flags[f]
-        tau_leg = c * tau_st + (1 - c) * tau_sw
+        if M is None:
+            tau_leg = c * tau_st + (1 - c) * tau_sw
+        else:  # a held leg's torque never reads the swing branch (whose J^-1 is not finite where the leg is straight)
+            tau_leg = ca.if_else(c > 0.5, tau_st, tau_sw)
         for k, j in enumerate(leg.u):
             u[j] = tau_leg[k]
     return ca.vertcat(*u)
