@@ -197,7 +197,7 @@ class _Simulation:
         # time is the switch-in time plus the time since switch-in the steps report (s), not steps x dt: a
         # step that ends on a switching time or a window's edge is shorter than dt, and the clock the law
         # and a replay of the run read advances by the steps' own lengths
-        self.t_sw, self.c_sw, self.S = 0.0, 0.0, None
+        self.t_sw, self.c_sw = 0.0, 0.0
         self.stride = max(1, self.nsteps // max_points)
         self.k = 0
         self.seen = False  # a violation recorded since the last switch
@@ -244,21 +244,22 @@ class _Simulation:
             zf, out = ch.run(self.z[:, None])
         except RuntimeError as err:  # the run cannot go on; what it did so far is kept
             run.safe = False
-            run.failed = f"{self.cur} at t = {self.k * self.dt:.3f} s: {err}"
+            run.failed = f"{self.cur} at t = {self.t_sw + self.z[p.system.nx + 1]:.3f} s: {err}"
             return False
         r = ch.rows
-        H, M, X, self.S = out[r.h, 0], out[r.margin, 0], out[r.x, 0], out[r.s, 0]
-        event = self._scan(p, ch.K, r.nh, H, M, X)
+        H, M, X, S = out[r.h, 0], out[r.margin, 0], out[r.x, 0], out[r.s, 0]
+        event = self._scan(p, ch.K, r.nh, H, M, X, S)
         if event is None:
             self.z = zf[:, 0]
             self.k += ch.K
             return True
-        return self._act(event, X)
+        return self._act(event, X, S)
 
-    def _scan(self, p: CompiledPrimitive, K: int, nh: int, H, M, X):
-        """The chunk's first event (step, kind, argument), monitoring and storing each sample before it."""
+    def _scan(self, p: CompiledPrimitive, K: int, nh: int, H, M, X, S):
+        """The chunk's first event (step, kind, argument), monitoring and storing each sample before it
+        (S: each sample's time since switch-in)."""
         for i in range(K):
-            t_now, clk = self.t_sw + self.S[i], self.c_sw + self.S[i]
+            t_now, clk = self.t_sw + S[i], self.c_sw + S[i]
             if t_now >= (self.nsteps - 0.5) * self.dt:
                 return (i, "end", None)
             xi = X[:, i]
@@ -355,10 +356,10 @@ class _Simulation:
             return None
         return (i, "graph", (nxt, t_B))
 
-    def _act(self, event, X) -> bool:
+    def _act(self, event, X, S) -> bool:
         """Switch (or end) at the event's step; False when the run ends."""
         i, kind, arg = event
-        t_now = self.t_sw + self.S[i]
+        t_now = self.t_sw + S[i]
         self.k += i
         xi = X[:, i]
         if kind == "end":

@@ -165,7 +165,7 @@ def test_a_sequence_runs_clock_is_its_time(a1_project):
     run = simulate_sequence(prims, None, None, seq, settings, "naive")
     assert run.safe and run.t[-1] > 0.99
     W, c0 = np.asarray(p.W), p.start_clock()
-    changes = np.array([0.0, 0.02, 0.18, 0.2, 0.36])  # lift-offs and touchdowns: x*(t) is a table across them
+    changes = np.r_[0.0, p.contacts.boundaries]  # lift-offs and touchdowns: x*(t) is a table across them
 
     def off(t, x):
         e = np.asarray(x) - p.x_star(c0 + t)

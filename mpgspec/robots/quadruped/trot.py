@@ -188,23 +188,24 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
         d = ca.mtimes(Ryaw[:2, :2], ca.DM(offsets[f]))
         p_lo = com[:2] + d - cdot[:2] * (g.stance / 2 + tau)
         p_td = com[:2] + d + cdot[:2] * (g.swing - tau + g.stance / 2) + g.raibert * (cdot[:2] - v_cmd)
-        s, ds = step(tau / (g.placement_fraction * g.swing))[:2]
+        path = step(tau / (g.placement_fraction * g.swing))  # (s, ds, d2s) of the horizontal path
+        s, ds = path[0], path[1]
         p_xy = p_lo + s * (p_td - p_lo)
         v_xy = ds / (g.placement_fraction * g.swing) * (p_td - p_lo)
         if g.lift_fraction > 0:  # lift first: the horizontal pull towards the path ramps in from 0
             w, _dw = _smoothstep(tau / (g.lift_fraction * g.swing))
             p_xy, v_xy = pos[f][:2] + w * (p_xy - pos[f][:2]), w * v_xy
-        zu, vu = z_up(tau)[:2]
-        zd, vd = z_dn(tau - g.swing / 2)[:2]
+        rise, fall = z_up(tau), z_dn(tau - g.swing / 2)
+        zu, vu, zd, vd = rise[0], rise[1], fall[0], fall[1]
         up = tau < g.swing / 2
         p_d = ca.vertcat(p_xy, ca.if_else(up, zu, zd))
         v_d = ca.vertcat(v_xy, ca.if_else(up, vu, vd))
         tau_sw = h_leg + ca.mtimes(J.T, g.kp_swing * (p_d - pos[f]) + g.kd_swing * (v_d - vel[f]))
         if M is not None:  # the path's acceleration (its targets held) through the leg's own inertia
-            a_xy = step(tau / (g.placement_fraction * g.swing))[2] / (g.placement_fraction * g.swing) ** 2 * (p_td - p_lo)
+            a_xy = path[2] / (g.placement_fraction * g.swing) ** 2 * (p_td - p_lo)
             if g.lift_fraction > 0:
                 a_xy = w * a_xy
-            a_z = ca.if_else(up, z_up(tau)[2], z_dn(tau - g.swing / 2)[2])
+            a_z = ca.if_else(up, rise[2], fall[2])
             tau_sw = tau_sw + ca.mtimes(M[list(leg.v), list(leg.v)], ca.solve(J, ca.vertcat(a_xy, a_z)))
         c = flags[f]
         if M is None:
