@@ -14,8 +14,8 @@ def _verdict(side: dict) -> str:
 
 
 def agreement_assertions(result, start: int) -> list[AssertionResult]:
-    """One assertion per replayed run and per variant of a CrossCheckResult: the simulator's verdict
-    is mpgspec's."""
+    """One assertion per replayed run of a CrossCheckResult (the simulator's verdict is mpgspec's) and
+    per variant (the graph executor on the simulator's state is safe and reaches every goal)."""
     out = []
     for mode, r in result.runs.items():
         msg = f"{result.simulator}: {_verdict(r['mujoco'])}; mpgspec: {_verdict(r['mpgspec'])}"
@@ -23,7 +23,9 @@ def agreement_assertions(result, start: int) -> list[AssertionResult]:
                                    "pass" if r["agree"] else "fail", msg))
     for v in result.variants:
         sim = result.simulator
-        msg = f"{sim}: {_verdict(v[sim])}; mpgspec: {_verdict(v['mpgspec'])}"
-        out.append(AssertionResult(start + len(out), "crosscheck", f"graph run agrees in {sim} with {v['name']}",
+        missed = [g["goal"] for g in v.get("goals") or [] if g.get("arrived") is None]
+        goals = "every goal reached" if not missed else f"not reached: {', '.join(missed)}"
+        msg = f"{sim} executor: {_verdict(v[sim])}, {goals}; mpgspec: {_verdict(v['mpgspec'])}"
+        out.append(AssertionResult(start + len(out), "crosscheck", f"graph executor holds in {sim} with {v['name']}",
                                    "pass" if v["agree"] else "fail", msg))
     return out

@@ -216,7 +216,7 @@ def _crosscheck(cp: CompiledProject, g: MotionPrimitiveGraph, table: dict, runs:
     variants = variants_of(spec, xcs) if "graph" in runs else []
     both = yield from concurrently({
         "runs": runs_stage(prims, runs, duration, xcs, settings.h_tolerance, memo=memo, plan=plan),
-        "variants": variants_stage(prims, runs.get("graph"), duration, variants, settings.h_tolerance, memo)})
+        "variants": variants_stage(prims, runs.get("graph"), duration, variants, plan, settings.h_tolerance, memo)})
     xc = both["runs"]
     xc.variants = both["variants"]
     return xc

@@ -14,8 +14,8 @@ def _num(v, digits: int = 4) -> str:
 
 def disagreements(report: dict) -> list[dict]:
     """{mode, text} for each cross-checked run whose verdict differs from mpgspec's, for each variant
-    of the graph run whose verdict differs (also `variant`: its name), and for a graph executor run on
-    the simulator's own state that is unsafe or does not reach every goal."""
+    of the graph executor that is unsafe or does not reach every goal (also `variant`: its name), and for
+    a graph executor run on the simulator's own state that is unsafe or does not reach every goal."""
     xc = report.get("crosscheck")
     if not isinstance(xc, dict):
         return []
@@ -33,12 +33,17 @@ def disagreements(report: dict) -> list[dict]:
     for v in xc.get("variants") or []:
         if not isinstance(v, dict) or v.get("agree", True):
             continue
-        theirs, ours = v.get(key) or {}, v.get("mpgspec") or {}
+        theirs = v.get(key) or {}
         f = theirs.get("first_violation") or {}
-        first = f": {f.get('h')} of {f.get('primitive')} at t = {_num(f.get('t'))} s, {_num(f.get('value'))}" if f else ""
+        if not theirs.get("safe", True):
+            first = f": {f.get('h')} of {f.get('primitive')} at t = {_num(f.get('t'))} s, {_num(f.get('value'))}" \
+                if f else f": {theirs.get('failed')}" if theirs.get("failed") else ""
+            what = f"is unsafe{first}"
+        else:
+            w = v.get("waiting") or {}
+            what = "does not reach every goal" + (f": it waits in {w.get('primitive')}, {waiting_why(w)}" if w else "")
         out.append({"mode": "graph", "variant": str(v.get("name")),
-                    "text": f"with {v.get('name')}, {sim} finds the graph run {'safe' if theirs.get('safe') else 'unsafe'} "
-                            f"where mpgspec finds it {'safe' if ours.get('safe') else 'unsafe'}{first}"})
+                    "text": f"with {v.get('name')}, the graph executor deciding from {sim}'s state {what}"})
     for mode, r in (xc.get("runs") or {}).items():
         e = r.get("executor") if isinstance(r, dict) else None
         if not isinstance(e, dict):

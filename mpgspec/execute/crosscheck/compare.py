@@ -20,8 +20,9 @@ from .settings import CrossCheckSettings
 
 SERIES_POINTS = 200
 """Samples kept of each compared series (for the report's plot)."""
-RECORD = 2
-"""Layout of the memoised comparison (part of its key): 2 keeps the playback samples."""
+RECORD = 3
+"""Layout of the memoised comparison (part of its key): 2 keeps the playback samples; 3 a variant is
+the executor's run on the simulator's state, with its least margins."""
 WORST = 10
 """Kinds of safety functions listed per run (the least margin of each, least first)."""
 
@@ -35,7 +36,7 @@ class CrossCheckResult:
     model: dict
     runs: dict[str, dict] = field(default_factory=dict)
     variants: list[dict] = field(default_factory=list)
-    """The graph run replayed under each of the project's variants (variants_stage)."""
+    """The graph executor run on the simulator's state under each of the project's variants (variants_stage)."""
 
     @property
     def agree(self) -> bool:
@@ -127,40 +128,48 @@ def _cost(run: SequenceRun, duration: float, plan: ExecutorPlan | None = None) -
 
 
 def variants_stage(prims: dict[str, CompiledPrimitive], run: SequenceRun, duration: float,
-                   variants: list[tuple[str, CrossCheckSettings, dict]], h_tolerance: float = 0.0, memo=None):
-    """The graph run replayed under each variant (name, settings, what it replaces), as a stage
-    (mpgspec.oracle.joint): its verdict beside mpgspec's, its first violation, how many control
-    updates violate, the least margins and the largest CoM divergence. Each replay is kept in the
-    memo as a cross-checked run is; the ones not in it are one map (each in its own process)."""
+                   variants: list[tuple[str, CrossCheckSettings, dict]], plan: ExecutorPlan,
+                   h_tolerance: float = 0.0, memo=None):
+    """The graph executor run on the simulator's own state under each variant (name, settings, what it
+    replaces), as a stage (mpgspec.oracle.joint): what a robot running the plan would do on that model.
+    Per variant: its verdict beside mpgspec's graph run, its first violation, how many control updates
+    violate, the least margins, and when it reached each goal of the sequence against mpgspec's run
+    (a variant agrees when it is safe and reaches every goal). Each is kept in the memo as a
+    cross-checked run is; the ones not in it are one map (each in its own process)."""
     system = next(iter(prims.values())).system
-    keys = [_memo_key(memo, prims, run, duration, st, h_tolerance, build_robot(system, st))
+    keys = [_memo_key(memo, prims, run, duration, st, h_tolerance, build_robot(system, st), plan, "crosscheck variant")
             if memo is not None else None for _n, st, _c in variants]
     done = [memo.get(k) if k is not None else None for k in keys]
     todo = [i for i, r in enumerate(done) if r is None]
     items = [variants[i][1] for i in todo]
-    shared = (prims, run, duration, h_tolerance)
+    shared = (prims, run, duration, h_tolerance, plan)
     label = f"cross-check variants ({variants[0][1].simulator})" if variants else "cross-check variants"
-    got = yield Map(_variant, items, label, shared, cost=[_cost(run, duration)] * len(items))
+    got = yield Map(_variant, items, label, shared, cost=[duration] * len(items))
     for i, r in zip(todo, got):
         if isinstance(r, Failed):
-            raise RuntimeError(f"the replay of the graph run with {variants[i][0]} failed: {r.error}")
+            raise RuntimeError(f"the executor run with {variants[i][0]} failed: {r.error}")
         done[i] = r
         if keys[i] is not None:
             memo.put(keys[i], r)
+    theirs = {"safe": run.safe, "first_violation": run.violations[0] if run.violations else None,
+              "violation_samples": len({v["t"] for v in run.violations}), "failed": run.failed}
     out = []
     for (name, st, changed), r in zip(variants, done):
-        theirs = r.get(st.simulator) or {}
-        out.append({"name": name, "replaces": changed, "agree": r["agree"], st.simulator: theirs,
-                    "mpgspec": r.get("mpgspec"), "worst": (r.get("worst") or [])[:5],
-                    "com_divergence": ((r.get("divergence") or {}).get("com") or {}).get("max")})
+        verdict = {k: r.get(k) for k in ("safe", "first_violation", "violation_samples", "failed")}
+        out.append({"name": name, "replaces": changed, "agree": bool(r["safe"] and r["reached_every_goal"]),
+                    st.simulator: verdict, "mpgspec": theirs, "worst": (r.get("worst") or [])[:5],
+                    "goals": r.get("goals") or [], "reached_every_goal": bool(r["reached_every_goal"]),
+                    "largest_lag_s": r.get("largest_lag_s"), "waiting": r.get("waiting")})
     return out
 
 
 def _variant(shared: tuple, st: CrossCheckSettings) -> dict:
-    """The graph run replayed and compared under one variant's settings; shared = (prims, run,
-    duration, h_tolerance)."""
-    prims, run, duration, h_tolerance = shared
-    return _without_playback(_replayed((None, prims, {"graph": run}, duration, st, h_tolerance, None), "graph"))
+    """The graph executor run on the simulator's state under one variant's settings; shared = (prims,
+    run, duration, h_tolerance, plan)."""
+    prims, run, duration, h_tolerance, plan = shared
+    robot = build_robot(next(iter(prims.values())).system, st)
+    out = executed(robot, prims, plan, run, duration, st, h_tolerance)
+    return {k: v for k, v in out.items() if k != "playback"}
 
 
 def _replayed(shared: tuple, mode: str) -> dict:
@@ -193,6 +202,7 @@ def executed(robot: MujocoRobot, prims: dict[str, CompiledPrimitive], plan: Exec
             "waiting": {"primitive": ex.cur, "best_roa_margin": ex.best.get(ex.cur)} if ex.goal != ex.cur else None,
             "contact": rep.contact,
             "law_failures": dict(rep.law_failures), "wall_s": rep.wall_s,
+            "worst": [{"primitive": p, "h": h, "mujoco": v, "t": tt} for p, h, v, tt in least_margins(prims, rep)],
             "playback": _playback(rep, next(iter(prims.values())).system.model.nq)}
 
 
@@ -205,10 +215,11 @@ def _until(run: SequenceRun, duration: float) -> float:
     return duration
 
 
-def _memo_key(memo, prims, run: SequenceRun, duration, settings, h_tolerance, robot, plan=None) -> str:
+def _memo_key(memo, prims, run: SequenceRun, duration, settings, h_tolerance, robot, plan=None,
+              kind: str = "crosscheck") -> str:
     used = sorted({s["to"] for s in run.switches} | (set(plan.table) if plan is not None else set()))
     text = json.dumps([run.to_dict(), plan.key() if plan is not None else None], sort_keys=True, default=float)
-    return memo.key("crosscheck", RECORD, hashlib.sha256(text.encode()).hexdigest(), [prims[n].digest() for n in used],
+    return memo.key(kind, RECORD, hashlib.sha256(text.encode()).hexdigest(), [prims[n].digest() for n in used],
                     duration, sorted(settings.to_dict().items()), h_tolerance, sorted(robot.info.items()))
 
 
@@ -219,6 +230,19 @@ def _com_function(system) -> ca.Function:
 
 def _decimate(n: int, most: int = SERIES_POINTS) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, min(n, most)).round().astype(int)) if n else np.zeros(0, int)
+
+
+def least_margins(prims: dict[str, CompiledPrimitive], rep: Replay) -> list[tuple]:
+    """(primitive, h, least value, when) of each kind of h (q_min, foot_still, ...) in a replay, least
+    first, at most WORST of them."""
+    families: dict[str, tuple] = {}
+    for p, (least, when) in rep.worst.items():
+        for h, v, tt in zip(prims[p].h_names, least, when):
+            fam = h.split("[", 1)[0]
+            if np.isfinite(v) or v < 0:
+                if fam not in families or v < families[fam][2]:
+                    families[fam] = (p, h, float(v), float(tt))
+    return sorted(families.values(), key=lambda w: w[2])[:WORST]
 
 
 def compare(prims: dict[str, CompiledPrimitive], rep: Replay, run: SequenceRun, rate: float) -> dict:
@@ -247,14 +271,7 @@ def compare(prims: dict[str, CompiledPrimitive], rep: Replay, run: SequenceRun, 
             div["com_until"] = float(dc[before].max()) if before.any() else None
             div["joint_until"] = float(dq[before].max()) if before.any() else None
     mpg_bad = {(v["primitive"], v["h"]) for v in run.violations}
-    families: dict[str, tuple] = {}  # the least margin of each kind of h (q_min, foot_still, ...)
-    for p, (least, when) in rep.worst.items():
-        for h, v, tt in zip(prims[p].h_names, least, when):
-            fam = h.split("[", 1)[0]
-            if np.isfinite(v) or v < 0:
-                if fam not in families or v < families[fam][2]:
-                    families[fam] = (p, h, float(v), float(tt))
-    worst = sorted(families.values(), key=lambda w: w[2])[:WORST]
+    worst = least_margins(prims, rep)
     mine = {"safe": rep.safe, "first_violation": rep.first_violation, "violation_samples": rep.violation_samples,
             "failed": rep.failed}
     theirs = {"safe": run.safe, "first_violation": run.violations[0] if run.violations else None,

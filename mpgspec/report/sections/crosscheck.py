@@ -51,6 +51,13 @@ class CrossCheckDivergence(_Strict):
     joint_until: Num = Field(description="largest joint divergence up to `until`, radians")
 
 
+class CrossCheckLeast(_Strict):
+    primitive: str
+    h: str
+    mujoco: Num = Field(description="least value in the simulator")
+    t: float
+
+
 class CrossCheckWorst(_Strict):
     primitive: str
     h: str
@@ -110,6 +117,8 @@ class ExecutorRun(_Strict):
     contact: CrossCheckContact
     law_failures: dict[str, int] = Field(default_factory=dict)
     wall_s: float
+    worst: list[CrossCheckLeast] = Field(default_factory=list, description="the least margin of each kind of h "
+                                         "in the simulator, least first")
 
 
 class CrossCheckRun(_Strict):
@@ -134,15 +143,19 @@ class CrossCheckRun(_Strict):
 
 
 class CrossCheckVariant(_Strict):
-    """The graph run replayed once more with some of the cross-check's settings replaced."""
+    """The graph executor run on the simulator's own state with some of the cross-check's settings replaced."""
 
     name: str
     replaces: dict[str, Any] = Field(description="the settings it replaces, by name (contact ones by theirs)")
-    agree: bool = Field(description="the simulator's verdict is mpgspec's")
+    agree: bool = Field(description="the executor's run is safe and reaches every goal, as mpgspec's graph run does")
     mujoco: CrossCheckVerdict
     mpgspec: CrossCheckVerdict
-    worst: list[CrossCheckWorst] = Field(description="the five least margins of a kind of h in the simulator")
-    com_divergence: Num = Field(description="largest distance between the two centres of mass, metres")
+    worst: list[CrossCheckLeast] = Field(description="the five least margins of a kind of h in the simulator")
+    goals: list[ExecutorGoal]
+    reached_every_goal: bool
+    largest_lag_s: Num = Field(description="largest |arrival - mpgspec's arrival| over the goals both reached, s")
+    waiting: dict[str, Any] | None = Field(default=None, description="where the run ended short of its goal: the "
+                                           "primitive it waited in and the largest E margin its state reached there")
 
 
 class CrossCheck(_Strict):
@@ -153,8 +166,9 @@ class CrossCheck(_Strict):
     model: dict[str, Any] = Field(description="what the simulator's model was built from and holds")
     agree: bool = Field(description="every replayed run and every variant agrees")
     runs: dict[str, CrossCheckRun]
-    variants: list[CrossCheckVariant] = Field(default_factory=list, description="the graph run under the "
-                                              "project's other contact models and control rates (crosscheck.variants)")
+    variants: list[CrossCheckVariant] = Field(default_factory=list, description="the graph executor "
+                                              "on the simulator's state under the project's other contact models, "
+                                              "control rates and model errors (crosscheck.variants)")
 
 
 def data(cp, vg, ch) -> dict | None:
@@ -168,7 +182,7 @@ def count(xc: dict) -> tuple:
     agree = sum(bool(r.get("agree")) for r in runs.values())
     sim = SIMULATORS.get(xc.get("simulator"), str(xc.get("simulator")))
     vs = xc.get("variants") or []
-    more = f"; {sum(bool(v.get('agree')) for v in vs)} of {len(vs)} variants agree" if vs else ""
+    more = f"; {sum(bool(v.get('agree')) for v in vs)} of {len(vs)} variants hold" if vs else ""
     return (f"cross-check in {sim}", f"{agree} / {len(runs)}",
             "runs agree" + "".join(f"; {m} disagrees" for m, r in runs.items() if not r.get("agree")) + more)
 
