@@ -41,7 +41,8 @@ def disagreements(report: dict) -> list[dict]:
             what = f"is unsafe{first}"
         else:
             w = v.get("waiting") or {}
-            what = "does not reach every goal" + (f": it waits in {w.get('primitive')}, {waiting_why(w)}" if w else "")
+            what = "does not reach every goal" + (f": it waits in {w.get('primitive')}, {waiting_why(w)}" if w else
+                                                 _missed(v.get("goals")))
         out.append({"mode": "graph", "variant": str(v.get("name")),
                     "text": f"with {v.get('name')}, the graph executor deciding from {sim}'s state {what}"})
     for mode, r in (xc.get("runs") or {}).items():
@@ -55,10 +56,17 @@ def disagreements(report: dict) -> list[dict]:
             out.append({"mode": mode, "text": f"the {mode} executor deciding from {sim}'s state is unsafe{first}"})
         elif not e.get("reached_every_goal", True):
             w = e.get("waiting") or {}
-            where = f": it waits in {w.get('primitive')}, {waiting_why(w)}" if w else ""
+            where = f": it waits in {w.get('primitive')}, {waiting_why(w)}" if w else _missed(e.get("goals"))
             out.append({"mode": mode, "text": f"the {mode} executor deciding from {sim}'s state does not reach "
                                               f"every goal{where}"})
     return out
+
+
+def _missed(goals) -> str:
+    """': it misses A (commanded at t s), ...' for the goals a run never reached, or ''."""
+    out = [f"{g.get('goal')} (commanded at {_num(g.get('t'))} s)" for g in goals or []
+           if isinstance(g, dict) and g.get("arrived") is None]
+    return f": it misses {', '.join(out)}" if out else ""
 
 
 def waiting_why(w: dict) -> str:

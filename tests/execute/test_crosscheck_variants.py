@@ -71,6 +71,9 @@ def test_variants_run_the_graph_executor_under_other_settings(tmp_path):
     assert [a["description"] for a in failed] == [f"graph executor holds in mujoco with {n}"
                                                   for n in ("control_rate 200", "40 % torque", "late")]
     assert "not reached: Lie" in failed[1]["message"]
+    weak_text = [d["text"] for d in disagreements(report) if d.get("variant") == "40 % torque"]
+    assert weak_text == ["with 40 % torque, the graph executor deciding from MuJoCo's state does not reach every "
+                         "goal: it misses Lie (commanded at 1 s)"]
     xml = junit([res])
     assert 'name="graph run with control_rate 200"' in xml and 'name="graph run with same"' in xml
     html = Path(res.files["html"]).read_text()
