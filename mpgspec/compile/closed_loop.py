@@ -22,6 +22,7 @@ from .contacts import ContactPlan, wrap_clock
 from .events import EventWindow
 from .guards import Guards
 from .hold import SampledLaw
+from .numeric import content_hash
 from .system import CompiledSystem
 
 
@@ -96,10 +97,10 @@ class CompiledPrimitive:
     def digest(self) -> str:
         """Content hash of everything that decides an oracle verdict of this closed loop."""
         if "digest" not in self.cache:
-            parts = [f.serialize() for f in (self.loop_raw or self.loop, self.f_cl, self.roa_margin, self.setpoint,
-                                              self.jump, self.loop_u) if f is not None]
+            parts = [content_hash(f) for f in (self.loop_raw or self.loop, self.f_cl, self.roa_margin, self.setpoint,
+                                                self.jump, self.loop_u) if f is not None]
             if self.sampled is not None:
-                parts += [self.sampled.solve.serialize(), repr(self.sampled.period)]
+                parts += [content_hash(self.sampled.solve), repr(self.sampled.period)]
             nums = repr((self.name, self.cls.value, self.period, self.domain, self.next, self.horizon, self.h_names,
                          self.radius, self.narrow, self.narrow_ratio, self.windows, self.boundaries, self.hybrid, self.W.tolist(),
                          self.system.u_lo.tolist(), self.system.u_hi.tolist()))

@@ -8,7 +8,9 @@ same compiled expression graph on preallocated arrays, so its numbers are the sa
 """
 from __future__ import annotations
 
+import hashlib
 import threading
+from collections import OrderedDict
 
 import casadi as ca
 import numpy as np
@@ -112,3 +114,24 @@ class NumericMap:
 
 def numeric_map(fn: ca.Function, shared: tuple[int, ...] = ()) -> NumericMap:
     return NumericMap(fn, shared)
+
+
+_HASHES: OrderedDict = OrderedDict()  # id(fn) -> (fn, hash); fn kept so its id is not reused while listed
+_HASHES_KEPT = 256
+_HASHES_LOCK = threading.Lock()
+
+
+def content_hash(fn: ca.Function) -> str:
+    """sha256 of fn's serialization, computed once per Function object: a primitive's digest, its loop
+    library's name and its records' keys all hash the same loops (the A1's take about 30 ms each)."""
+    with _HASHES_LOCK:
+        hit = _HASHES.get(id(fn))
+        if hit is not None and hit[0] is fn:
+            _HASHES.move_to_end(id(fn))
+            return hit[1]
+    h = hashlib.sha256(fn.serialize().encode()).hexdigest()
+    with _HASHES_LOCK:
+        _HASHES[id(fn)] = (fn, h)
+        while len(_HASHES) > _HASHES_KEPT:
+            _HASHES.popitem(last=False)
+    return h

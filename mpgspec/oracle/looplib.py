@@ -35,7 +35,7 @@ import casadi as ca
 from ..compile.primitive import INACTIVE, CompiledPrimitive
 from ..compile.contacts import wrap_clock
 from ..compile.events import EventWindow
-from ..compile.numeric import NumericFunction, numeric
+from ..compile.numeric import NumericFunction, content_hash, numeric
 from .flow import jump_of
 from .jit import cache_dir, compile_libraries, compile_many, library_job, sealed, with_cse
 
@@ -169,7 +169,7 @@ def _name(prefix: str, sources: list, kinds: tuple[str, ...], flags: tuple[str, 
     digest = hashlib.sha256(" ".join((*kinds, *flags, str(LAYOUT), str(INLINE_NODES), ca.__version__)).encode())
     for fn in sources:
         if fn is not None:
-            digest.update(fn.serialize().encode())
+            digest.update(content_hash(fn).encode())
     return f"{prefix}_{digest.hexdigest()[:16]}"
 
 

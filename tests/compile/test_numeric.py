@@ -55,3 +55,22 @@ def test_every_kind_of_argument_reads_as_function_call_reads_it():
         pass
     else:
         raise AssertionError("a vector of the wrong length was accepted")
+
+
+def test_content_hash_is_the_serializations_and_computed_once_per_function():
+    import hashlib
+
+    from mpgspec.compile import numeric
+    x = ca.SX.sym("x")
+    f, g = ca.Function("f", [x], [ca.sin(x)]), ca.Function("f", [x], [ca.cos(x)])
+    assert numeric.content_hash(f) == hashlib.sha256(f.serialize().encode()).hexdigest()
+    assert numeric.content_hash(g) != numeric.content_hash(f)
+    assert numeric.content_hash(ca.Function("f", [x], [ca.sin(x)])) == numeric.content_hash(f)  # by content
+    calls = []
+    real = ca.Function.serialize
+    try:
+        ca.Function.serialize = lambda self, *a: calls.append(1) or real(self, *a)
+        numeric.content_hash(f)
+    finally:
+        ca.Function.serialize = real
+    assert calls == []  # remembered for this object
