@@ -137,8 +137,9 @@ def variants_stage(prims: dict[str, CompiledPrimitive], run: SequenceRun, durati
     (a variant agrees when it is safe and reaches every goal). Each is kept in the memo as a
     cross-checked run is; the ones not in it are one map (each in its own process)."""
     system = next(iter(prims.values())).system
-    keys = [_memo_key(memo, prims, run, duration, st, h_tolerance, build_robot(system, st), plan, "crosscheck variant")
-            if memo is not None else None for _n, st, _c in variants]
+    run_hash = _run_hash(run, plan) if memo is not None and variants else None
+    keys = [_memo_key(memo, prims, run, duration, st, h_tolerance, build_robot(system, st), plan, "crosscheck variant",
+                      run_hash) if memo is not None else None for _n, st, _c in variants]
     done = [memo.get(k) if k is not None else None for k in keys]
     todo = [i for i, r in enumerate(done) if r is None]
     items = [variants[i][1] for i in todo]
@@ -216,11 +217,17 @@ def _until(run: SequenceRun, duration: float) -> float:
 
 
 def _memo_key(memo, prims, run: SequenceRun, duration, settings, h_tolerance, robot, plan=None,
-              kind: str = "crosscheck") -> str:
+              kind: str = "crosscheck", run_hash: str | None = None) -> str:
+    """The memo key of one comparison; run_hash: _run_hash(run, plan) when the caller has it (a run of
+    many seconds takes a while to serialise, and every variant of it has the same)."""
     used = sorted({s["to"] for s in run.switches} | (set(plan.table) if plan is not None else set()))
-    text = json.dumps([run.to_dict(), plan.key() if plan is not None else None], sort_keys=True, default=float)
-    return memo.key(kind, RECORD, hashlib.sha256(text.encode()).hexdigest(), [prims[n].digest() for n in used],
+    return memo.key(kind, RECORD, run_hash or _run_hash(run, plan), [prims[n].digest() for n in used],
                     duration, sorted(settings.to_dict().items()), h_tolerance, sorted(robot.info.items()))
+
+
+def _run_hash(run: SequenceRun, plan=None) -> str:
+    text = json.dumps([run.to_dict(), plan.key() if plan is not None else None], sort_keys=True, default=float)
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _com_function(system) -> ca.Function:
