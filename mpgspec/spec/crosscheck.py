@@ -50,8 +50,9 @@ class VariantContact(Strict):
 
 
 class Variant(Strict):
-    """The graph run replayed once more with some of the cross-check's settings replaced: another
-    contact model, control rate or integrator. What a variant does not name is as the cross-check's."""
+    """The graph executor run once more on the simulator's state with some of the cross-check's settings
+    replaced: another contact model, control rate, integrator, model or sensing error. What a variant does
+    not name is as the cross-check's."""
 
     name: str | None = Field(default=None, min_length=1, max_length=80, description="how the report names it "
                              "(default: the settings it replaces)")
@@ -97,10 +98,12 @@ class CrossCheck(Strict):
     runs: list[Literal["naive", "graph"]] = Field(default=["naive", "graph"], min_length=1,
                                                   description="which sequence runs to replay")
     require_agreement: bool = Field(default=False, description="fail the project when the simulator's safety "
-                                    "verdict of a replayed run (or of a variant) differs from mpgspec's")
-    variants: list[Variant] = Field(default_factory=list, max_length=16, description="the graph run replayed "
-                                    "again under other contact models, control rates or integrators: does the "
-                                    "verified plan transfer beyond one simulator setting?")
+                                    "verdict of a replayed run differs from mpgspec's, or a variant's executor "
+                                    "run is unsafe or misses a goal")
+    variants: list[Variant] = Field(default_factory=list, max_length=16, description="the graph executor run "
+                                    "again on the simulator's state under other contact models, control rates, "
+                                    "integrators, model and sensing errors: does the verified plan transfer "
+                                    "beyond one simulator setting?")
 
     @field_validator("timestep")
     @classmethod

@@ -112,7 +112,7 @@ def _no_base(where, key: str, noise: float):
 
 def variants_of(spec, base: CrossCheckSettings) -> list[tuple[str, CrossCheckSettings, dict]]:
     """(name, settings, the settings it replaces) of each of the project's cross-check variants: the
-    base settings with what the variant names replaced, replaying the graph run only. Raises a located
+    base settings with what the variant names replaced, for the graph executor's run only. Raises a located
     SpecError for a variant MuJoCo cannot run (a control period that is not a whole number of steps,
     a contact softer than two steps can resolve, nothing replaced)."""
     from ...errors import SpecError
