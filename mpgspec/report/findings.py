@@ -33,33 +33,27 @@ def disagreements(report: dict) -> list[dict]:
     for v in xc.get("variants") or []:
         if not isinstance(v, dict) or v.get("agree", True):
             continue
-        theirs = v.get(key) or {}
-        f = theirs.get("first_violation") or {}
-        if not theirs.get("safe", True):
-            first = f": {f.get('h')} of {f.get('primitive')} at t = {_num(f.get('t'))} s, {_num(f.get('value'))}" \
-                if f else f": {theirs.get('failed')}" if theirs.get("failed") else ""
-            what = f"is unsafe{first}"
-        else:
-            w = v.get("waiting") or {}
-            what = "does not reach every goal" + (f": it waits in {w.get('primitive')}, {waiting_why(w)}" if w else
-                                                 _missed(v.get("goals")))
+        what = _executor_trouble(v.get(key) or {}, v.get("goals"), v.get("waiting"))
         out.append({"mode": "graph", "variant": str(v.get("name")),
                     "text": f"with {v.get('name')}, the graph executor deciding from {sim}'s state {what}"})
     for mode, r in (xc.get("runs") or {}).items():
         e = r.get("executor") if isinstance(r, dict) else None
-        if not isinstance(e, dict):
-            continue
-        v = e.get("first_violation") or {}
-        if not e.get("safe", True):
-            first = f": {v.get('h')} of {v.get('primitive')} at t = {_num(v.get('t'))} s, {_num(v.get('value'))}" \
-                if v else f": {e.get('failed')}" if e.get("failed") else ""
-            out.append({"mode": mode, "text": f"the {mode} executor deciding from {sim}'s state is unsafe{first}"})
-        elif not e.get("reached_every_goal", True):
-            w = e.get("waiting") or {}
-            where = f": it waits in {w.get('primitive')}, {waiting_why(w)}" if w else _missed(e.get("goals"))
-            out.append({"mode": mode, "text": f"the {mode} executor deciding from {sim}'s state does not reach "
-                                              f"every goal{where}"})
+        if isinstance(e, dict) and (not e.get("safe", True) or not e.get("reached_every_goal", True)):
+            what = _executor_trouble(e, e.get("goals"), e.get("waiting"))
+            out.append({"mode": mode, "text": f"the {mode} executor deciding from {sim}'s state {what}"})
     return out
+
+
+def _executor_trouble(verdict: dict, goals, waiting) -> str:
+    """What went wrong with an executor's run: 'is unsafe: <first violation or failure>', else 'does not
+    reach every goal: <where it waits, or the goals it missed>'."""
+    if not verdict.get("safe", True):
+        f = verdict.get("first_violation") or {}
+        first = f": {f.get('h')} of {f.get('primitive')} at t = {_num(f.get('t'))} s, {_num(f.get('value'))}" \
+            if f else f": {verdict.get('failed')}" if verdict.get("failed") else ""
+        return f"is unsafe{first}"
+    w = waiting or {}
+    return "does not reach every goal" + (f": it waits in {w.get('primitive')}, {waiting_why(w)}" if w else _missed(goals))
 
 
 def _missed(goals) -> str:

@@ -152,8 +152,7 @@ def variants_stage(prims: dict[str, CompiledPrimitive], run: SequenceRun, durati
         done[i] = r
         if keys[i] is not None:
             memo.put(keys[i], r)
-    theirs = {"safe": run.safe, "first_violation": run.violations[0] if run.violations else None,
-              "violation_samples": len({v["t"] for v in run.violations}), "failed": run.failed}
+    theirs = _verdict_of(run)
     out = []
     for (name, st, changed), r in zip(variants, done):
         verdict = {k: r.get(k) for k in ("safe", "first_violation", "violation_samples", "failed")}
@@ -164,13 +163,18 @@ def variants_stage(prims: dict[str, CompiledPrimitive], run: SequenceRun, durati
     return out
 
 
+def _verdict_of(run: SequenceRun) -> dict:
+    """mpgspec's verdict of a sequence run as the comparisons show it beside the simulator's."""
+    return {"safe": run.safe, "first_violation": run.violations[0] if run.violations else None,
+            "violation_samples": len({v["t"] for v in run.violations}), "failed": run.failed}
+
+
 def _variant(shared: tuple, st: CrossCheckSettings) -> dict:
     """The graph executor run on the simulator's state under one variant's settings; shared = (prims,
     run, duration, h_tolerance, plan)."""
     prims, run, duration, h_tolerance, plan = shared
     robot = build_robot(next(iter(prims.values())).system, st)
-    out = executed(robot, prims, plan, run, duration, st, h_tolerance)
-    return {k: v for k, v in out.items() if k != "playback"}
+    return _without_playback(executed(robot, prims, plan, run, duration, st, h_tolerance))
 
 
 def _replayed(shared: tuple, mode: str) -> dict:
@@ -281,8 +285,7 @@ def compare(prims: dict[str, CompiledPrimitive], rep: Replay, run: SequenceRun, 
     worst = least_margins(prims, rep)
     mine = {"safe": rep.safe, "first_violation": rep.first_violation, "violation_samples": rep.violation_samples,
             "failed": rep.failed}
-    theirs = {"safe": run.safe, "first_violation": run.violations[0] if run.violations else None,
-              "violation_samples": len({v["t"] for v in run.violations}), "failed": run.failed}
+    theirs = _verdict_of(run)
     d = _decimate(len(t))
     least = np.asarray(run.min_h if len(run.min_h) == len(ok) else [None] * len(ok), dtype=float)[ok]
     return {
