@@ -135,6 +135,15 @@ class Schedule:
                 out.append(float(until) % float(self.period) if self.period else float(until))
         return sorted(out)
 
+    @property
+    def liftoffs(self) -> list[float]:
+        """Clock times within the period at which the next phase releases a held foot."""
+        out = []
+        for k, (until, feet) in enumerate(self.phases):
+            if set(feet) - set(self.phases[(k + 1) % len(self.phases)][1]):
+                out.append(float(until) % float(self.period) if self.period else float(until))
+        return sorted(out)
+
     def held(self, t: float) -> tuple[str, ...]:
         """The feet held at clock t, read as `mode` reads it (a clock within SNAP of a switch is at it)."""
         tc = clock_phase(t + SNAP, float(self.period) if self.period is not None else float("inf"))

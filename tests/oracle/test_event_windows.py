@@ -25,6 +25,7 @@ from mpgspec.api import compile_project, settings_for
 from mpgspec.cli import main
 from mpgspec.compile.events import NEVER, EventWindow
 from mpgspec.oracle import Reason, SafetyOracle
+from mpgspec.oracle.flow import RAMP_STEPS
 from mpgspec.oracle.integrator import build_chunk, initial_state
 from mpgspec.oracle.trace import trace
 from mpgspec.spec.loader import load_project
@@ -189,7 +190,8 @@ def test_the_oracle_steps_onto_the_end_of_an_event_window(tmp_path):
     s, h = out[ch.rows.s, 0], out[ch.rows.dt, 0]
     k = int(np.argmin(np.abs(s - Tc)))
     assert s[k] == pytest.approx(Tc, abs=1e-9) and h[k] == pytest.approx(EPS, abs=1e-12)
-    assert np.allclose(h[:k], DT) and np.allclose(h[k + 1:k + 5], DT)
+    n = RAMP_STEPS + 1  # the first DT after switch-in: RAMP_STEPS + 1 steps growing from DT / 2^RAMP_STEPS
+    assert h[:n].sum() == pytest.approx(DT) and np.allclose(h[n:k], DT) and np.allclose(h[k + 1:k + 5], DT)
     sink = -out[ch.rows.x, 0, k][prim.system.state_names.index("base_z")] + 0.2
     assert sink > 1e-3  # sunk(1e-3) is violated at T_c
 

@@ -18,6 +18,7 @@ from mpgspec.api import compile_project
 from mpgspec.compile.primitive import CompiledPrimitive
 from mpgspec.errors import UsageError
 from mpgspec.oracle import OracleEvidence, Reason, SafetyOracle
+from mpgspec.oracle.flow import RAMP_STEPS
 from mpgspec.settings import OracleSettings
 from mpgspec.spec.loader import load_project
 
@@ -71,7 +72,7 @@ def test_entered_E_with_the_right_time(tmp_path):
     assert (e.verdict, e.reason) == (1, Reason.ENTERED_E)
     assert in_step_after(e.t_enter, exact)
     assert e.t_stop == e.t_enter
-    assert e.steps == round(e.t_enter / DT)
+    assert e.steps == round(e.t_enter / DT) + RAMP_STEPS  # the first dt after switch-in in 1 + RAMP_STEPS steps
     assert e.violated is None and e.min_margins == {}
     assert 0 < e.best_roa_margin < 0.1
     assert e.peak_input == [pytest.approx(2.0)]  # |u| is largest at the start: 2 |0 - 1|
@@ -289,7 +290,7 @@ def test_clear_verdicts_are_not_refined(tmp_path):
     down = one(tmp_path, DOWN)
     e = SafetyOracle(down, FAST.replace(refinements=2))(np.array([0.5]), 0.0)
     assert e.status == "unsafe" and e.checked and not e.refined and e.violated == "floor"
-    assert e.steps * DT == pytest.approx(e.t_stop)
+    assert (e.steps - RAMP_STEPS) * DT == pytest.approx(e.t_stop)
 
 
 # ----------------------------------------------------------------------------- backends
@@ -326,9 +327,9 @@ def test_unknown_backend_is_a_usage_error(tmp_path):
 
 
 def test_a_numerical_blow_up_is_inconclusive_not_a_safety_violation(tmp_path):
-    """p' = -1e4 p at dt 0.01: RK4 is unstable and the state explodes; that is no evidence that the
+    """p' = -1e6 p at dt 0.01 (dt / 16 at the first step after switch-in): RK4 is unstable and the state explodes; that is no evidence that the
     loop leaves C, so no `no_edge` assertion may pass on it."""
-    stiff = GOAL.replace("-2*(x - 1)", "-10000*(x - 1)") + '  safe_set:\n    - {name: band, h: "3 - abs(x)"}\n'
+    stiff = GOAL.replace("-2*(x - 1)", "-1000000*(x - 1)") + '  safe_set:\n    - {name: band, h: "3 - abs(x)"}\n'
     e = SafetyOracle(one(tmp_path, stiff, bounds=(-1e9, 1e9)), FAST.replace(horizon=1.0))(np.array([0.0]), 0.0)
     assert (e.status, e.reason) == ("inconclusive", Reason.INCONCLUSIVE)
     assert "decrease dt" in e.message and e.error_bound > 1e3 * abs(e.margin)
