@@ -299,3 +299,21 @@ def test_a_large_loop_takes_a_switch_read_snap_early_at_the_step_that_ends_on_it
             seen.setdefault(off, []).append((e.steps, e.lower_bounds["cap"]))
     for off, ((n1, m1), (n2, m2)) in seen.items():
         assert n1 == n2 and m1 == pytest.approx(m2, abs=1e-12) and m1 == pytest.approx(off, abs=2e-6), seen
+
+
+@pytest.mark.parametrize("before", [1e-13, 5e-10])
+def test_a_companion_crossing_right_after_its_start_takes_a_sliver_not_the_whole_step(tmp_path, before):
+    """Under step doubling the companion trails the judged rollout by its error: where the judged one
+    starts a step on a guard, the companion's crossing lies just after its start. x' = 1 until x = 0.5,
+    then 3, from `before` seconds short of the switch: the step of 10 ms ends at 0.5 + 3 (0.01 - before)
+    and the error it adds is a sliver's (its length times the jump of 2 in the rate), not the whole
+    step's 0.02."""
+    from mpgspec.oracle.pieces import _Parts, _split
+
+    prim = _switching(tmp_path, "if_else(x < 0.5, 1, 3)", 10.0)
+    parts = _Parts(prim)
+    x0, h = np.array([0.5 - before]), 0.01
+    k1, r, _on, _e = parts.nudged(ca.DM(x0), 0.0, 0.0, ca.DM(x0), h)
+    x_end, extra, extra_h = (float(v) for v in _split(parts)(1, x0, 0.0, 0.0, x0, k1, h, h, x0, r))
+    assert abs(x_end - (0.5 + 3 * (h - before))) <= extra + 1e-12 and extra < 1e-8  # the sliver's bound covers it
+    assert extra_h == pytest.approx(extra)  # h = c - x moves with x
