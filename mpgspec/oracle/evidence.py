@@ -23,9 +23,9 @@ class OracleEvidence:
     status is three-valued: 'safe' (verdict 1) only when every margin exceeds its numerical error
     bound; 'unsafe' when the flow certainly left C, failed, or did not reach E in time;
     'inconclusive' when a margin is within its error bound (no edge is built on it).
-    margin is the least sampled value of any active safety function, error_bound what the numerics
-    may hide below it (integration error and the dip between samples): margin - error_bound is the
-    error-aware lower bound. method is how the verdict was obtained: 'simulated' for a rollout.
+    margin is the least sampled value of any active safety function (of the function in doubt, named
+    by `violated`, when inconclusive), error_bound what the numerics may hide below it (integration
+    error and the dip between samples): margin - error_bound is the least error-aware lower bound. method is how the verdict was obtained: 'simulated' for a rollout.
     """
 
     verdict: int

@@ -329,6 +329,8 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
         ev.min_margins, ev.lower_bounds = dict(zip(names, min_l[n])), dict(zip(names, low_l[n]))
         if names:
             m0, l0 = ms_l[n], lw_l[n]
+            if kind == "doubt":  # the doubted function's own least sample and bound (its lower bound is the least)
+                m0, l0 = min_l[n][worst[n]], low_l[n][worst[n]]
             ev.margin = m0
             ev.error_bound = m0 - l0 if m0 is not None and l0 is not None else None
             if kind == "doubt" and ev.error_bound is not None and ev.error_bound > 1e3 * max(1.0, abs(m0)):

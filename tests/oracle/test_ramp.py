@@ -1,7 +1,8 @@
 """The oracle's short first steps (oracle.flow.RAMP): a flow that starts at rest 10 um above its
 safe set's boundary and accelerates away from it at 1,000 m/s^2, as a released swing foot does,
 is judged safe; with whole steps the bound between samples (the steepest end rate over the step)
-dips under the boundary at the first step and the call is inconclusive."""
+dips under the boundary at the first step and the call is inconclusive, its evidence naming the
+function in doubt with that function's own margin."""
 from __future__ import annotations
 
 import textwrap
@@ -66,3 +67,20 @@ def test_the_first_dt_is_taken_in_growing_steps(tmp_path, monkeypatch):
     h = out[ch.rows.dt, 0]
     assert h[:flow.RAMP_STEPS + 2] == pytest.approx([1e-3 * flow.RAMP * 2 ** max(k - 1, 0) for k in range(flow.RAMP_STEPS + 1)]
                                                     + [1e-3])
+
+
+def test_a_doubt_reports_the_doubted_functions_own_margin(tmp_path, monkeypatch):
+    """Whole steps: `floor` (least sample 1e-5) is in doubt at the first step while `near` keeps a
+    smaller sampled value, 5e-6, beyond doubt; the evidence names `floor` with floor's own margin and
+    error, whose difference is the least lower bound of all."""
+    monkeypatch.setattr(flow, "RAMP", 1.0)
+    tmp_path.mkdir(parents=True, exist_ok=True)
+    (tmp_path / "project.yaml").write_text(SPEC.replace('      - {name: floor, h: "p"}\n',
+                                                        '      - {name: floor, h: "p"}\n'
+                                                        '      - {name: near, h: "5e-6 + 0*v"}\n'))
+    (prim,) = compile_project(load_project(tmp_path / "project.yaml")).values()
+    settings = OracleSettings(horizon=1.0, dt=1e-3, refinements=0, jit=False, error="doubling")
+    e = SafetyOracle(prim, settings)(START, 0.0)
+    assert (e.status, e.violated) == ("inconclusive", "floor"), e
+    assert e.min_margins["near"] == pytest.approx(5e-6) and e.margin == pytest.approx(e.min_margins["floor"])
+    assert e.margin - e.error_bound == pytest.approx(min(e.lower_bounds.values()))
