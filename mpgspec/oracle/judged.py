@@ -30,7 +30,7 @@ from .verdict import ENVELOPE_STEPS, LANES, Block, Carry, Decision, evidences, l
 
 KINDS = ("", "safe", "left_C", "non_finite", "horizon", "doubt", "doubt_E")
 SAFE, LEFT_C, NON_FINITE, HORIZON, DOUBT, DOUBT_E = range(1, 7)
-SCALARS = ("T", "zero", "i", "done", "kind", "t_stop", "entry", "why", "pend", "s_prev", "maybe", "en_c", "cen",
+SCALARS = ("T", "zero", "i", "done", "kind", "t_stop", "entry", "why", "dbt", "t_dbt", "maybe", "en_c", "cen",
            "best_m", "sat", "nsteps")
 WHY = ("any", "safety function", "RoA margin", "input", "state", "end")
 """Bits of `why` at a non-finite decision: some output, the h rows, the margin, the raw input, the
@@ -181,28 +181,32 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, first: bool, B: int,
     at_switch_in = _and(fob, g["nsteps"] == 0)  # E cannot have been entered before C was left
     maybe_v = maybe if at_switch_in is False else ca.logic_and(maybe, ca.logic_not(at_switch_in))
     # kinds as sums of 0/1 flags times codes (exact small integers; fewer operations than if_else)
-    c_kind = bad * NON_FINITE + (1 - bad) * (viol * (LEFT_C + (DOUBT_E - LEFT_C) * maybe_v) + (1 - viol) * DOUBT)
-    pend, endbad = g["pend"] > 0.5, ca.logic_or(viol, bad)
-    # the judge's order: a pending doubtful step is decided by this sample (within a block: only a
-    # violation or failure here counts, else the doubt is the step's); then C, E, the horizon, the step
-    p_in = pend if fob is False else ca.logic_and(pend, ca.logic_not(fob))
-    cev = ca.logic_and(valid, ca.logic_or(ca.logic_or(viol, doubt_s), bad))
-    plain = ca.logic_and(ca.logic_not(cev), ca.logic_and(valid, ca.logic_not(ment)))  # sample passed
-    npend, entered = ca.logic_not(pend), ca.logic_and(valid, ment)
-    on_c = ca.logic_or(ca.logic_and(pend, ca.logic_or(ca.logic_not(p_in), endbad)), ca.logic_and(npend, cev))
-    rest = ca.logic_and(npend, ca.logic_not(cev))
-    ends = ca.logic_and(ca.logic_not(entered), ca.logic_or(ca.logic_not(valid), ca.logic_not(valid_t)))
-    kind = on_c * c_kind + ca.logic_and(p_in, ca.logic_not(endbad)) * DOUBT + ca.logic_and(rest, entered) * SAFE + \
-        ca.logic_and(rest, ends) * (HORIZON + (DOUBT_E - HORIZON) * maybe)
-    fs = ca.logic_and(live, ca.if_else(pend, ca.logic_or(ca.logic_not(p_in), endbad), valid))
-    ft = ca.logic_and(live, ca.logic_and(ca.logic_not(pend), ca.logic_and(plain, valid_t)))
+    # the judge's order at this sample: C (a certain violation or failure decides; a doubt marks), E,
+    # the horizon; then the step, whose doubt marks too (verdict._decide)
+    nbad = ca.logic_not(bad)
+    hard = ca.logic_and(valid, ca.logic_or(viol, bad))
+    soft_s = ca.logic_and(ca.logic_and(valid, doubt_s), ca.logic_and(ca.logic_not(viol), nbad))
+    dbt = g["dbt"] > 0.5
+    dbt_s = ca.logic_or(dbt, soft_s)
+    entered = ca.logic_and(valid, ment)
+    nhard = ca.logic_not(hard)
+    is_e = ca.logic_and(nhard, entered)
+    ends = ca.logic_and(ca.logic_and(nhard, ca.logic_not(entered)), ca.logic_or(ca.logic_not(valid), ca.logic_not(valid_t)))
+    h_kind = bad * (NON_FINITE + (DOUBT - NON_FINITE) * dbt) + nbad * (LEFT_C + (DOUBT_E - LEFT_C) * maybe_v)
+    kind = hard * h_kind + is_e * (SAFE + (DOUBT - SAFE) * dbt_s) + \
+        ends * (dbt_s * DOUBT + ca.logic_not(dbt_s) * (HORIZON + (DOUBT_E - HORIZON) * maybe))
+    fs = ca.logic_and(live, valid)
+    ft = ca.logic_and(ca.logic_and(live, valid_t), ca.logic_and(ca.logic_and(valid, nhard), ca.logic_not(entered)))
+    step_doubt = ca.logic_and(ft, doubt_t)
+    new_doubt = ca.logic_and(live, ca.logic_or(soft_s, step_doubt))  # a decided rollout keeps what it had
+    t_dbt = ca.if_else(dbt, g["t_dbt"], ca.if_else(new_doubt, s, g["t_dbt"]))
     decided = ca.logic_and(live, kind > 0)
     new = dict(g)
     new.update({n: v for n, v in sums.items() if n in lay.parts}, maybe=maybe)
     if not first:
         new["i"] = ca.if_else(last_k, ca.if_else(i == B - K, 0, i + K), i)
-    new["pend"] = ca.logic_and(ft, doubt_t)
-    new["s_prev"] = s
+    new["dbt"] = ca.logic_or(dbt, new_doubt)
+    new["t_dbt"] = t_dbt
     new.update(_folded(g, rows, o, fs, ft, eh_s, eh_e, lo, hi))
     if rows.doubling:  # the margin's error at the last sample judged; the envelopes run on
         new["en_c"] = ca.if_else(fs, en_s, g["en_c"])
@@ -214,7 +218,7 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, first: bool, B: int,
     new["nsteps"] = g["nsteps"] + ft
     new["done"] = ca.logic_or(g["done"], decided)
     why = [any_bad, *parts, end_bad]
-    for n, v in (("kind", kind), ("t_stop", ca.if_else(ca.logic_and(p_in, ca.logic_not(endbad)), g["s_prev"], s)),
+    for n, v in (("kind", kind), ("t_stop", ca.if_else(kind == DOUBT, t_dbt, s)),
                  ("entry", margin), ("hk", h), ("why", sum(p * 2 ** b for b, p in enumerate(why) if p is not False))):
         new[n] = g[n] + ca.if_else(decided, v, 0)  # what the deciding sample left (0 until then)
     return ca.Function("judge_first" if first else "judge_step", [J, o, zend, last_k],
@@ -357,6 +361,8 @@ def decided_evidence(ch: JudgedChunk, J: np.ndarray, t0s, cm: float) -> list:
     c.min_h, c.low, c.count = get["min_h"], get["low"], get["count"].astype(int)
     c.best_m, c.peak, c.peak_raw = get["best_m"][0], get["peak"], get["peak_raw"]
     c.sat, c.nsteps = get["sat"][0] > 0.5, get["nsteps"][0].astype(int)
+    c.doubted = get["dbt"][0] > 0.5
+    c.t_doubt = np.where(c.doubted, get["t_dbt"][0], np.nan)
     d = Decision(np.ones(m, bool), kind, np.zeros(m, int))
     msgs = {b_: _message(int(w)) for b_, (w, k) in enumerate(zip(get["why"][0], kind)) if k == "non_finite"}
     return evidences(ch.prim, b, c, d, np.arange(m), t0s, cm, msgs)

@@ -6,13 +6,16 @@ ends), the integration error mapped onto it (`dh`), the RoA margin, the local er
 times and the inputs. The judge keeps the running error estimates and decides, in time order:
 
 - C first at each sample: a value below -tol even after adding its error estimate is a certain
-  violation (unsafe); a value within its error of -tol is a doubt (inconclusive);
-- E next: the flow is inside E when the RoA margin exceeds its own error estimate (safe, if no doubt
-  came before);
-- then the step that follows: a lower bound within its error of -tol is a doubt (inconclusive).
+  violation (unsafe); a value within its error of -tol is a doubt;
+- E next: the flow is inside E when the RoA margin exceeds its own error estimate (safe, unless a
+  doubt came before: then inconclusive);
+- then the step that follows: a lower bound within its error of -tol is a doubt.
 
-A safe verdict therefore means that every active safety function stayed above -tol by more than
-what the numerics can hide, between samples as well as at them, until the flow was inside E.
+A doubt does not end the rollout: a certain violation after it is still one (unsafe: the flow leaves
+C whatever happened in the doubtful stretch), while E entered, the horizon reached or a non-finite
+value after it leaves the call inconclusive, at the first doubt's time. A safe verdict therefore means
+that every active safety function stayed above -tol by more than what the numerics can hide, between
+samples as well as at them, until the flow was inside E.
 """
 from __future__ import annotations
 
@@ -48,8 +51,8 @@ class Block:
 class Carry:
     """What each rollout in flight has accumulated: error estimates, least values, peaks."""
 
-    FIELDS = ("eh", "en", "en_env", "min_h", "low", "count", "best_m", "peak", "peak_raw", "sat", "nsteps", "pending",
-              "maybe_e")
+    FIELDS = ("eh", "en", "en_env", "min_h", "low", "count", "best_m", "peak", "peak_raw", "sat", "nsteps", "doubted",
+              "t_doubt", "maybe_e")
 
     def __init__(self, nh: int, nu: int, m: int = 0):
         self.eh = np.zeros((nh, m))  # integration error estimate of each h so far
@@ -63,7 +66,8 @@ class Carry:
         self.peak_raw = np.zeros((nu, m))
         self.sat = np.zeros(m, bool)
         self.nsteps = np.zeros(m, int)  # steps judged so far
-        self.pending = np.zeros(m, bool)  # the last step was doubtful: its end sample decides
+        self.doubted = np.zeros(m, bool)  # a margin of C was within its error at some sample or step
+        self.t_doubt = np.full(m, np.nan)  # the time of the first doubt
         self.maybe_e = np.zeros(m, bool)  # some sample may have been inside E (within the margin's error)
 
     def extend(self, k: int) -> None:
@@ -182,45 +186,42 @@ def envelope(b: Block, c: Carry) -> tuple:
 def _decide(b: Block, c: Carry, e: _Errors, valid: np.ndarray, valid_t: np.ndarray, c_margin: float):
     """(kind, first event's position, its sample k, k within the block, reached the horizon, the
     position standing for none) of each rollout, in time order: C at a sample, then E, then the
-    step after it; a doubtful step waits for the sample at its end (Carry.pending)."""
+    step after it. A doubt (at a sample or over a step) only marks the rollout (Carry.doubted): a
+    certain violation after it decides unsafe, E, the horizon or a non-finite value inconclusive."""
     m, K = b.margin.shape
     viol, bad = e.viol, ~b.finite
-    c_event = (viol | e.doubt_s | bad) & valid
+    hard = (viol | bad) & valid
     enter = (b.margin - c_margin * e.en_s > 0) & valid
     big = 2 * K + 2
-    pos_c = np.where(c_event.any(axis=1), 2 * c_event.argmax(axis=1), big)
+    pos_h = np.where(hard.any(axis=1), 2 * hard.argmax(axis=1), big)
     pos_e = np.where(enter.any(axis=1), 2 * enter.argmax(axis=1), big)
-    st = e.doubt_t & valid_t
-    pos_t = np.where(st.any(axis=1), 2 * st.argmax(axis=1) + 1, big)
-    # a doubtful step is decided by the sample at its end: a certain violation there is unsafe
-    pos_t = np.where(c.pending, 0, pos_t)
-    first = np.minimum(np.minimum(pos_c, pos_e), pos_t)
+    soft_s, soft_t = e.doubt_s & ~viol & ~bad & valid, e.doubt_t & valid_t
+    pos_d = np.minimum(np.where(soft_s.any(axis=1), 2 * soft_s.argmax(axis=1), big),
+                       np.where(soft_t.any(axis=1), 2 * soft_t.argmax(axis=1) + 1, big))
+    first = np.minimum(pos_h, pos_e)
     rows = np.arange(m)
-    step_first = (pos_t == first) & (pos_c != first) & (first < big)
-    ke = np.minimum(first // 2 + (pos_t % 2), K - 1)  # sample at the doubtful step's end (this block)
-    end_in = step_first & ((first // 2 + 1 < K) | c.pending)
-    end_bad = end_in & (viol | bad)[rows, np.where(c.pending, 0, ke)]
-    first = np.where(end_bad, 2 * np.where(c.pending, 0, ke), first)
     k = first // 2
     kc = np.minimum(k, K - 1)
+    doubted = c.doubted | (pos_d <= np.minimum(first, big - 1))  # at a sample, C's doubt comes before E
     kind = np.full(m, "", dtype=object)
-    is_c = ((pos_c == first) | end_bad) & (first < big)
-    kind[is_c & bad[rows, kc]] = "non_finite"
+    is_h = (pos_h == first) & (first < big)
     # a violation after a sample that may have been inside E does not show the switch unsafe
     maybe = c.maybe_e[:, None] | np.logical_or.accumulate((b.margin + c_margin * e.en_s > 0) & valid, axis=1)
     maybe_v = maybe.copy()
     maybe_v[c.nsteps == 0, 0] = False  # at the switch-in instant, E cannot have been entered before C was left
-    kind[is_c & ~bad[rows, kc] & viol[rows, kc] & ~maybe_v[rows, kc]] = "left_C"
-    kind[is_c & ~bad[rows, kc] & viol[rows, kc] & maybe_v[rows, kc]] = "doubt_E"
-    kind[is_c & ~bad[rows, kc] & ~viol[rows, kc]] = "doubt"
-    kind[~is_c & (pos_e == first) & (first < big)] = "safe"
-    kind[~is_c & step_first & end_in] = "doubt"
-    wait = ~is_c & step_first & ~end_in  # the doubtful step is this block's last: decide on the next
+    nf = is_h & bad[rows, kc]
+    kind[nf] = np.where(doubted[nf], "doubt", "non_finite")
+    kind[is_h & ~bad[rows, kc] & ~maybe_v[rows, kc]] = "left_C"
+    kind[is_h & ~bad[rows, kc] & maybe_v[rows, kc]] = "doubt_E"
+    is_e = ~is_h & (pos_e == first) & (first < big)
+    kind[is_e] = np.where(doubted[is_e], "doubt", "safe")
     horizon = (first >= big) & ((~valid).any(axis=1) | ~valid_t[:, -1])
-    kind[horizon] = np.where(maybe[:, -1][horizon], "doubt_E", "horizon")
-    c.pending = wait
+    kind[horizon] = np.where(doubted[horizon], "doubt", np.where(maybe[:, -1][horizon], "doubt_E", "horizon"))
+    new = ~c.doubted & doubted
+    c.t_doubt = np.where(new, b.s[rows, np.minimum(pos_d // 2, K - 1)], c.t_doubt)
+    c.doubted = doubted
     c.maybe_e = maybe[:, -1]
-    return kind, np.where(wait, big, first), k, kc, horizon, big
+    return kind, first, k, kc, horizon, big
 
 
 LANES = 8
@@ -279,6 +280,7 @@ def _fold(b: Block, c: Carry, e: _Errors, n_s: np.ndarray, n_t: np.ndarray, lo: 
 
 
 DOUBT = "a safety margin is within the numerical error bound"
+AFTER_DOUBT = "certainly left C after a margin within its numerical error bound at"
 DOUBT_E = ("the flow may have entered E (its margin is within the numerical error bound) "
            "but E was not entered beyond doubt before C was left or the horizon was reached")
 
@@ -291,7 +293,9 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
         return []
     names = prim.h_names
     k = d.k[cols].astype(int)
-    t = b.s[cols, k].tolist()
+    td = c.t_doubt[cols]
+    t = np.where((d.kind[cols] == "doubt") & np.isfinite(td), td, b.s[cols, k]).tolist()  # a doubt: its first one's time
+    td_l = td.tolist()
     kinds = d.kind[cols].tolist()
     entry = b.margin[cols, k].tolist()
     entry_err = (c_margin * c.en[cols]).tolist()
@@ -316,7 +320,8 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
             ev = OracleEvidence(1, Reason.ENTERED_E, tn, t_enter=tn, status=SAFE, entry_margin=entry[n],
                                 entry_error=entry_err[n])
         elif kind == "left_C":
-            ev = OracleEvidence(0, Reason.LEFT_C, tn, violated=names[first_bad[n]], status=UNSAFE)
+            ev = OracleEvidence(0, Reason.LEFT_C, tn, violated=names[first_bad[n]], status=UNSAFE,
+                                message=f"{AFTER_DOUBT} {td_l[n]:.6g} s" if td_l[n] == td_l[n] else "")
         elif kind == "non_finite":
             ev = OracleEvidence(0, Reason.INTEGRATION_FAILED, tn, status=UNSAFE,
                                 message=(messages or {}).get(j) or "non-finite value")
