@@ -4,14 +4,15 @@
 
 After a switch-in and after a contact schedule's lift-off the oracle's steps grow from dt/16
 (oracle.flow.RAMP). In one process, every oracle call of Algorithm 1 (each source's setpoint on its
-t_A grid, every target on its t_B grid) is made per round twice, through primitives compiled with the
-ramp and through the same primitives compiled with whole steps (RAMP = 1). Prints the median per-round
-time ratio, the verdicts of both and how they differ, and checks the decided cells that moved (every
-one that became safe, and a spread of the rest up to --reference in all) against a reference: the
-same closed loop stepped at dt/100 (oracle.flow's switched_flow, no error bookkeeping) over the
-rollout up to the decision, each active safety function read at every reference step. A verdict agrees with it when an unsafe rollout's named function goes
-below zero in the reference before the oracle's decision plus dt, and a safe rollout's functions stay
-at or above zero until its entry into E.
+t_A grid, every target on its t_B grid) is made per round twice, through primitives compiled with
+the ramp and through the same primitives compiled with whole steps (RAMP = 1). Prints the median
+per-round time ratio, the verdicts of both and how they differ, and checks the decided cells that
+moved (every one that became safe, and a spread of the rest up to --reference in all) against a
+reference: the same closed loop stepped at dt/100 (oracle.flow's switched_flow, no error
+bookkeeping) over the rollout up to the decision, each active safety function read at every
+reference step. A verdict agrees with it when an unsafe rollout's named function goes below zero in
+the reference before the oracle's decision plus dt, and a safe rollout's functions stay at or above
+zero until its entry into E.
 """
 from __future__ import annotations
 
@@ -114,8 +115,10 @@ def main(argv=None) -> int:
         x0s, t0s = pts[b]
         verdicts.setdefault(_reference(prims[b], x0s[i], float(t0s[i]), s.dt, e), []).append(f"{b} {e.status}")
     rows = [("oracle calls per round (Algorithm 1's grids)", f"{len(evidence['ramp'])}"),
-            ("oracle steps, ramp; whole steps", f"{steps['ramp']}; {steps['whole']} ({steps['ramp'] / steps['whole']:.3f}x)"),
-            ("**oracle time, ramp / whole steps**", f"**{r:.2f}x** ({med['ramp']:.1f} s vs {med['whole']:.1f} s per round)"),
+            ("oracle steps, ramp; whole steps",
+             f"{steps['ramp']}; {steps['whole']} ({steps['ramp'] / steps['whole']:.3f}x)"),
+            ("**oracle time, ramp / whole steps**",
+             f"**{r:.2f}x** ({med['ramp']:.1f} s vs {med['whole']:.1f} s per round)"),
             ("verdicts safe / unsafe / inconclusive, ramp; whole steps",
              f"{' / '.join(map(str, count['ramp']))}; {' / '.join(map(str, count['whole']))}"),
             ("verdicts that moved (whole steps -> ramp)",

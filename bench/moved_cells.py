@@ -68,8 +68,8 @@ def main(argv=None) -> int:
         verdict = bench_ramp._reference(prims[b], x0, t_b, s.dt, ev) if ev.status != "inconclusive" else "undecided"
         result.setdefault(verdict, []).append(f"{a} -> {b} t_A {t_a:.3g} t_B {t_b:.3g} {ev.status}")
         print(a, "->", b, f"{t_a:.3g} {t_b:.3g}", ev.status, f"{ev.t_stop:.4g}", ev.violated, verdict, flush=True)
-    rows = [("cells that moved (old -> new status)", ", ".join(f"{a} -> {b}: {n}" for (a, b), n in sorted(counts.items()))
-             or "none"),
+    moves = ", ".join(f"{a} -> {b}: {n}" for (a, b), n in sorted(counts.items())) or "none"
+    rows = [("cells that moved (old -> new status)", moves),
             ("decided ones run again, same status", f"{again} of {len(decided)}"),
             (f"checked at dt/{bench_ramp.FINE}: agree / differ",
              f"{len(result.get('agrees', []))} / {len(result.get('differs', []))}"

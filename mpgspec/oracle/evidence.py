@@ -25,7 +25,8 @@ class OracleEvidence:
     'inconclusive' when a margin is within its error bound (no edge is built on it).
     margin is the least sampled value of any active safety function (of the function in doubt, named
     by `violated`, when inconclusive), error_bound what the numerics may hide below it (integration
-    error and the dip between samples): margin - error_bound is the least error-aware lower bound. method is how the verdict was obtained: 'simulated' for a rollout.
+    error and the dip between samples): margin - error_bound is the least error-aware lower bound.
+    method is how the verdict was obtained: 'simulated' for a rollout.
     """
 
     verdict: int

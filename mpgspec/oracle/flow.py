@@ -147,7 +147,8 @@ def step_length(prim: CompiledPrimitive, dt: float, tc, x=None, s=None, edge: bo
     B = prim.boundaries
     if B:
         gap = ca.fmin(gap, _clock_gap(prim, tc))
-    full = ca.DM(dt) if s is None or prim.sampled is not None else ca.fmin(dt, ca.fmax(RAMP * dt, _since_start(prim, tc, s)))
+    ramp = s is not None and prim.sampled is None
+    full = ca.fmin(dt, ca.fmax(RAMP * dt, _since_start(prim, tc, s))) if ramp else ca.DM(dt)
     step = ca.fmin(full, gap)
     return (step, gap <= full + SNAP) if edge else step  # within SNAP before a switching time is at it
 

@@ -191,7 +191,8 @@ def judge_step(lay: Layout, rows: Rows, n_out: int, K: int, first: bool, B: int,
     entered = ca.logic_and(valid, ment)
     nhard = ca.logic_not(hard)
     is_e = ca.logic_and(nhard, entered)
-    ends = ca.logic_and(ca.logic_and(nhard, ca.logic_not(entered)), ca.logic_or(ca.logic_not(valid), ca.logic_not(valid_t)))
+    ends = ca.logic_and(ca.logic_and(nhard, ca.logic_not(entered)),
+                        ca.logic_or(ca.logic_not(valid), ca.logic_not(valid_t)))
     h_kind = bad * (NON_FINITE + (DOUBT - NON_FINITE) * dbt) + nbad * (LEFT_C + (DOUBT_E - LEFT_C) * maybe_v)
     kind = hard * h_kind + is_e * (SAFE + (DOUBT - SAFE) * dbt_s) + \
         ends * (dbt_s * DOUBT + ca.logic_not(dbt_s) * (HORIZON + (DOUBT_E - HORIZON) * maybe))
