@@ -129,18 +129,19 @@ class Schedule:
     @property
     def touchdowns(self) -> list[float]:
         """Clock times within the period at which the next phase adds a foot to the held set."""
-        out = []
-        for k, (until, feet) in enumerate(self.phases):
-            if set(self.phases[(k + 1) % len(self.phases)][1]) - set(feet):
-                out.append(float(until) % float(self.period) if self.period else float(until))
-        return sorted(out)
+        return self._changes(adds=True)
 
     @property
     def liftoffs(self) -> list[float]:
         """Clock times within the period at which the next phase releases a held foot."""
+        return self._changes(adds=False)
+
+    def _changes(self, adds: bool) -> list[float]:
+        """Clock times within the period at which the next phase adds (or releases) a foot."""
         out = []
         for k, (until, feet) in enumerate(self.phases):
-            if set(feet) - set(self.phases[(k + 1) % len(self.phases)][1]):
+            now, nxt = set(feet), set(self.phases[(k + 1) % len(self.phases)][1])
+            if (nxt - now) if adds else (now - nxt):
                 out.append(float(until) % float(self.period) if self.period else float(until))
         return sorted(out)
 
