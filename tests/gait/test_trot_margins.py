@@ -1,5 +1,6 @@
 """The A1 trot's margins by design: swing feet stay above the ground on every walk's orbit, `aerial`
-allows no swing foot below it, a switch between speeds asks a bounded horizontal force, and a swing
+allows no swing foot below it, a switch between speeds asks a bounded horizontal force, a switch in from a
+crouch a bounded vertical one, and a swing
 foot lifts before it is pulled over."""
 import casadi as ca
 import numpy as np
@@ -79,6 +80,21 @@ def test_a_switch_between_speeds_asks_a_bounded_horizontal_force(prims):
     # on its own orbit the limit does not bind: the force is the orbit's, far below the limit
     y = np.asarray(slow.x_star(0.005), float).ravel()
     assert np.hypot(*_ground_force(slow, y, 0.005)[:2]) < 0.5 * mass * 2.0
+
+
+def test_a_switch_in_from_a_crouch_asks_a_bounded_vertical_force(prims):
+    """Walk(in_place)'s law from Land's rest (its CoM about 6 cm below the walk's h_d, at rest, all four feet
+    down) asks the ground for m (g + height_accel_limit) (4 m/s^2), not the m (g + kz e) of its stiff height
+    law (kz 2500: over 100 m/s^2): the height error saturates at height_accel_limit / kz."""
+    land, walk = prims["Land"], prims["Walk(in_place)"]
+    x = np.asarray(land.x_star(land.domain[1] if land.domain else 4.0), float).ravel()
+    mass = pin.computeTotalMass(walk.system.model.pin_model)
+    g = 9.81
+    F = _ground_force(walk, x, 0.005)
+    assert F[2] == pytest.approx(mass * (g + 4.0), rel=0.05)
+    # on its own orbit the limit does not bind: the vertical force stays within the limit's band
+    y = np.asarray(walk.x_star(0.005), float).ravel()
+    assert abs(_ground_force(walk, y, 0.005)[2] - mass * g) < mass * 4.0
 
 
 def test_a_swing_foot_lifts_before_it_is_pulled_over(prims):

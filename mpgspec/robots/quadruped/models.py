@@ -66,6 +66,11 @@ class TrotController(Strict):
                                        "(m/s^2) the stance wrench asks: the velocity error saturates at "
                                        "accel_limit / kv, so a step in the speed command (a switch between walks) "
                                        "is a ramp; default: no limit")
+    height_accel_limit: Number | None = Field(default=None, gt=0, description="largest vertical CoM acceleration "
+                                              "(m/s^2) the height stiffness asks: the height error saturates at "
+                                              "height_accel_limit / kz, so a stiff height law (which holds the "
+                                              "height under a mass or torque error) rises from a lower stance "
+                                              "(a switch in from a crouch) at a bounded force; default: no limit")
     lift_fraction: Number = Field(default=0.0, ge=0, lt=1, description="share of the swing over which the swing "
                                   "foot's horizontal pull ramps in from 0: the foot lifts before it moves over; "
                                   "0: the path's pull from lift-off")
