@@ -326,9 +326,11 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
     firsts = {}
     for v in report["sequence"]["runs"]["naive"]["violations"]:
         firsts.setdefault(v["h"].split("[")[0], v)
-    t_tc, t_q = _claim(r"Walk\(fast\) hits `trunk_clearance` at ([\d.]+) s, then `q_min` of a calf at ([\d.]+) s,", readme)
+    t_tc, t_q, t_fc, f_fc = _claim(r"Walk\(fast\) hits `trunk_clearance` at ([\d.]+) s, then `q_min` of a calf at "
+                                   r"([\d.]+) s and a friction cone at ([\d.]+) s \((-[\d.]+) N\),", readme)
     assert _as_written(firsts["trunk_clearance"]["t"], t_tc) and _as_written(firsts["q_min"]["t"], t_q)
-    assert firsts["friction_cone"]["primitive"] == "Jump"  # the first friction-cone violation is the jump's below
+    walk_fc = firsts["friction_cone"]  # the first friction-cone violation, the walk's before the jump's below
+    assert walk_fc["primitive"] == "Walk(fast)" and _as_written(walk_fc["t"], t_fc) and _as_written(walk_fc["value"], f_fc)
     t_j, f_j = _claim(r"Walk\(fast\) -> Jump leaves the friction cone at ([\d.]+) s \((-[\d.]+) N\)", readme)
     jump = [v for v in report["sequence"]["runs"]["naive"]["violations"]
             if v["primitive"] == "Jump" and v["h"].startswith("friction_cone")][0]
