@@ -295,6 +295,7 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
     k = d.k[cols].astype(int)
     td = c.t_doubt[cols]
     t = np.where((d.kind[cols] == "doubt") & np.isfinite(td), td, b.s[cols, k]).tolist()  # a doubt: its first one's time
+    doubted = np.isfinite(td).tolist()
     td_l = td.tolist()
     kinds = d.kind[cols].tolist()
     entry = b.margin[cols, k].tolist()
@@ -321,7 +322,7 @@ def evidences(prim: CompiledPrimitive, b: Block, c: Carry, d: Decision, cols: np
                                 entry_error=entry_err[n])
         elif kind == "left_C":
             ev = OracleEvidence(0, Reason.LEFT_C, tn, violated=names[first_bad[n]], status=UNSAFE,
-                                message=f"{AFTER_DOUBT} {td_l[n]:.6g} s" if td_l[n] == td_l[n] else "")
+                                message=f"{AFTER_DOUBT} {td_l[n]:.6g} s" if doubted[n] else "")
         elif kind == "non_finite":
             ev = OracleEvidence(0, Reason.INTEGRATION_FAILED, tn, status=UNSAFE,
                                 message=(messages or {}).get(j) or "non-finite value")

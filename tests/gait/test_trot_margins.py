@@ -1,7 +1,6 @@
 """The A1 trot's margins by design: swing feet stay above the ground on every walk's orbit, `aerial`
 allows no swing foot below it, a switch between speeds asks a bounded horizontal force, a switch in from a
-crouch a bounded vertical one, and a swing
-foot lifts before it is pulled over."""
+crouch a bounded vertical one, and a swing foot lifts before it is pulled over."""
 import casadi as ca
 import numpy as np
 import pinocchio as pin
@@ -87,7 +86,7 @@ def test_a_switch_in_from_a_crouch_asks_a_bounded_vertical_force(prims):
     down) asks the ground for m (g + height_accel_limit) (4 m/s^2), not the m (g + kz e) of its stiff height
     law (kz 2500: over 100 m/s^2): the height error saturates at height_accel_limit / kz."""
     land, walk = prims["Land"], prims["Walk(in_place)"]
-    x = np.asarray(land.x_star(land.domain[1] if land.domain else 4.0), float).ravel()
+    x = np.asarray(land.x_star(land.domain[1]), float).ravel()  # the end of its domain, settled
     mass = pin.computeTotalMass(walk.system.model.pin_model)
     g = 9.81
     F = _ground_force(walk, x, 0.005)
