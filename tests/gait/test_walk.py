@@ -84,6 +84,48 @@ def test_twenty_seconds_of_walking_from_the_orbit(prims, name):
     assert abs(mean - v) <= max(0.1 * v, 0.01), f"{name}: mean speed {mean:.4f} m/s for {v} m/s"
 
 
+def _table(path: Path) -> np.ndarray:
+    """The states (nx x samples) of a gait table on disk."""
+    rows = [line for line in path.read_text().splitlines() if line and not line.startswith("#")][1:]
+    return np.array([[float(v) for v in r.split(",")[1:]] for r in rows]).T
+
+
+@pytest.mark.slow
+def test_nodes_of_one_gait_in_two_files_each_get_their_own_law(tmp_path):
+    """Walk nodes written in two files may differ in more than their speed (here the touchdown height):
+    each table is the orbit of its own node's law, so verify finds every table current."""
+    import shutil
+
+    from mpgspec.robots.quadruped.setup import trot_inputs
+
+    d = tmp_path / "a1"
+    shutil.copytree(A1, d)
+    walk = d / "primitives" / "walk.yaml"
+    text = walk.read_text()
+    every = "  speed: {in_place: 0.0, slow: 0.2, medium: 0.4, fast: 0.6}\n"
+    assert every in text and "  touchdown_height: 0.0007 " in text
+    walk.write_text(text.replace(every, "  speed: {in_place: 0.0, slow: 0.2, medium: 0.4}\n"))
+    (d / "primitives" / "walk_fast.yaml").write_text(
+        text.replace(every, "  speed: {fast: 0.6}\n").replace("  touchdown_height: 0.0007 ", "  touchdown_height: 0.001 "))
+    project = d / "project.yaml"
+    project.write_text(project.read_text().replace("  - primitives/walk.yaml\n",
+                                                   "  - primitives/walk.yaml\n  - primitives/walk_fast.yaml\n"))
+    gaits = d / "gaits.yaml"  # the walks only: the transients' flows are those committed
+    gaits.write_text(gaits.read_text().split("transients:")[0])
+    messages = []
+    tables = generate(gaits, progress=messages.append)
+    assert sum(m.startswith("compiling the stride map") for m in messages) == 2
+    spec = load_project(project)
+    sys = compile_system(spec)
+    for inst in (i for i in spec.primitives if i.base == "Walk"):  # what verify's staleness check compares
+        table = next(t for t in tables if t.node == inst.name)
+        assert table.inputs == trot_inputs(inst.spec.controller, sys, float(next(iter(inst.argument.values()))))
+    ours = {t.node: t.orbit.X for t in tables if hasattr(t, "orbit")}
+    committed = {n: _table(A1 / "gaits" / f) for n, f in (("Walk(in_place)", "walk_0.csv"), ("Walk(fast)", "walk_0.6.csv"))}
+    assert np.allclose(ours["Walk(in_place)"], committed["Walk(in_place)"], atol=1e-9)  # its own law, as committed
+    assert not np.allclose(ours["Walk(fast)"], committed["Walk(fast)"], atol=1e-4)  # the other file's law
+
+
 def test_a_gait_table_outside_the_project_is_refused(tmp_path):
     """`mpgspec gait` writes tables only inside the project folder, and says so before any work."""
     import shutil

@@ -242,7 +242,6 @@ def generate(path: str | Path, progress=print, allow_paths=None) -> list:
         raise SpecError("no trot primitive of that name", location=pos.locate_value(("primitive",)), key="primitive",
                         expected="the name of a primitive with controller type trot", found=gf.primitive,
                         code="MPG104")
-    ctrl = nodes[0].spec.controller
     for inst in nodes:  # the checks verify runs, located in the spec, before any orbit is computed
         check_ready(inst.spec.controller, sys, ExprCompiler(inst.locate, f"primitive '{inst.name}'"))
     targets = {}  # written only inside the project: checked before any orbit is computed
@@ -250,18 +249,21 @@ def generate(path: str | Path, progress=print, allow_paths=None) -> list:
         raw = inst.spec.controller.gait or f"gaits/{gf.primitive.lower()}_{{speed}}.csv"
         targets[inst.name] = spec_file(inst, raw, inst.locate(("controller", "gait")),
                                        f"primitive '{inst.name}': controller.gait")[1]
-    progress(f"compiling the stride map of {gf.primitive} (dt = {gf.dt:g} s)")
-    try:
-        sm = StrideMap(sys, ctrl, gf.dt)
-    except ValueError as err:  # the trot's switching times are not on the step grid
-        raise SpecError("the gait's step does not divide the trot's timing", location=pos.locate(("dt",)),
-                        key="dt", expected="a step that divides swing and double_support",
-                        found=f"{gf.dt:g} s ({err})", code="MPG104") from None
-    stand = nominal_state(sys, dict(ctrl.pose))
+    maps: dict[str, StrideMap] = {}  # one stride map per law: nodes of several files may differ in more than speed
     out = []
     for inst in nodes:
+        ctrl = inst.spec.controller
+        law = json.dumps(ctrl.model_dump(mode="json", exclude={"speed", "gait"}), sort_keys=True)
+        if law not in maps:
+            progress(f"compiling the stride map of {inst.name if maps else gf.primitive} (dt = {gf.dt:g} s)")
+            try:
+                maps[law] = StrideMap(sys, ctrl, gf.dt)
+            except ValueError as err:  # the trot's switching times are not on the step grid
+                raise SpecError("the gait's step does not divide the trot's timing", location=pos.locate(("dt",)),
+                                key="dt", expected="a step that divides swing and double_support",
+                                found=f"{gf.dt:g} s ({err})", code="MPG104") from None
         speed = float(next(iter(inst.argument.values()))) if inst.argument else float(ctrl.speed)
-        orbit = find_orbit(sm, stand, speed)
+        orbit = find_orbit(maps[law], nominal_state(sys, dict(ctrl.pose)), speed)
         table = GaitTable(inst.name, targets[inst.name], orbit, trot_inputs(ctrl, sys, speed))
         out.append(table)
         if table.failure:
