@@ -287,12 +287,80 @@ def _format_arg(v: float) -> str:
     return f"{v:g}"
 
 
-def _expand(p: Primitive) -> list[tuple[str, dict[str, float]]]:
+def _expand(p: Primitive) -> list[tuple[str, dict[str, float], str | None]]:
+    """(node name, argument, label) of each node of a primitive."""
     if not p.arguments:
-        return [(p.name, {})]
+        return [(p.name, {}, None)]
     (arg, values), = p.arguments.items()
     items = values.items() if isinstance(values, dict) else ((_format_arg(v), v) for v in values)
-    return [(f"{p.name}({label})", {arg: float(v)}) for label, v in items]
+    return [(f"{p.name}({label})", {arg: float(v)}, label) for label, v in items]
+
+
+NODE_FIXED = ("name", "class", "arguments", "nodes")
+"""Keys a node cannot set for itself: they make the family it belongs to."""
+
+
+def _merged(base, over):
+    """base with over's keys: mappings merge key by key, any other value replaces."""
+    if isinstance(base, dict) and isinstance(over, dict):
+        return {**base, **{k: _merged(base.get(k), v) for k, v in over.items()}}
+    return over
+
+
+def _in_override(over: dict, loc: tuple) -> bool:
+    """Whether the key at `loc` of a node's primitive is written in its override (or lies inside a value
+    the override replaces)."""
+    node = over
+    for k in loc:
+        if not isinstance(node, dict) or k not in node:
+            return False
+        node = node[k]
+        if not isinstance(node, dict):
+            return True
+    return True
+
+
+def _node_spec(p: Primitive, label: str | None, loc_fn: Locator, errors: list) -> tuple[Primitive, Locator]:
+    """The primitive of one node: its `nodes` entry merged in (None when that entry is invalid, which is
+    then in errors), and a locator that finds the keys the entry sets in the entry."""
+    over = p.nodes.get(label) if label is not None else None
+    base = p.model_copy(update={"nodes": {}})
+    if not over:
+        return base, loc_fn
+
+    def locate(loc, offset=None):
+        return loc_fn(("nodes", label, *loc), offset) if _in_override(over, tuple(loc)) else loc_fn(loc, offset)
+
+    fixed = [k for k in over if k in NODE_FIXED]
+    if fixed:
+        errors.append(SpecError("a node cannot set this key", location=loc_fn(("nodes", label, fixed[0])),
+                                key=f"nodes.{label}.{fixed[0]}", expected=f"keys of the primitive other than "
+                                f"{', '.join(NODE_FIXED)}", found=fixed[0], code="MPG104"))
+        return None, locate
+    data = _merged(base.model_dump(by_alias=True, exclude_unset=True), over)
+    try:
+        return Primitive.model_validate(data), locate
+    except ValidationError as e:
+        errors += _validation_errors(e, _EntryErrors(loc_fn, label, over), data=data)
+        return None, locate
+
+
+class _EntryErrors:
+    """Where _validation_errors puts an error of a node's merged primitive: at the deepest key of the path
+    that the node's entry writes (its entry made the primitive invalid), else at the family's key."""
+
+    def __init__(self, loc_fn: Locator, label: str, over: dict):
+        self.loc_fn, self.label, self.over = loc_fn, label, over
+
+    def locate(self, loc, offset=None):
+        node, depth = self.over, 0
+        for k in loc:
+            if not isinstance(node, dict) or k not in node:
+                break
+            node, depth = node[k], depth + 1
+        if depth == 0:
+            return self.loc_fn(loc, offset)
+        return self.loc_fn(("nodes", self.label, *loc[:depth]), offset)
 
 
 def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = None,
@@ -440,13 +508,26 @@ def _instances(project: Project, prim_locates: list[Locator], prim_sources: list
         loc_fn = _safe_set_locator(prim_locates[i], merged.locate, origins)
         errors += [e for e in _event_window_errors(project, p, loc_fn, merged.locate)  # a block's: once
                    if all((e.key, str(e.location)) != (o.key, str(o.location)) for o in errors)]
-        for name, arg in _expand(p):
+        labels = [label for _n, _a, label in _expand(p)]
+        for label in p.nodes:
+            if label not in labels:
+                errors.append(SpecError("no node of that label", location=prim_locates[i](("nodes", label)),
+                                        key=f"nodes.{label}", expected="one of " + ", ".join(map(str, labels)),
+                                        found=clip_repr(label), code="MPG104"))
+        for name, arg, label in _expand(p):
+            node, node_loc = _node_spec(p, label, loc_fn, errors)
+            if node is None:
+                continue
             if name in names:
                 errors.append(SpecError("duplicate primitive name", location=loc_fn(("name",)),
                                         key="name", expected="unique names",
                                         found=f"{clip_repr(name)} also defined at {names[name]}", code="MPG303"))
             names[name] = loc_fn(("name",))
-            instances.append(PrimitiveInstance(name, p.name, p, arg, tuple(resolved), loc_fn, prim_sources[i],
+            node_set = resolved
+            if node.safe_set != p.safe_set:  # the node's own safe set, its blocks expanded
+                node_set, origins = _resolve_safe_set(project, node, node_loc, errors)
+                node_loc = _safe_set_locator(node_loc, merged.locate, origins)
+            instances.append(PrimitiveInstance(name, p.name, node, arg, tuple(node_set), node_loc, prim_sources[i],
                                                roots))
     return instances
 

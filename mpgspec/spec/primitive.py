@@ -224,6 +224,12 @@ class Primitive(Strict):
         default_factory=dict,
         description="one node per value: a list of numbers, or labels mapped to numbers (Walk(slow))",
     )
+    nodes: dict[str, dict[str, Any]] = Field(
+        default_factory=dict,
+        description="per node (an argument's label, as in Walk(fast)): keys of this primitive that differ for that "
+                    "node, e.g. {fast: {controller: {touchdown_height: 0.0007}}}; mappings merge key by key, other "
+                    "values replace",
+    )
     let: dict[str, Expr] = Field(default_factory=dict, description="derived constants")
     setpoint: Setpoint
     controller: Controller
@@ -250,6 +256,8 @@ class Primitive(Strict):
             raise ValueError("'domain' and 'next' are only for transient primitives")
         if len(self.arguments) > 1:
             raise ValueError("a primitive takes at most one argument")
+        if self.nodes and not self.arguments:
+            raise ValueError("'nodes' sets keys per argument value: the primitive needs 'arguments'")
         return self
 
 
