@@ -243,6 +243,14 @@ class Primitive(Strict):
     grid: Grid | None = None
     description: Text = ""
 
+    @field_validator("nodes", mode="before")
+    @classmethod
+    def _labels(cls, v):
+        """A numeric argument's node is labelled as its name writes it (`2.6:` for Swing(2.6))."""
+        if isinstance(v, dict):
+            return {(f"{k:g}" if isinstance(k, (int, float)) and not isinstance(k, bool) else k): e for k, e in v.items()}
+        return v
+
     @model_validator(mode="after")
     def _class_fields(self):
         c = self.class_

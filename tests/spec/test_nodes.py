@@ -73,3 +73,9 @@ def test_nodes_need_arguments(tmp_path):
     with pytest.raises(SpecErrors) as err:
         load_project(d / "project.yaml")
     assert any("needs 'arguments'" in e.format() for e in err.value.errors)
+
+
+def test_a_numeric_label_is_written_as_the_node_name_writes_it(tmp_path):
+    nodes = _nodes(_pendulum(tmp_path, "{2.6: {roa: {radius: 0.1}}, 2: {roa: {radius: 0.12}}}"))
+    assert nodes["Swing(2.6)"].spec.roa.radius == 0.1 and nodes["Swing(2)"].spec.roa.radius == 0.12
+    assert nodes["Swing(1)"].spec.roa.radius == 0.15
