@@ -80,7 +80,7 @@ def test_the_touchdown_gap_block_compiles_to_the_hand_written_rows(tmp_path):
     walk = tmp_path / "a1" / "primitives" / "walk.yaml"
     text = walk.read_text()
     walk.write_text(text[:text.index("  - name: touchdown_gap[FR_foot]")] + "  - use: touchdown_gap\n"
-                    + text[text.index("roa:"):])
+                    + text[text.index("\nroa:") + 1:])
     prims = []
     for project in (A1, tmp_path / "a1" / "project.yaml"):
         spec = load_project(project)
