@@ -32,6 +32,7 @@ from .paths import (
     read_text_bounded,
     resolve_roots,
 )
+from .primitive import node_label
 from .project import node_refs
 from .yamlpos import PositionMap, parse_yaml
 
@@ -283,16 +284,12 @@ def _event_window_errors(project: Project, p: Primitive, loc_fn: Locator, block_
     return out
 
 
-def _format_arg(v: float) -> str:
-    return f"{v:g}"
-
-
 def _expand(p: Primitive) -> list[tuple[str, dict[str, float], str | None]]:
     """(node name, argument, label) of each node of a primitive."""
     if not p.arguments:
         return [(p.name, {}, None)]
     (arg, values), = p.arguments.items()
-    items = values.items() if isinstance(values, dict) else ((_format_arg(v), v) for v in values)
+    items = values.items() if isinstance(values, dict) else ((node_label(v), v) for v in values)
     return [(f"{p.name}({label})", {arg: float(v)}, label) for label, v in items]
 
 
@@ -307,17 +304,17 @@ def _merged(base, over):
     return over
 
 
-def _in_override(over: dict, loc: tuple) -> bool:
-    """Whether the key at `loc` of a node's primitive is written in its override (or lies inside a value
-    the override replaces)."""
-    node = over
+def _written(over: dict, loc: tuple) -> tuple[int, bool]:
+    """How many keys of `loc` a node's entry writes, and whether the key at `loc` is its (written there, or
+    inside a value the entry replaces)."""
+    node, depth = over, 0
     for k in loc:
         if not isinstance(node, dict) or k not in node:
-            return False
-        node = node[k]
+            return depth, False
+        node, depth = node[k], depth + 1
         if not isinstance(node, dict):
-            return True
-    return True
+            return depth, True
+    return depth, True
 
 
 def _node_spec(p: Primitive, label: str | None, loc_fn: Locator, errors: list) -> tuple[Primitive, Locator]:
@@ -329,7 +326,7 @@ def _node_spec(p: Primitive, label: str | None, loc_fn: Locator, errors: list) -
         return base, loc_fn
 
     def locate(loc, offset=None):
-        return loc_fn(("nodes", label, *loc), offset) if _in_override(over, tuple(loc)) else loc_fn(loc, offset)
+        return loc_fn(("nodes", label, *loc), offset) if _written(over, tuple(loc))[1] else loc_fn(loc, offset)
 
     fixed = [k for k in over if k in NODE_FIXED]
     if fixed:
@@ -353,14 +350,8 @@ class _EntryErrors:
         self.loc_fn, self.label, self.over = loc_fn, label, over
 
     def locate(self, loc, offset=None):
-        node, depth = self.over, 0
-        for k in loc:
-            if not isinstance(node, dict) or k not in node:
-                break
-            node, depth = node[k], depth + 1
-        if depth == 0:
-            return self.loc_fn(loc, offset)
-        return self.loc_fn(("nodes", self.label, *loc[:depth]), offset)
+        depth = _written(self.over, tuple(loc))[0]
+        return self.loc_fn(("nodes", self.label, *loc[:depth]), offset) if depth else self.loc_fn(loc, offset)
 
 
 def load_project(path: str | Path, allow_paths: Iterable[str | Path] | None = None,
@@ -508,13 +499,14 @@ def _instances(project: Project, prim_locates: list[Locator], prim_sources: list
         loc_fn = _safe_set_locator(prim_locates[i], merged.locate, origins)
         errors += [e for e in _event_window_errors(project, p, loc_fn, merged.locate)  # a block's: once
                    if all((e.key, str(e.location)) != (o.key, str(o.location)) for o in errors)]
-        labels = [label for _n, _a, label in _expand(p)]
+        nodes = _expand(p)
+        labels = [label for _n, _a, label in nodes]
         for label in p.nodes:
             if label not in labels:
                 errors.append(SpecError("no node of that label", location=prim_locates[i](("nodes", label)),
                                         key=f"nodes.{label}", expected="one of " + ", ".join(map(str, labels)),
                                         found=clip_repr(label), code="MPG104"))
-        for name, arg, label in _expand(p):
+        for name, arg, label in nodes:
             node, node_loc = _node_spec(p, label, loc_fn, errors)
             if node is None:
                 continue

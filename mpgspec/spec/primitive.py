@@ -212,6 +212,11 @@ class Grid(Strict):
                           "switch is meant to happen (a walk's double support rather than its touchdown instants)")
 
 
+def node_label(v: float) -> str:
+    """The label of the node a numeric argument value makes, as in Swing(2.6)."""
+    return f"{v:g}"
+
+
 class Primitive(Strict):
     """Definition 1: setpoint x*, control law k, safe set C, explicit safe RoA E, plus its class."""
 
@@ -248,7 +253,8 @@ class Primitive(Strict):
     def _labels(cls, v):
         """A numeric argument's node is labelled as its name writes it (`2.6:` for Swing(2.6))."""
         if isinstance(v, dict):
-            return {(f"{k:g}" if isinstance(k, (int, float)) and not isinstance(k, bool) else k): e for k, e in v.items()}
+            return {(node_label(k) if isinstance(k, (int, float)) and not isinstance(k, bool) else k): e
+                    for k, e in v.items()}
         return v
 
     @model_validator(mode="after")

@@ -84,12 +84,6 @@ def test_twenty_seconds_of_walking_from_the_orbit(prims, name):
     assert abs(mean - v) <= max(0.1 * v, 0.01), f"{name}: mean speed {mean:.4f} m/s for {v} m/s"
 
 
-def _table(path: Path) -> np.ndarray:
-    """The states (nx x samples) of a gait table on disk."""
-    rows = [line for line in path.read_text().splitlines() if line and not line.startswith("#")][1:]
-    return np.array([[float(v) for v in r.split(",")[1:]] for r in rows]).T
-
-
 @pytest.mark.slow
 def test_nodes_of_one_gait_in_two_files_each_get_their_own_law(tmp_path):
     """Walk nodes written in two files may differ in more than their speed (here the touchdown height, which
@@ -98,6 +92,7 @@ def test_nodes_of_one_gait_in_two_files_each_get_their_own_law(tmp_path):
     import re
     import shutil
 
+    from mpgspec.robots.quadruped.gait.library import _table_on_disk
     from mpgspec.robots.quadruped.setup import trot_inputs
 
     d = tmp_path / "a1"
@@ -125,7 +120,7 @@ def test_nodes_of_one_gait_in_two_files_each_get_their_own_law(tmp_path):
         table = next(t for t in tables if t.node == inst.name)
         assert table.inputs == trot_inputs(inst.spec.controller, sys, float(next(iter(inst.argument.values()))))
     ours = {t.node: t.orbit.X for t in tables if hasattr(t, "orbit")}
-    committed = {n: _table(A1 / "gaits" / f) for n, f in (("Walk(in_place)", "walk_0.csv"), ("Walk(fast)", "walk_0.6.csv"))}
+    committed = {n: _table_on_disk(A1 / "gaits" / f)[1:] for n, f in (("Walk(in_place)", "walk_0.csv"), ("Walk(fast)", "walk_0.6.csv"))}
     for n in committed:  # each its own law: as committed, where the two laws come from one file's `nodes`
         assert np.allclose(ours[n], committed[n], atol=1e-9), n
 

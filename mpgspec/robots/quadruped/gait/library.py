@@ -249,7 +249,7 @@ def generate(path: str | Path, progress=print, allow_paths=None) -> list:
         raw = inst.spec.controller.gait or f"gaits/{gf.primitive.lower()}_{{speed}}.csv"
         targets[inst.name] = spec_file(inst, raw, inst.locate(("controller", "gait")),
                                        f"primitive '{inst.name}': controller.gait")[1]
-    maps: dict[str, StrideMap] = {}  # one stride map per law: nodes of several files may differ in more than speed
+    maps: dict[str, tuple] = {}  # (stride map, stance) per law: nodes of several files may differ in more than speed
     out = []
     for inst in nodes:
         ctrl = inst.spec.controller
@@ -257,13 +257,13 @@ def generate(path: str | Path, progress=print, allow_paths=None) -> list:
         if law not in maps:
             progress(f"compiling the stride map of {inst.name if maps else gf.primitive} (dt = {gf.dt:g} s)")
             try:
-                maps[law] = StrideMap(sys, ctrl, gf.dt)
+                maps[law] = StrideMap(sys, ctrl, gf.dt), nominal_state(sys, dict(ctrl.pose))
             except ValueError as err:  # the trot's switching times are not on the step grid
                 raise SpecError("the gait's step does not divide the trot's timing", location=pos.locate(("dt",)),
                                 key="dt", expected="a step that divides swing and double_support",
                                 found=f"{gf.dt:g} s ({err})", code="MPG104") from None
         speed = float(next(iter(inst.argument.values()))) if inst.argument else float(ctrl.speed)
-        orbit = find_orbit(maps[law], nominal_state(sys, dict(ctrl.pose)), speed)
+        orbit = find_orbit(*maps[law], speed)
         table = GaitTable(inst.name, targets[inst.name], orbit, trot_inputs(ctrl, sys, speed))
         out.append(table)
         if table.failure:
