@@ -194,7 +194,7 @@ def _suggest_keys(out: list[SpecError], errs, prefix: tuple, data) -> None:
         word = parts[-1]
         parent = tuple(int(x) if x.isdigit() else x for x in parts[:-1])
         near = difflib.get_close_matches(word, missing.get(parent, []), n=1, cutoff=0.6) or \
-            difflib.get_close_matches(word, _spec_keys(), n=1, cutoff=0.8)
+            difflib.get_close_matches(word, [k for k in _spec_keys() if k != word], n=1, cutoff=0.8)  # valid elsewhere
         if near:
             s.hint = f"did you mean {near[0]!r}?"
 

@@ -21,7 +21,8 @@ import casadi as ca
 
 from ...compile.laws.base import cubic_profile
 from ...errors import SpecError
-from .stance import level_trunk_moment, nominal_geometry, nominal_state, quadruped_legs, split_wrench, trunk
+from .stance import (leg_torques, level_trunk_moment, nominal_geometry, nominal_state, quadruped_legs,
+                     split_wrench, trunk)
 
 
 def jump_torque(sys, c, mode: dict, t: ca.SX) -> ca.SX:
@@ -44,19 +45,8 @@ def jump_torque(sys, c, mode: dict, t: ca.SX) -> ca.SX:
     kp, kd = float(c.kp_joint), float(c.kd_joint)
     hold = kp * (stance_q - q) - kd * v
     tuck = kp * (tuck_q - q) - kd * v
-    legs = {leg.foot: leg for leg in sys.legs}
-    u = [None] * m.nu
-    for i, f in enumerate(feet):
-        leg = legs[f]
-        at = [k - 7 for k in leg.q]  # the leg's joints among the joint angles
-        J = tk.sub(sys.dyn.contact_jacobian_expr([f]))[:, list(leg.v)]
-        fi = f_all[3 * i:3 * i + 3]
-        push = tk.H[list(leg.v)] - ca.mtimes(J.T, fi)
-        push = mode[f] * push + (1 - mode[f]) * hold[at]
-        tau_leg = ca.if_else(t < float(c.takeoff_time), push, tuck[at])
-        for k, j in enumerate(leg.u):
-            u[j] = tau_leg[k]
-    return ca.vertcat(*u)
+    return leg_torques(sys, tk, mode, f_all, hold, then=lambda at, push: ca.if_else(t < float(c.takeoff_time), push,
+                                                                                  tuck[at]))
 
 
 def jump_law(c, ctx) -> ca.SX:

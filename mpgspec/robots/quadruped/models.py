@@ -1,4 +1,4 @@
-"""Spec models of the quadruped controller kinds trot and jump (no CasADi here: the spec layer
+"""Spec models of the quadruped controller kinds trot, jump and land (no CasADi here: the spec layer
 reads them through the entry points `mpgspec.controllers`)."""
 from __future__ import annotations
 
@@ -99,6 +99,52 @@ class JumpController(Strict):
     d_yaw: Number = Field(default=10.0, ge=0, description="yaw-rate damping (1/s)")
     kp_joint: Number = Field(default=60.0, ge=0, description="joint stiffness of the tuck (N m/rad)")
     kd_joint: Number = Field(default=2.0, ge=0, description="joint damping of the tuck (N m s/rad)")
+    moment_weight: Number = Field(default=10.0, gt=0, description="weight of the moment against the force in the "
+                                  "stance feet's wrench split")
+    regularization: Number = Field(default=1e-4, gt=0, description="force regularization of the wrench split (the "
+                                   "least-squares weight on ||f||^2)")
+
+
+class TouchdownGains(Strict):
+    """The landing's gains at the first touchdown (each omitted: the landing's own)."""
+
+    kz: Number | None = Field(default=None, ge=0, description="CoM height stiffness (1/s^2)")
+    dz: Number | None = Field(default=None, ge=0, description="CoM height damping (1/s)")
+    kp_xy: Number | None = Field(default=None, ge=0, description="horizontal CoM stiffness (1/s^2)")
+
+
+class LandController(Strict):
+    """A landing for point-foot quadrupeds (robots/quadruped/land.py): in the air the legs hold a crouch by
+    joint PD; the feet in contact share the trunk wrench that holds the CoM at the crouch's height and over
+    the feet, levels the trunk and damps its motion (as the jump's push, at rest)."""
+
+    type: Literal["land"]
+    reads_setpoint: ClassVar[bool] = False  # x*(t) may be the loop's own flow (`mpgspec gait`)
+    pose: dict[Text, Number] = Field(default_factory=dict, description="joint angles of the crouch the legs "
+                                     "hold in the air (others 0): its CoM height with the feet on the ground "
+                                     "is the height held after touchdown")
+    height: Number | None = Field(default=None, gt=0, description="CoM height held on the ground (m); default: "
+                                  "the crouch's")
+    kz: Number = Field(default=400.0, ge=0, description="CoM height stiffness (1/s^2)")
+    dz: Number = Field(default=20.0, ge=0, description="CoM height damping (1/s)")
+    touchdown: TouchdownGains | None = Field(default=None, description="the gains at the first touchdown, ramped "
+                                             "to kz, dz, kp_xy (linearly over `stiffen` seconds from `stiffen_after` "
+                                             "on the touchdown's event clock): soft while the landing is absorbed (a "
+                                             "stiff law bounces the feet off), stiff at rest (so a mass or torque "
+                                             "error moves the rest little); default: the same gains throughout")
+    stiffen_after: Number = Field(default=0.0, ge=0, description="seconds after the first touchdown before the "
+                                  "gains start to ramp")
+    stiffen: Number = Field(default=0.3, gt=0, description="seconds over which the gains ramp")
+    kp_xy: Number = Field(default=20.0, ge=0, description="horizontal CoM stiffness (1/s^2) towards its place over "
+                          "the feet in the crouch")
+    kv: Number = Field(default=10.0, ge=0, description="horizontal CoM velocity gain (1/s)")
+    k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
+    d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
+    d_yaw: Number = Field(default=10.0, ge=0, description="yaw-rate damping (1/s)")
+    k_yaw: Number = Field(default=100.0, ge=0, description="yaw stiffness (1/s^2) towards the heading of the feet on "
+                          "the ground")
+    kp_joint: Number = Field(default=20.0, ge=0, description="joint stiffness of a leg in the air (N m/rad)")
+    kd_joint: Number = Field(default=3.0, ge=0, description="joint damping of a leg in the air (N m s/rad)")
     moment_weight: Number = Field(default=10.0, gt=0, description="weight of the moment against the force in the "
                                   "stance feet's wrench split")
     regularization: Number = Field(default=1e-4, gt=0, description="force regularization of the wrench split (the "

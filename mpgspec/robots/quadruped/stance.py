@@ -70,6 +70,25 @@ def split_wrench(tk: Trunk, flags: dict, feet, wrench: ca.SX, moment_weight: flo
     return dense_ldl_solve(K, ca.mtimes([A.T, S, wrench]))
 
 
+def leg_torques(sys, tk: Trunk, mode: dict, f_all: ca.SX, air: ca.SX, then=None) -> ca.SX:
+    """u: on each leg the stance torque h_leg - J_leg^T f of its foot's share f of f_all (feet in the
+    order of the contact frames) while the foot is in contact (mode 1), else `air` (torques on every
+    joint, in the order of the joint angles); then(at, tau_leg), when given, replaces a leg's torque."""
+    m = sys.model
+    legs = {leg.foot: leg for leg in sys.legs}
+    u = [None] * m.nu
+    for i, f in enumerate(m.contact_frames):
+        leg = legs[f]
+        at = [k - 7 for k in leg.q]  # the leg's joints among the joint angles
+        J = tk.sub(sys.dyn.contact_jacobian_expr([f]))[:, list(leg.v)]
+        stance = tk.H[list(leg.v)] - ca.mtimes(J.T, f_all[3 * i:3 * i + 3])
+        tau_leg = mode[f] * stance + (1 - mode[f]) * air[at]
+        tau_leg = tau_leg if then is None else then(at, tau_leg)
+        for k, j in enumerate(leg.u):
+            u[j] = tau_leg[k]
+    return ca.vertcat(*u)
+
+
 def nominal_state(sys, pose: dict) -> np.ndarray:
     """The nominal stance at rest: the system's default state with the `pose` joint angles, feet on the ground."""
     x = sys.default_state()

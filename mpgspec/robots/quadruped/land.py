@@ -1,0 +1,86 @@
+"""A landing for point-foot quadrupeds: the jump's stance law held at rest, with the legs in the air held
+in a crouch.
+
+On the contact flags of the state (contact events):
+
+- a foot out of contact holds the crouch (`pose`) by joint PD, so the legs reach down before the
+  touchdowns;
+- the feet in contact share the trunk wrench m (g + k_z (h - z) - d_z zdot) upwards, with the
+  CoM pulled over the feet as it stands in the crouch (k_xy), its horizontal velocity damped, the
+  trunk levelled and turned to the heading of the feet (k_yaw: a push in the air lands it turned) (as the jump's push and the trot's stance), mapped to torques tau = h_leg - J_leg^T f
+  through each foot's Jacobian.
+
+Unlike the paper's joint PD about a crouch (which, with four feet down, pushes them against each other
+and holds the height only as stiffly as its joint gains), the force split has no internal force, and
+the height is held by a CoM law: a heavier robot or weaker motors move the rest little. The law reads
+only the state, not x*(t): Land's setpoint is this loop's own flow from Jump (mpgspec gait).
+"""
+from __future__ import annotations
+
+import casadi as ca
+
+from ...compile.events import clock_name, happened
+from ...errors import SpecError
+from .stance import (leg_torques, level_trunk_moment, nominal_geometry, nominal_state, quadruped_legs,
+                     split_wrench, trunk)
+
+
+def land_torque(sys, c, mode: dict, s) -> ca.SX:
+    """u(x, s) of the landing (s: time since switch-in); mode[f] is 1 while foot f is in contact."""
+    m = sys.model
+    feet = m.contact_frames
+    tk = trunk(sys)
+    inertia, _ = nominal_geometry(sys, dict(c.pose))
+    x0 = nominal_state(sys, dict(c.pose))
+    h = float(c.height) if c.height is not None else float(ca.Function("com_z", [sys.x], [tk.com[2]])(x0))
+    centre = sum(tk.pos[f][:2] for f in feet) / len(feet)  # the feet's centroid: where they stand, or will
+    offset = ca.Function("offset", [sys.x], [tk.com[:2] - centre])(x0)  # the crouch's CoM over it, heading x
+    goal = centre + ca.mtimes(tk.Ryaw[:2, :2], offset)
+    kz, dz, kxy = _gains(sys, c, s)
+    force = tk.mass * ca.vertcat(kxy * (goal - tk.com[:2]) - float(c.kv) * tk.cdot[:2],
+                                 tk.grav + kz * (h - tk.com[2]) - dz * tk.cdot[2])
+    moment = level_trunk_moment(tk, inertia, float(c.k_tilt), float(c.d_tilt), float(c.d_yaw))
+    turn = _heading(tk, feet) - ca.atan2(tk.Ryaw[1, 0], tk.Ryaw[0, 0])
+    turn = turn - ca.Function("turn", [sys.x], [turn])(x0)  # the crouch's own, 0 when it is symmetric
+    moment[2] += float(inertia[2, 2]) * float(c.k_yaw) * ca.atan2(ca.sin(turn), ca.cos(turn))
+    wrench = ca.vertcat(force, moment)
+    f_all = split_wrench(tk, mode, feet, wrench, float(c.moment_weight), float(c.regularization))
+    q, v = sys.x[7:m.nq], sys.x[m.nq + 6:m.nq + m.nv]
+    hold = float(c.kp_joint) * (ca.DM(x0[7:m.nq]) - q) - float(c.kd_joint) * v
+    return leg_torques(sys, tk, mode, f_all, hold)
+
+
+def land_law(c, ctx) -> ca.SX:
+    """Land's u(x) for a compiled primitive: the contact flags in the state (contact events), else the
+    primitive's contact set."""
+    quadruped_legs(ctx.sys, ctx.ec, "landing")
+    unknown = [j for j in c.pose if j not in ctx.sys.state_names[7:ctx.sys.model.nq]]
+    if unknown:
+        raise SpecError("unknown joint in the landing's pose", location=ctx.ec.locate(("controller", "pose", unknown[0])),
+                        key=f"{ctx.ec.owner}: controller.pose", expected="joint names of the system",
+                        found=repr(unknown[0][:60]), code="MPG106")
+    sys = ctx.sys
+    feet = sys.model.contact_frames
+    mode = {f: sys.contact_flag(f) for f in feet} if sys.events else ctx.plan.mode(feet, ctx.t)
+    return land_torque(sys, c, mode, ctx.s)
+
+
+def _heading(tk, feet) -> ca.SX:
+    """Yaw of the feet's polygon: from the rear feet's midpoint to the front feet's (legs named F*, R*,
+    else the first two contacts against the last two)."""
+    front = [f for f in feet if f.startswith("F")] or list(feet[:2])
+    rear = [f for f in feet if f.startswith("R")] or list(feet[2:])
+    d = sum(tk.pos[f] for f in front) / len(front) - sum(tk.pos[f] for f in rear) / len(rear)
+    return ca.atan2(d[1], d[0])
+
+
+def _gains(sys, c, s) -> tuple:
+    """(k_z, d_z, k_xy): those of `touchdown` until the first touchdown, then a linear ramp to the law's
+    over `stiffen` seconds from `stiffen_after` on its event clock; the law's throughout without it."""
+    final = (float(c.kz), float(c.dz), float(c.kp_xy))
+    if c.touchdown is None:
+        return final
+    start = [f if g is None else float(g) for f, g in zip(final, (c.touchdown.kz, c.touchdown.dz, c.touchdown.kp_xy))]
+    tau = sys.x[sys.state_names.index(clock_name("first_touchdown"))]
+    w = ca.if_else(happened(tau, s), ca.fmin(ca.fmax(tau - float(c.stiffen_after), 0) / float(c.stiffen), 1), 0)
+    return tuple(g0 + (g1 - g0) * w for g0, g1 in zip(start, final))
