@@ -7,8 +7,12 @@ On the contact flags of the state (contact events):
   touchdowns;
 - the feet in contact share the trunk wrench m (g + k_z (h - z) - d_z zdot) upwards, with the
   CoM pulled over the feet as it stands in the crouch (k_xy), its horizontal velocity damped, the
-  trunk levelled and turned to the heading of the feet (k_yaw: a push in the air lands it turned) (as the jump's push and the trot's stance), mapped to torques tau = h_leg - J_leg^T f
-  through each foot's Jacobian.
+  trunk levelled and turned to the heading of the feet (k_yaw: a push in the air lands it turned),
+  as the jump's push and the trot's stance, mapped to torques tau = h_leg - J_leg^T f through each
+  foot's Jacobian;
+- with `touchdown` gains, k_z, d_z and k_xy are those until `stiffen_after` seconds after the first
+  touchdown (on its event clock), then ramp to the law's over `stiffen` seconds: soft while the
+  landing is absorbed (stiff, the feet bounce off), stiff at rest.
 
 Unlike the paper's joint PD about a crouch (which, with four feet down, pushes them against each other
 and holds the height only as stiffly as its joint gains), the force split has no internal force, and
@@ -30,7 +34,7 @@ def land_torque(sys, c, mode: dict, s) -> ca.SX:
     m = sys.model
     feet = m.contact_frames
     tk = trunk(sys)
-    inertia, _ = nominal_geometry(sys, dict(c.pose))
+    inertia, offsets = nominal_geometry(sys, dict(c.pose))
     x0 = nominal_state(sys, dict(c.pose))
     h = float(c.height) if c.height is not None else float(ca.Function("com_z", [sys.x], [tk.com[2]])(x0))
     centre = sum(tk.pos[f][:2] for f in feet) / len(feet)  # the feet's centroid: where they stand, or will
@@ -40,7 +44,7 @@ def land_torque(sys, c, mode: dict, s) -> ca.SX:
     force = tk.mass * ca.vertcat(kxy * (goal - tk.com[:2]) - float(c.kv) * tk.cdot[:2],
                                  tk.grav + kz * (h - tk.com[2]) - dz * tk.cdot[2])
     moment = level_trunk_moment(tk, inertia, float(c.k_tilt), float(c.d_tilt), float(c.d_yaw))
-    turn = _heading(tk, feet) - ca.atan2(tk.Ryaw[1, 0], tk.Ryaw[0, 0])
+    turn = _heading(tk, offsets) - ca.atan2(tk.Ryaw[1, 0], tk.Ryaw[0, 0])
     turn = turn - ca.Function("turn", [sys.x], [turn])(x0)  # the crouch's own, 0 when it is symmetric
     moment[2] += float(inertia[2, 2]) * float(c.k_yaw) * ca.atan2(ca.sin(turn), ca.cos(turn))
     wrench = ca.vertcat(force, moment)
@@ -60,16 +64,21 @@ def land_law(c, ctx) -> ca.SX:
                         key=f"{ctx.ec.owner}: controller.pose", expected="joint names of the system",
                         found=repr(unknown[0][:60]), code="MPG106")
     sys = ctx.sys
+    if c.touchdown is not None and not sys.events:
+        raise SpecError("the landing's touchdown gains ramp on the first touchdown's event clock",
+                        location=ctx.ec.locate(("controller", "touchdown")), key=f"{ctx.ec.owner}: controller.touchdown",
+                        expected="system.contact_events: true", found="a system without contact events",
+                        code="MPG108")
     feet = sys.model.contact_frames
     mode = {f: sys.contact_flag(f) for f in feet} if sys.events else ctx.plan.mode(feet, ctx.t)
     return land_torque(sys, c, mode, ctx.s)
 
 
-def _heading(tk, feet) -> ca.SX:
-    """Yaw of the feet's polygon: from the rear feet's midpoint to the front feet's (legs named F*, R*,
-    else the first two contacts against the last two)."""
-    front = [f for f in feet if f.startswith("F")] or list(feet[:2])
-    rear = [f for f in feet if f.startswith("R")] or list(feet[2:])
+def _heading(tk, offsets: dict) -> ca.SX:
+    """Yaw of the feet's polygon: from the midpoint of the feet behind the CoM in the nominal crouch
+    (`offsets`, heading x) to that of the feet ahead of it."""
+    front = [f for f, o in offsets.items() if o[0] > 0]
+    rear = [f for f, o in offsets.items() if o[0] <= 0]
     d = sum(tk.pos[f] for f in front) / len(front) - sum(tk.pos[f] for f in rear) / len(rear)
     return ca.atan2(d[1], d[0])
 
