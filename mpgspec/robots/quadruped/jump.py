@@ -45,8 +45,11 @@ def jump_torque(sys, c, mode: dict, t: ca.SX) -> ca.SX:
     kp, kd = float(c.kp_joint), float(c.kd_joint)
     hold = kp * (stance_q - q) - kd * v
     tuck = kp * (tuck_q - q) - kd * v
-    return leg_torques(sys, tk, mode, f_all, hold, then=lambda at, push: ca.if_else(t < float(c.takeoff_time), push,
-                                                                                  tuck[at]))
+
+    def after_takeoff(at, push):  # the legs tuck from T_t on
+        return ca.if_else(t < float(c.takeoff_time), push, tuck[at])
+
+    return leg_torques(sys, tk, mode, f_all, hold, then=after_takeoff)
 
 
 def jump_law(c, ctx) -> ca.SX:
