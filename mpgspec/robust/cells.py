@@ -31,7 +31,8 @@ of an event that has not happened (NEVER), which stays at rest."""
 
 def check_target(prims: dict, B, items: list, unc, settings, sc: Scenarios, rollout) -> tuple[list, dict, int, float]:
     """(edge records, B's own-flow record, rollouts run, seconds building the rollout) for target B
-    and its nominal in-edges `items` [(A, transition)]; rollout(B, horizon) builds B's robust rollout."""
+    and its nominal in-edges `items` [(A, transition, t_A rows to check)]; rollout(B, horizon) builds
+    B's robust rollout."""
     cells = _cells(prims, items, unc)
     hz = B.horizons(settings.horizon, [c[5] for c in cells])
     tb0 = time.perf_counter()
@@ -45,14 +46,14 @@ def check_target(prims: dict, B, items: list, unc, settings, sc: Scenarios, roll
     node = _node_check(B, rr, _node_clocks(cells), sc, settings, tol, decisive)
     n_roll += node["scenarios"]
     per_edge = _cell_records(prims, B, cells, worst, node, sc, unc, settings)
-    edges = [_edge_record(a, B.name, tr, per_edge.get(a, []), node, prims, unc) for a, tr in items]
+    edges = [_edge_record(a, B.name, tr, per_edge.get(a, []), node, prims, unc) for a, tr, _rows in items]
     return edges, node, n_roll, build_s
 
 
 @dataclass
 class TargetJob:
     """One target's robust check, picklable and small: B's name, its nominal in-edges [(A,
-    transition)], the uncertainty, the settings, the scenarios and the rollout factory
+    transition, t_A rows to check)], the uncertainty, the settings, the scenarios and the rollout factory
     (rollout(B, horizon), picklable). The closed loops travel apart, once per worker."""
 
     target: str
@@ -72,7 +73,7 @@ def run_target(prims: dict, job: TargetJob) -> tuple[list, dict, int, float]:
 def job_cost(job: TargetJob) -> float:
     """About how many rollouts the job runs (its cells' scenarios and its own flow's): what orders
     a merged map, the costliest first."""
-    cells = sum(len(_rows(tr, job.unc.cells)) for _a, tr in job.items)
+    cells = sum(len(rows) for _a, _tr, rows in job.items)
     return float((cells + 1) * job.sc.S)
 
 
@@ -82,11 +83,11 @@ def failed_target(prims: dict, b: str, items: list, unc, error: str) -> tuple[li
     node = {"node": b, "t_B": [], "scenarios": 0, "stopped": 0, "robust_safe": False, "worst_margin": -math.inf,
             "worst_case": {"error": error}}
     edges = []
-    for a, tr in items:
+    for a, tr, rows in items:
         checked = [{"t_A": float(tr.t_A[i]), "t_B": float(tr.best_t_B[i]), "robust_safe": False,
                     "worst_margin": -math.inf, "worst_case": {"kind": "error", "error": error},
                     "_ij": (i, int(np.argmin(np.abs(tr.t_B - tr.best_t_B[i])))), "starts_kept": 0, "stopped": 0}
-                   for i in _rows(tr, unc.cells)]
+                   for i in rows]
         edges.append(_edge_record(a, b, tr, checked, node, prims, unc))
     return edges, node
 
@@ -94,8 +95,8 @@ def failed_target(prims: dict, b: str, items: list, unc, error: str) -> tuple[li
 def _cells(prims: dict, items: list, unc) -> list[tuple]:
     """(A, transition, t_A row i, t_B column j, starts, t_B) of every cell checked."""
     cells = []
-    for a, tr in items:
-        for i in _rows(tr, unc.cells):
+    for a, tr, rows in items:
+        for i in rows:
             tb = tr.best_t_B[i]
             j = int(np.argmin(np.abs(tr.t_B - tb)))
             t_A = float(tr.t_A[i])
@@ -322,8 +323,14 @@ def _flipped(D: np.ndarray, bound: np.ndarray, a: int, k: int) -> np.ndarray:
     return Dn
 
 
-def _rows(tr: Transition, m: int) -> list[int]:
+def cell_rows(tr: Transition, m: int, taken: list | None = None) -> list[int]:
+    """Up to m t_A rows of a transition to check, spread evenly over those the executor switches through
+    (`taken`: per t_A the t_B it switches in at, or None), else over every verified row: a robust cell is
+    a switch the executor may make."""
     avail = np.flatnonzero(tr.available)
+    if taken is not None:
+        avail = np.array([i for i in avail if taken[i] is not None], int) if any(
+            taken[i] is not None for i in avail) else avail
     if len(avail) <= m:
         return [int(i) for i in avail]
     return sorted({int(avail[int(round(k))]) for k in np.linspace(0, len(avail) - 1, m)})

@@ -1,7 +1,9 @@
 """The robust graph: each nominal edge's switch cells re-run under the project's uncertainty.
 
 For every nominal transition A -> B (among `nodes`, when given), up to `cells` t_A rows that have
-a verified t_B are taken (the t_B the plan would switch in at). Each such cell is run for a set of
+a verified t_B are taken (the t_B the plan would switch in at), spread over the rows the graph executor
+switches through (the sequence's rule and reserve, the checks from E_A's boundary) when it takes any,
+so that a robust cell is a switch the executor makes. Each such cell is run for a set of
 scenarios: the corners of the box of uncertain parameters and start errors (at most `corners` of
 them, seeded), its centre, `samples` seeded random points, each with the disturbance at 0, +bound
 and -bound; then `search` rounds of an adversarial bang-bang disturbance from the worst scenario
@@ -25,15 +27,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..check.assertions import AssertionResult, evaluate_assertions
-from ..graph.transition import MotionPrimitiveGraph, Transition, TransitionClass
+from ..graph.transition import (MotionPrimitiveGraph, Transition, TransitionClass, executor_clocks,
+                                input_bounds)
 from ..plan.planner import lookup_table
+from ..spec.models import PrimitiveClass
 from ..spec.uncertainty_refs import latency_steps, rigid_nominal
 from ..progress import of_project
 from .from_roa import from_roa_samples
 from ..oracle.executors import InProcess
 from ..oracle.joint import Map, concurrently, run
 from ..oracle.tasks import Failed
-from .cells import TargetJob, failed_target, job_cost, run_target
+from .cells import TargetJob, cell_rows, failed_target, job_cost, run_target
 from .library import prefetch
 from .rigid import RigidRobustRollout, uses_library
 from .rollout import RobustRollout, plant
@@ -41,9 +45,10 @@ from .scenarios import Scenarios, scenarios, searched
 from .sequence import uncertain_stage
 
 LABEL = "empirical"
-RECORD = 12
+RECORD = 13
 """Layout of the memoised robust record and the rule that made it (part of its key): 10 runs a cell's scenarios in
-waves; 11 runs a target's own flow past its first wave only when an edge into it depends on it."""
+waves; 11 runs a target's own flow past its first wave only when an edge into it depends on it; 13 takes the
+cells among the rows the graph executor switches through."""
 SAMPLED = "empirical (sampled)"
 NOTE = ("falsification, not proof: a robust edge withstood every scenario tried (parameter-box corners, seeded "
         "samples and an adversarial disturbance search); no certificate backs it")
@@ -230,15 +235,22 @@ def target_jobs(spec, prims: dict, settings, g: MotionPrimitiveGraph) -> tuple[S
     unc, sys = spec.project.uncertainty, next(iter(prims.values())).system
     sc, rollout = _setup(spec, sys, unc, settings)
     among = set(unc.nodes) if unc.nodes is not None else set(prims)
-    return sc, [TargetJob(b, items, unc, settings, sc, rollout) for b, items in _by_target(g, among).items()]
+    return sc, [TargetJob(b, items, unc, settings, sc, rollout)
+                for b, items in _by_target(spec, prims, g, among).items()]
 
 
-def _by_target(g: MotionPrimitiveGraph, among: set) -> dict[str, list]:
-    """Target -> [(source, transition)] of the nominal edges among `among`."""
+def _by_target(spec, prims: dict, g: MotionPrimitiveGraph, among: set) -> dict[str, list]:
+    """Target -> [(source, transition, t_A rows)] of the nominal edges among `among`: the rows are the
+    cells to check, among those the graph executor switches through under the sequence's rule and
+    reserve (executor_clocks) where it takes any."""
+    seq = spec.project.sequence
+    rule, reserve = (seq.switch, seq.reserve) if seq is not None else ("first", None)
     by_target: dict[str, list] = {}
     for (a, b), tr in g.transitions.items():
         if tr.cls is not TransitionClass.NONE and a in among and b in among:
-            by_target.setdefault(b, []).append((a, tr))
+            taken = executor_clocks(tr, prims[a].cls is PrimitiveClass.TRANSIENT, rule, reserve,
+                                    input_bounds(prims[b].system))
+            by_target.setdefault(b, []).append((a, tr, cell_rows(tr, spec.project.uncertainty.cells, taken)))
     return by_target
 
 

@@ -88,17 +88,10 @@ def test_only_the_rows_the_sequences_rule_takes_are_checked(tmp_path):
     """The pendulum with `switch: margin` and 4 samples: a row the margin rule does not take on the
     unchecked grid is refused unchecked ([0, 0, 0]); every other verified row is checked; the graph
     run leaves a primitive only through checked rows with a share above 0."""
-    import shutil
-
     from mpgspec.compile.contacts import grid_clock
     from mpgspec.graph.transition import switch_clocks
 
-    proj = tmp_path / "pendulum"
-    shutil.copytree(Path(__file__).resolve().parents[2] / "specs" / "pendulum", proj)
-    spec = proj / "project.yaml"
-    text = spec.read_text().replace("  duration: 40\n", "  duration: 40\n  switch: margin\n")
-    spec.write_text(text.replace("  horizon: 6.0\n", "  horizon: 6.0\n  from_roa: 4\n"))
-    report = api.verify(proj)["pendulum"].report
+    report = _pendulum_by_margin(tmp_path)
     checked = skipped = 0
     for t in report["transitions"]:
         fr = t.get("from_roa")
@@ -145,3 +138,43 @@ def test_a_primitive_may_be_checked_from_more_samples_than_the_project(tmp_path,
     from mpgspec.spec.loader import load_project
 
     assert from_roa_samples(load_project(path)) == {"Hold": 12, "Go": 4}
+
+
+def test_robust_cells_are_switches_the_executor_makes(tmp_path):
+    """The pendulum with `switch: margin` and checks from E_A's boundary: every robust cell of a nominal
+    edge is a t_A row the graph executor switches through (the rule takes it and its share is above 0),
+    where the edge has such rows; the rows are spread as before (cell_rows) over those alone."""
+    import numpy as np
+
+    from mpgspec.graph.transition import executor_clocks
+    from mpgspec.robust.cells import cell_rows
+
+    report = _pendulum_by_margin(tmp_path)
+    prims = {p["name"]: p for p in report["primitives"]}
+    trs = {(t["from"], t["to"]): t for t in report["transitions"]}
+    narrowed = 0
+    for e in report["robust"]["edges"]:
+        t = trs[(e["from"], e["to"])]
+        plain = type("Row", (), {"best_t_B": t["best_t_B"], "row_margins": t.get("row_margins") or [],
+                                 "row_from_roa": (t.get("from_roa") or {}).get("rows") or []})
+        taken = executor_clocks(plain, prims[e["from"]]["class"] == "transient", "margin")
+        verified = [i for i, b in enumerate(t["best_t_B"]) if b is not None]
+        usable = [i for i in verified if taken[i] is not None]
+        assert set(e["cells"]["row"]) <= set(usable or verified), (e["from"], e["to"])
+        narrowed += len(usable) < len(verified)
+    assert narrowed  # the rule and the checks leave out some verified rows, so the choice matters here
+    tr = type("Tr", (), {"available": np.array([True] * 12)})
+    taken = [None if i % 3 else 0.1 for i in range(12)]
+    assert cell_rows(tr, 2, taken) == [0, 9] and cell_rows(tr, 4, [None] * 12) == [0, 4, 7, 11]
+
+
+def _pendulum_by_margin(tmp_path) -> dict:
+    """The report of specs/pendulum with `switch: margin` and 4 samples of E_A's boundary a row."""
+    import shutil
+
+    proj = tmp_path / "pendulum"
+    shutil.copytree(Path(__file__).resolve().parents[2] / "specs" / "pendulum", proj)
+    spec = proj / "project.yaml"
+    text = spec.read_text().replace("  duration: 40\n", "  duration: 40\n  switch: margin\n")
+    spec.write_text(text.replace("  horizon: 6.0\n", "  horizon: 6.0\n  from_roa: 4\n"))
+    return api.verify(proj)["pendulum"].report
