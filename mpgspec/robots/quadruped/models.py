@@ -12,6 +12,24 @@ from ...spec.system import Expr, Number, Text
 
 Pair = Annotated[list[Text], Field(min_length=2, max_length=2)]
 
+
+_TRUNK = {
+    "k_tilt": dict(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)"),
+    "d_tilt": dict(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)"),
+    "d_yaw": dict(default=10.0, ge=0, description="yaw-rate damping (1/s)"),
+    "moment_weight": dict(default=10.0, gt=0, description="weight of the moment against the force in the stance "
+                          "feet's wrench split"),
+    "regularization": dict(default=1e-4, gt=0, description="force regularization of the wrench split (the "
+                           "least-squares weight on ||f||^2)"),
+}
+"""The trunk-wrench fields the trot, the jump and the landing share (levelling the trunk, splitting the wrench)."""
+
+
+def _trunk(name: str):
+    """A fresh Field of the shared trunk-wrench field `name`."""
+    return Field(**_TRUNK[name])
+
+
 # The docstrings are the schema's descriptions (`mpgspec schema`), kept as published.
 class TrotController(Strict):
     """A trot for point-foot quadrupeds (compile/rigidbody/trot.py): stance feet share the trunk wrench,
@@ -41,9 +59,9 @@ class TrotController(Strict):
     raibert: Number = Field(default=0.08, ge=0, description="foot placement gain on the velocity error (s)")
     kp_swing: Number = Field(default=12000.0, gt=0, description="swing foot stiffness (N/m)")
     kd_swing: Number = Field(default=200.0, ge=0, description="swing foot damping (N s/m)")
-    k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
-    d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
-    d_yaw: Number = Field(default=10.0, ge=0, description="yaw-rate damping (1/s)")
+    k_tilt: Number = _trunk("k_tilt")
+    d_tilt: Number = _trunk("d_tilt")
+    d_yaw: Number = _trunk("d_yaw")
     kz: Number = Field(default=100.0, ge=0, description="CoM height stiffness (1/s^2)")
     dz: Number = Field(default=20.0, ge=0, description="CoM height damping (1/s)")
     f_min: Number | None = Field(default=None, ge=0, description="least normal force asked of a stance foot (N); "
@@ -58,10 +76,8 @@ class TrotController(Strict):
                                     "so the feet keep a margin there; default: the system's friction")
     placement_fraction: Number = Field(default=0.8, gt=0, le=1, description="share of the swing after which the "
                                        "foot is over its Raibert target")
-    moment_weight: Number = Field(default=10.0, gt=0, description="weight of the moment against the force in the "
-                                  "stance feet's wrench split")
-    regularization: Number = Field(default=1e-4, gt=0, description="force regularization of the wrench split (the "
-                                   "least-squares weight on ||f||^2)")
+    moment_weight: Number = _trunk("moment_weight")
+    regularization: Number = _trunk("regularization")
     accel_limit: Number | None = Field(default=None, gt=0, description="largest horizontal CoM acceleration "
                                        "(m/s^2) the stance wrench asks: the velocity error saturates at "
                                        "accel_limit / kv, so a step in the speed command (a switch between walks) "
@@ -94,15 +110,13 @@ class JumpController(Strict):
     kz: Number = Field(default=400.0, ge=0, description="CoM height stiffness (1/s^2)")
     dz: Number = Field(default=40.0, ge=0, description="CoM height damping (1/s)")
     kv: Number = Field(default=10.0, ge=0, description="horizontal CoM velocity gain (1/s)")
-    k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
-    d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
-    d_yaw: Number = Field(default=10.0, ge=0, description="yaw-rate damping (1/s)")
+    k_tilt: Number = _trunk("k_tilt")
+    d_tilt: Number = _trunk("d_tilt")
+    d_yaw: Number = _trunk("d_yaw")
     kp_joint: Number = Field(default=60.0, ge=0, description="joint stiffness of the tuck (N m/rad)")
     kd_joint: Number = Field(default=2.0, ge=0, description="joint damping of the tuck (N m s/rad)")
-    moment_weight: Number = Field(default=10.0, gt=0, description="weight of the moment against the force in the "
-                                  "stance feet's wrench split")
-    regularization: Number = Field(default=1e-4, gt=0, description="force regularization of the wrench split (the "
-                                   "least-squares weight on ||f||^2)")
+    moment_weight: Number = _trunk("moment_weight")
+    regularization: Number = _trunk("regularization")
 
 
 class TouchdownGains(Strict):
@@ -138,14 +152,12 @@ class LandController(Strict):
     kp_xy: Number = Field(default=20.0, ge=0, description="horizontal CoM stiffness (1/s^2) towards its place over "
                           "the feet in the crouch")
     kv: Number = Field(default=10.0, ge=0, description="horizontal CoM velocity gain (1/s)")
-    k_tilt: Number = Field(default=300.0, ge=0, description="trunk roll/pitch stiffness (1/s^2)")
-    d_tilt: Number = Field(default=30.0, ge=0, description="trunk roll/pitch damping (1/s)")
-    d_yaw: Number = Field(default=10.0, ge=0, description="yaw-rate damping (1/s)")
+    k_tilt: Number = _trunk("k_tilt")
+    d_tilt: Number = _trunk("d_tilt")
+    d_yaw: Number = _trunk("d_yaw")
     k_yaw: Number = Field(default=100.0, ge=0, description="yaw stiffness (1/s^2) towards the heading of the feet on "
                           "the ground")
     kp_joint: Number = Field(default=20.0, ge=0, description="joint stiffness of a leg in the air (N m/rad)")
     kd_joint: Number = Field(default=3.0, ge=0, description="joint damping of a leg in the air (N m s/rad)")
-    moment_weight: Number = Field(default=10.0, gt=0, description="weight of the moment against the force in the "
-                                  "stance feet's wrench split")
-    regularization: Number = Field(default=1e-4, gt=0, description="force regularization of the wrench split (the "
-                                   "least-squares weight on ||f||^2)")
+    moment_weight: Number = _trunk("moment_weight")
+    regularization: Number = _trunk("regularization")
