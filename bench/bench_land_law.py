@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import re
 import shutil
 import subprocess
 import sys
@@ -31,7 +30,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
-from common import publish_rows  # noqa: E402
+from common import publish_rows, with_controller  # noqa: E402
 
 PAPER_PD = """controller:
   type: pd
@@ -50,7 +49,7 @@ def paper_copy(project: Path, dst: Path) -> Path:
     """A copy of the project whose Land runs PAPER_PD, with the gait tables written for it."""
     shutil.copytree(project.parent, dst)
     land = dst / "primitives" / "land.yaml"
-    land.write_text(re.sub(r"\ncontroller:\n(?:  [^\n]*\n|\s*#[^\n]*\n)*", "\n" + PAPER_PD, land.read_text(), count=1))
+    land.write_text(with_controller(land.read_text(), PAPER_PD))
     subprocess.run([sys.executable, "-m", "mpgspec", "gait", str(dst / "gaits.yaml")], check=True,
                    stdout=subprocess.DEVNULL)
     return dst / project.name

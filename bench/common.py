@@ -144,10 +144,19 @@ def publish_rows(heading: str, script: str, repeats: int, t_start: float, rows: 
 
 def pd_lie(folder: Path) -> Path:
     """In a copy of specs/a1 at `folder`, Lie runs the paper's joint PD (r = 0.023) instead of the ID-QP:
-    the benchmarks' continuous law on four grounded feet, as the tests use it (tests/a1_lie.py, loaded
-    by its path so that tests/ does not go onto sys.path)."""
+    the benchmarks' continuous law on four grounded feet, as the tests use it (tests/a1_lie.py)."""
+    return _a1_lie().pd_lie(folder)
+
+
+def with_controller(text: str, block: str) -> str:
+    """A primitive file's text with its controller block replaced by `block` (tests/a1_lie.py)."""
+    return _a1_lie().with_controller(text, block)
+
+
+def _a1_lie():
+    """tests/a1_lie.py, loaded by its path so that tests/ does not go onto sys.path."""
     path = Path(__file__).resolve().parents[1] / "tests" / "a1_lie.py"
     spec = importlib.util.spec_from_file_location("mpgspec_tests_a1_lie", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.pd_lie(folder)
+    return module

@@ -23,11 +23,16 @@ def pd_lie(folder: Path) -> Path:
     had (0.023: the largest, 0.024 by bisection, for which its E lies inside C, rounded down), for the tests
     of a continuous law on four grounded feet; returns lie.yaml's path."""
     path = Path(folder) / "primitives" / "lie.yaml"
-    text = path.read_text()
-    head, rest = text.split("controller:\n", 1)
-    text = head + PD_LIE + rest[rest.index("safe_set:\n"):]
+    text = with_controller(path.read_text(), PD_LIE)
     text, n = re.subn(r"\n  radius: [^\n]*", "\n  radius: 0.023", text)
     assert n == 1, f"{path}: expected one roa radius, found {n}"
     text = re.sub(r"\ndescription: [^\n]*", "\ndescription: Rest low on the ground with folded legs (joint PD with the cubic motion profile).", text)
     path.write_text(text)
     return path
+
+
+def with_controller(text: str, block: str) -> str:
+    """A primitive file's text (of specs/a1, whose `controller:` block is followed by `safe_set:`) with its
+    controller block replaced by `block` (YAML from `controller:` on)."""
+    head, rest = text.split("controller:\n", 1)
+    return head + block + rest[rest.index("safe_set:\n"):]
