@@ -328,9 +328,8 @@ def cell_rows(tr: Transition, m: int, taken: list | None = None) -> list[int]:
     (`taken`: per t_A the t_B it switches in at, or None), else over every verified row: a robust cell is
     a switch the executor may make."""
     avail = np.flatnonzero(tr.available)
-    if taken is not None:
-        avail = np.array([i for i in avail if taken[i] is not None], int) if any(
-            taken[i] is not None for i in avail) else avail
+    usable = [i for i in avail if taken is not None and taken[i] is not None]
+    avail = np.array(usable, int) if usable else avail
     if len(avail) <= m:
         return [int(i) for i in avail]
     return sorted({int(avail[int(round(k))]) for k in np.linspace(0, len(avail) - 1, m)})
