@@ -58,8 +58,11 @@ def _simulate_uncertain(args) -> int:
                                           "disturbance": unc.disturbance.model_dump() if unc.disturbance else None}},
                          indent=1))
         return args.exit_code
-    print(f"{runs} seeded runs (seed {seed}) of the goal sequence: parameters, start error and a disturbance held "
-          f"{stats['disturbance_hold_s']:g} s drawn uniformly from the project's uncertainty")
+    window = stats.get("disturbance_after_switch_in_s")
+    held = (f"a push on for {window:g} s after every switch-in, each value held {stats['disturbance_hold_s']:g} s"
+            if window else f"a disturbance held {stats['disturbance_hold_s']:g} s")
+    print(f"{runs} seeded runs (seed {seed}) of the goal sequence: parameters, start error and {held}, "
+          "drawn uniformly from the project's uncertainty")
     for m, r in modes.items():
         first = r["first_violation"][0] if r["first_violation"] else None
         why = "" if first is None else (f"; first unsafe at t = {first['t']:.3f} s in {first['primitive']}"

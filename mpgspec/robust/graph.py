@@ -288,7 +288,9 @@ def _assertions(unc, rg: MotionPrimitiveGraph) -> list[AssertionResult]:
 
 def _robust_graph(g: MotionPrimitiveGraph, edges: list[dict], nodes: list[str] | None = None) -> MotionPrimitiveGraph:
     """The nominal graph (on `nodes` only, when given) with each edge's transition cut to its robust
-    cells; fills each edge record's robust class, windows and weights."""
+    cells, keeping each row's margin and its check from E_A's boundary (where and within what share of
+    r_A the executor may switch, as robust_report_graph reads them from a report); fills each edge
+    record's robust class, windows and weights."""
     keep = set(g.G.nodes) if nodes is None else set(nodes)
     trs = {k: tr for k, tr in g.transitions.items() if k[0] in keep and k[1] in keep}
     for e in edges:
@@ -297,8 +299,9 @@ def _robust_graph(g: MotionPrimitiveGraph, edges: list[dict], nodes: list[str] |
               for i, safe in zip(e["cells"]["row"], e["cells"]["robust_safe"]) if safe}
         ev = [[x if (i, j) in ok else dataclasses.replace(x, verdict=0, status="unsafe") for j, x in enumerate(row)]
               for i, row in enumerate(tr.evidence)]
-        rt = Transition(tr.source, tr.target, tr.t_A, tr.t_B, ev)
-        rt.classify()
+        rt = Transition(tr.source, tr.target, tr.t_A, tr.t_B, ev, row_margins=list(tr.row_margins),
+                        row_from_roa=list(tr.row_from_roa), from_roa_worst=tr.from_roa_worst)
+        rt.classify()  # the rows' margins and checks from E_A's boundary stay: the executor's rule reads them
         trs[(e["from"], e["to"])] = rt
         e.update(robust_class=int(rt.cls), survives=rt.cls is not TransitionClass.NONE, cells_robust=len(ok),
                  robust_windows=[list(w) for w in rt.windows], robust_weights=dict(rt.weights))

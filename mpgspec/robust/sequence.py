@@ -1,8 +1,10 @@
 """The project's goal sequence under sampled uncertainty: how often it stays safe in each mode.
 
 Each of `runs` seeded runs draws the plant's parameters and the start error uniformly from their
-boxes and a disturbance that is piecewise constant over `hold` seconds, uniform in its bounds (an
-input disturbance, or for rigid bodies the push on the base). The same draws are run naive (switch
+boxes and a disturbance uniform in its bounds: an input disturbance (or a push without a duration) is
+on throughout, piecewise constant over HOLD seconds; a push with a `duration` is the one the robust
+cells withstand, on for `duration` seconds after every switch-in (the start included), piecewise
+constant over its `segments`, a fresh draw at each switch-in, and off in between. The same draws are run naive (switch
 at each command), through the nominal graph and through the robust graph (the switching rules of
 mpgspec.execute.sequence: leave a primitive only after its flow entered E, at a verified t_A,
 switching in at the verified t_B). All runs of a mode advance together, one mapped step per
@@ -30,7 +32,10 @@ from ..spec.models import PrimitiveClass
 from .library import STEP_FLAGS
 
 HOLD = 0.5
-"""Seconds the sampled disturbance holds each value."""
+"""Seconds a disturbance that is on throughout holds each value."""
+
+PUSHES = 64
+"""Pushes drawn per run (a run that switches in more often reuses them in turn)."""
 
 
 def _step(prim: CompiledPrimitive, plant_fn: ca.Function, Bd: np.ndarray, dt: float) -> ca.Function:
@@ -117,12 +122,28 @@ class DisturbedSequences:
         for s, b in unc.initial_state.items():
             self.err[sys.state_names.index(s)] = rng.uniform(-b, b, runs)
         self.steps = int(round(seq.duration / settings.dt))
-        pieces = int(np.ceil(seq.duration / HOLD)) + 1
-        self.dist = rng.uniform(-1, 1, (pieces, nd, runs)) * np.asarray(bound, float).reshape(1, nd, 1)
+        self.window, self.hold = push_window(unc)
+        if self.window is None:
+            shape = (int(np.ceil(seq.duration / HOLD)) + 1, nd, runs)
+        else:
+            shape = (PUSHES, unc.disturbance.segments, nd, runs)
+        bnd = np.asarray(bound, float).reshape((1,) * (len(shape) - 2) + (nd, 1))
+        self.dist = rng.uniform(-1, 1, shape) * bnd
         if cols is not None:
-            self.theta, self.err, self.dist = self.theta[:, cols], self.err[:, cols], self.dist[:, :, cols]
+            self.theta, self.err, self.dist = self.theta[:, cols], self.err[:, cols], self.dist[..., cols]
         self.n = self.theta.shape[1] if cols is not None else runs
         self.nz = max(f.nz for f in steppers.values())
+
+    def disturbance(self, t: float, since: np.ndarray, pushes: np.ndarray) -> np.ndarray:
+        """The disturbance (nd x runs) over the step from t, for runs switched in at `since` for the
+        pushes[r]-th time (counting the start as 0)."""
+        if self.window is None:
+            return self.dist[min(int(t / HOLD), len(self.dist) - 1)]
+        j = np.floor((t - since) / self.hold + 1e-9).astype(int)
+        on = np.flatnonzero((j >= 0) & (j < self.dist.shape[1]))
+        d = np.zeros(self.dist.shape[2:])
+        d[:, on] = self.dist[pushes[on] % PUSHES, j[on], :, on].T
+        return d
 
     def _apply(self, fn, cols: np.ndarray, args: list[np.ndarray]):
         """fn on the columns `cols` of args, and the columns whose call failed (a control law that
@@ -153,7 +174,7 @@ class DisturbedSequences:
         runs = _Runs(self, mode, graph, table)
         for k in range(self.steps):
             t = (k + 1) * dt
-            runs.step(t, self.dist[min(int(k * dt / HOLD), len(self.dist) - 1)])
+            runs.step(t, self.disturbance(k * dt, runs.since, runs.pushes))
             new_goal = runs.commands(t - dt)
             runs.switch(t, new_goal)
             runs.arrive()
@@ -185,6 +206,7 @@ class _Runs:
         self.Z = np.zeros((ds.nz, n))
         self.safe, self.conv = np.ones(n, bool), np.zeros(n, bool)
         self.margin = np.full(n, -np.inf)  # each run's RoA margin after its last step
+        self.since, self.pushes = np.zeros(n), np.zeros(n, int)  # each run's last switch-in: when, how many before
         self.first = [None] * n
         self.goal, self.cmd = [seq.start] * n, 0
         self.goals = [c.goal for c in seq.commands]
@@ -206,7 +228,7 @@ class _Runs:
     def enter(self, rs: list[int], name: str, clocks: np.ndarray, X: np.ndarray, t: float) -> None:
         """Switch primitive `name` in for the runs rs at the given clocks from the states X."""
         ds = self.ds
-        d = ds.dist[min(int(t / HOLD), len(ds.dist) - 1)]
+        d = ds.disturbance(t, self.since, self.pushes)
         cols = np.array(rs)
         fn = ds.fns[name]
         full = np.zeros((self.nx, ds.n)), np.zeros(ds.n)
@@ -271,6 +293,7 @@ class _Runs:
                 self.taken[(cur, to[0])] = self.taken.get((cur, to[0]), 0) + 1
                 self.cur[r], self.conv[r] = to[0], False
                 self.cur_a[r] = to[0]
+                self.since[r], self.pushes[r] = t, self.pushes[r] + 1
                 moves.setdefault(to[0], []).append((int(r), float(to[1])))
         for name, items in moves.items():
             rs = [r for r, _ in items if self.safe[r]]
@@ -404,7 +427,19 @@ def uncertain_stage(spec, prims, settings, graphs: dict, runs: int, seed: int, w
         for m, _, _ in job.modes:
             parts.setdefault(m, []).append(_failed_mode(runs, res.error) if isinstance(res, Failed) else res[m])
     out = {m: (got[0] if len(got) == 1 else _merged(got, runs)) for m, got in parts.items()}
-    return {"runs": runs, "seed": seed, "disturbance_hold_s": HOLD, "modes": {m: out[m] for m, _, _ in modes}}
+    window, hold = push_window(spec.project.uncertainty)
+    return {"runs": runs, "seed": seed, "disturbance_hold_s": hold, "disturbance_after_switch_in_s": window,
+            "modes": {m: out[m] for m, _, _ in modes}}
+
+
+def push_window(unc) -> tuple[float | None, float]:
+    """(seconds a push is on after each switch-in, None when the disturbance is on throughout; seconds
+    each drawn value holds)."""
+    dist = unc.disturbance
+    force = dist.force if dist is not None else None
+    if force is None or force.duration is None:
+        return None, HOLD
+    return float(force.duration), float(force.duration) / dist.segments
 
 
 def _merged(blocks: list[dict], runs: int) -> dict:

@@ -168,6 +168,26 @@ def test_robust_cells_are_switches_the_executor_makes(tmp_path):
     assert cell_rows(tr, 2, taken) == [0, 9] and cell_rows(tr, 4, [None] * 12) == [0, 4, 7, 11]
 
 
+def test_the_robust_graph_switches_where_the_report_says(tmp_path):
+    """The robust graph verify runs the sequence through keeps each row's margin and its check from
+    E_A's boundary: the graph executor reads the same rows, switch-in clocks and shares from it as from
+    the robust graph `simulate --uncertain` and `plan --robust` read back from the report."""
+    from mpgspec.robust.plan import report_lookup_table, robust_report_graph
+    from mpgspec.spec.loader import load_project
+
+    report = _pendulum_by_margin(tmp_path)
+    spec = load_project(tmp_path / "pendulum" / "project.yaml")
+    cp, vg = api.build(spec, api.settings_for(spec))
+    built = api.robust_stage(cp, vg).graph
+    read = robust_report_graph(report)
+    table = report_lookup_table(read)
+    seq = spec.project.sequence
+    mine, theirs = ExecutorPlan.of(built, table, seq, cp.prims), ExecutorPlan.of(read, table, seq, cp.prims)
+    assert mine.edges == theirs.edges
+    shares = [s for _, _, sh in mine.edges.values() for s in sh]
+    assert any(s == 0 for s in shares)  # some rows were refused by the check from E_A's boundary
+
+
 def _pendulum_by_margin(tmp_path) -> dict:
     """The report of specs/pendulum with `switch: margin` and 4 samples of E_A's boundary a row."""
     import shutil
