@@ -181,7 +181,7 @@ def test_sequence_runs_share_their_y_axes(sample_text):
 
 def _robust_sequence(safe: dict[str, int], runs: int = 8) -> dict:
     def mode(n, switches):
-        return {"safe_fraction": n / runs, "safe_runs": n, "runs": runs, "final": ["Hang"] * runs,
+        return {"safe_fraction": n / runs, "safe_runs": n, "runs": runs, "final": ["Hang"] * runs, "reached_goal": n // 2,
                 "first_violation": [] if n == runs else [{"t": 2.01, "primitive": "Balance"}], "switches": switches}
 
     return {"runs": runs, "seed": 3, "disturbance_hold_s": 0.5, "modes": {
@@ -196,7 +196,8 @@ def test_robust_edges_in_summary_legend_and_sequence_fractions(sample_text):
     report["robust"]["sequence"] = _robust_sequence({"naive": 0, "graph": 6, "robust_graph": 8})
     html = render_html(report)
     assert "<b>19</b> robust edges" in html and "nominal only: Balance -&gt; SwingUp" in html
-    assert "disturbed sequence safe: naive 0/8, nominal graph 6/8, robust graph 8/8" in html
+    assert ("disturbed sequence safe: naive 0/8, nominal graph 6/8 (3 in every goal), robust graph 8/8 (4 in every "
+            "goal)") in html
     lost = [f"A{k} -> B{k}" for k in range(23)]  # many: counted on the first screen, listed under robust
     report["robust"]["summary"] = {**report["robust"]["summary"], "robust_edges": 1, "nominal_only": lost}
     many = render_html(report)

@@ -18,12 +18,15 @@ LISTED = 4
 
 def count(rob: dict) -> tuple:
     """The summary line of the robust graph: edges that survive uncertainty, the nominal-only ones and
-    the safe runs of the goal sequence under sampled uncertainty per mode."""
+    the safe runs of the goal sequence under sampled uncertainty per mode (and, through a graph, those
+    that were in every goal: a run that waits safely in one primitive is safe but gets nowhere)."""
     sm = rob.get("summary") or {}
     lost = sm.get("nominal_only") or []
     runs = ((rob.get("sequence") or {}).get("modes") or {}).items()
     names = {"graph": "nominal graph", "robust_graph": "robust graph"}
-    seq = "; disturbed sequence safe: " + ", ".join(f"{names.get(m, m)} {x['safe_runs']}/{x['runs']}" for m, x in runs)
+    seq = "; disturbed sequence safe: " + ", ".join(
+        f"{names.get(m, m)} {x['safe_runs']}/{x['runs']}"
+        + (f" ({x['reached_goal']} in every goal)" if m != "naive" and "reached_goal" in x else "") for m, x in runs)
     return ("robust edges", sm.get("robust_edges", "–"),
             f"of {sm.get('nominal_edges', '–')}; " + ((f"nominal only: {', '.join(lost)}" if len(lost) <= LISTED
                                                         else f"{len(lost)} nominal only (listed under robust)")
