@@ -299,6 +299,28 @@ def _as_written(value: float, text: str) -> bool:
     return abs(value - float(text)) <= 0.5 * 10.0 ** -digits + 1e-9
 
 
+def _uncertain_runs_as_written(report: dict, readme: str) -> None:
+    """The README's Table II under uncertainty is the report's, when the report ran them (the full A1 of
+    reports/a1; the light A1 of this module runs none)."""
+    seq = (report.get("robust") or {}).get("sequence") or {}
+    if not seq.get("runs"):
+        return
+    n, seed = _claim(r"On the A1's Table II sequence \((\d+) runs, 22 s each, seed (\d+)\):", readme)
+    assert (int(n), int(seed)) == (seq["runs"], seq["seed"])
+    m = seq["modes"]
+    assert int(_claim(r"naive, (\d+) of \d+ runs stay safe: trunk_clearance", readme)[0]) == m["naive"]["safe_runs"]
+    for mode, words in (("graph", "nominal graph"), ("robust_graph", "robust graph")):
+        safe, every, goals = _goal_claim(words, readme)
+        assert (int(safe), int(every)) == (m[mode]["safe_runs"], m[mode]["reached_goal"]), mode
+        assert [int(g) for g in re.findall(r"\d+", goals)] == m[mode]["goals_reached"], mode
+
+
+def _goal_claim(words: str, readme: str) -> tuple:
+    """(safe runs, runs in every goal, per goal) the README states for a mode through a graph."""
+    return _claim(rf"- through the {words}, (\d+) of \d+ stay safe and (?:\*\*)?(\d+)[^(]*?(?:\(\d+ %\))?"
+                  r"(?:\*\*)?\s*(?:are )?in every goal(?:\*\*)? \(per goal: ([\d, and]+?)(?: of \d+)?\)", readme)
+
+
 def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
     """The README's A1 numbers are the report's: the edge table (every edge and class), the oracle
     calls and edges, the radii of E it quotes and the naive run's first violations."""
@@ -358,6 +380,8 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
     for (_g, mj, mpg), (w_mj, w_mpg) in zip(got, [(t_mj, t_mpg), (t_jump, t_jump_mpg), (t_up, t_up_mpg),
                                                (t_lie, t_lie_mpg)]):
         assert _as_written(mj, w_mj) and _as_written(mpg, w_mpg), (mj, w_mj, mpg, w_mpg)
+
+    _uncertain_runs_as_written(report, readme)
 
     run = report["sequence"]["runs"]["graph"]
     to_jump, last = _claim(r"and Stand to Jump \(([\d.]+) s: it waits in Stand.*?down through Walk\(in_place\) to "
