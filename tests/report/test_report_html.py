@@ -181,8 +181,8 @@ def test_sequence_runs_share_their_y_axes(sample_text):
 
 def _robust_sequence(safe: dict[str, int], runs: int = 8) -> dict:
     def mode(n, switches):
-        return {"safe_fraction": n / runs, "safe_runs": n, "runs": runs, "final": ["Hang"] * runs, "reached_goal": n // 2,
-                "first_violation": [] if n == runs else [{"t": 2.01, "primitive": "Balance"}], "switches": switches}
+        return {"safe_fraction": n / runs, "safe_runs": n, "runs": runs, "final": ["Hang"] * runs,
+                "reached_goal": n // 2, "first_violation": [] if n == runs else [{"t": 2.01, "primitive": "Balance"}], "switches": switches}
 
     return {"runs": runs, "seed": 3, "disturbance_hold_s": 0.5, "modes": {
         "naive": mode(safe["naive"], [{"from": "Hang", "to": "Balance", "count": runs}]),

@@ -13,13 +13,14 @@ from mpgspec.spec.project import Uncertainty
 RUNS = 5
 
 
-def _draws(force: dict | None = None, inputs: bool = False, seed: int = 3) -> DisturbedSequences:
+def _draws(force: dict | None = None, inputs: bool = False, seed: int = 3, cols=None) -> DisturbedSequences:
+    """The seeded draws of RUNS runs (of the runs `cols` only, when given) of a 6 s sequence."""
     dist = {"force": force, "segments": 4} if force else {"inputs": ["tau"], "bound": 0.3} if inputs else None
     unc = Uncertainty(parameters={"mass_scale": {"range": [0.9, 1.1]}}, disturbance=dist)
     prims = {"A": SimpleNamespace(system=SimpleNamespace(nx=2, state_names=["q", "v"]))}
     nd, bound = (3, force["bound"]) if force else (1, [0.3])
     return DisturbedSequences(prims, {"A": SimpleNamespace(nz=6)}, ["mass_scale"], nd, bound, unc,
-                              SimpleNamespace(dt=0.001), SimpleNamespace(duration=6.0), RUNS, seed)
+                              SimpleNamespace(dt=0.001), SimpleNamespace(duration=6.0), RUNS, seed, cols)
 
 
 PUSH = {"frame": "trunk", "bound": [7.5, 5.0, 0.0], "duration": 0.2}
@@ -49,11 +50,7 @@ def test_a_push_acts_for_its_duration_after_each_switch_in_only():
 def test_the_draws_of_a_block_of_runs_are_those_of_the_whole():
     whole = _draws(PUSH)
     cols = [1, 3]
-    unc = Uncertainty(parameters={"mass_scale": {"range": [0.9, 1.1]}},
-                      disturbance={"force": PUSH, "segments": 4})
-    prims = {"A": SimpleNamespace(system=SimpleNamespace(nx=2, state_names=["q", "v"]))}
-    part = DisturbedSequences(prims, {"A": SimpleNamespace(nz=6)}, ["mass_scale"], 3, PUSH["bound"], unc,
-                              SimpleNamespace(dt=0.001), SimpleNamespace(duration=6.0), RUNS, 3, cols)
+    part = _draws(PUSH, cols=cols)
     assert np.array_equal(part.theta, whole.theta[:, cols]) and np.array_equal(part.dist, whole.dist[..., cols])
 
 
