@@ -7,7 +7,8 @@ after any motion profile has ended) is run from seeded samples of E's boundary, 
 manifold of its feet for robots with contacts, over the horizon (in chunks: a run ends early once a
 flow has left C or every flow is within 0.05 r of x*). Sampled, so 'empirical':
 
-- fail: a flow left C (some h < -tol) or blew up: E is not inside the implicit safe RoA S;
+- fail: a flow left C (some h < -tol), blew up or its law found no input (its compiled step failed):
+  E is not inside the implicit safe RoA S;
 - warn: every flow stayed in C, but some ended outside E: E is not shown invariant;
 - pass: every flow stayed in C and ended inside E; the message says how far from x* they ended (a
   legged robot's flows stop short of x* where the loop does not steer the feet back to where x*
@@ -52,6 +53,22 @@ def boundary_starts(p: CompiledPrimitive, n: int, seed: int) -> np.ndarray:
     return np.asarray(project.many(X.T, xs, 0.0)[0], float).T
 
 
+def _run_each(flow: HybridFlow, X: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One chunk of every flow; when the batch's compiled call fails (a law that finds no input, say),
+    each flow alone, a failing one left not finite: that flow's evidence, not the end of the check."""
+    try:
+        return flow.run(X, t, 1)
+    except RuntimeError:
+        Y, h = np.full_like(X, np.nan), np.full(X.shape[1], np.nan)
+        for j in range(X.shape[1]):
+            try:
+                Yj, hj = flow.run(X[:, [j]], t[[j]], 1)
+            except RuntimeError:
+                continue
+            Y[:, j], h[j] = Yj[:, 0], hj[0]
+        return Y, h
+
+
 def roa_invariant(p: CompiledPrimitive, tol: float = 1e-9, samples: int = SAMPLES, seed: int = 0,
                   horizon: float | None = None) -> AssumptionCheck | None:
     """The check above for a fixed primitive with a non-empty E; None for other primitives."""
@@ -68,7 +85,7 @@ def roa_invariant(p: CompiledPrimitive, tol: float = 1e-9, samples: int = SAMPLE
     hmin, dist = h0.copy(), r0.copy()
     ran, chunks, stop = 0.0, max(1, int(round(T / CHUNK))), "horizon"
     for k in range(chunks):
-        X, hk = flow.run(X, np.full(samples, k * CHUNK), 1)
+        X, hk = _run_each(flow, X, np.full(samples, k * CHUNK))
         hmin = np.minimum(hmin, hk)
         ran = (k + 1) * CHUNK
         dist = weighted_distances(p, X, xs)
@@ -91,7 +108,7 @@ def roa_invariant(p: CompiledPrimitive, tol: float = 1e-9, samples: int = SAMPLE
     head = f"{samples} flows from E's boundary ({where}seed {seed}), {ran:.2g} s of {T:.2g} s"
     if unsafe.any():
         return AssumptionCheck(p.name, "roa_invariant", "fail", "empirical",
-                               f"{head}: {int(unsafe.sum())} left C or blew up ({least_h}): E is not "
+                               f"{head}: {int(unsafe.sum())} left C, blew up or found no input ({least_h}): E is not "
                                f"inside the safe region of attraction; shrink roa.radius", numbers)
     if outside.any():
         return AssumptionCheck(p.name, "roa_invariant", "warn", "empirical",

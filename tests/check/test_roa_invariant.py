@@ -62,6 +62,29 @@ def test_a_safe_flow_that_leaves_e_is_a_warning(tmp_path, line_spec):
     assert chk.numbers["final_distance_max"] == pytest.approx((1 + 0.2 * np.exp(2.5)) / 1.2, rel=0.02)
 
 
+def test_a_flow_whose_law_finds_no_input_fails_the_check_alone(tmp_path, line_spec, monkeypatch):
+    """A compiled step that fails (a law that finds no input, say) from one start is that flow's evidence: the
+    check fails with it counted, the other flows run on, and no error ends the check."""
+    from mpgspec.certify.hybrid_orbit import HybridFlow
+
+    run = HybridFlow.run
+
+    def failing(self, X0, t0, periods=1):
+        if (X0[0] > 0.45).any():  # the starts at +r (a 1-D E's boundary is +-r), until they have moved
+            raise RuntimeError("Error in Function::call for 'hybrid_period_end': Evaluation failed")
+        return run(self, X0, t0, periods)
+
+    monkeypatch.setattr(HybridFlow, "run", failing)
+    from mpgspec.check.roa_flows import boundary_starts
+
+    p = _hold(tmp_path, line_spec, 0.5)
+    plus = int((boundary_starts(p, 16, 0)[0] > 0).sum())
+    assert 0 < plus < 16
+    chk = roa_invariant(p)
+    assert chk.status == "fail" and "found no input" in chk.message, chk.message
+    assert chk.numbers["unsafe"] == plus and chk.numbers["ran_s"] == pytest.approx(0.1)
+
+
 def _verify(tmp_path: Path, line_spec, extra: str = ""):
     """(exit code, report, Hold's roa_invariant) of a run with E = 1.5."""
     path = tmp_path / "project.yaml"
