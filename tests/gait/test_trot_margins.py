@@ -190,3 +190,29 @@ def test_a_sequence_runs_clock_is_its_time(a1_project):
     assert len(far) > 1500
     worst = max(off(t, x) for t, x in far)
     assert worst < 0.01, worst  # 0.64 when a shortened step counted as a whole one
+
+
+def test_the_tilt_limit_bounds_the_levelling_acceleration(prims):
+    """tilt_accel_limit scales the roll and pitch acceleration the tilt PD asks down to its norm, direction kept,
+    and leaves yaw damping and a request within the limit as they were."""
+    from mpgspec.robots.quadruped.stance import level_trunk_moment, trunk
+
+    sys = prims["Walk(slow)"].system
+    tk = trunk(sys)
+    inertia = np.diag([0.02, 0.06, 0.07])
+    free = level_trunk_moment(tk, inertia, 300.0, 50.0, 10.0)
+    capped = level_trunk_moment(tk, inertia, 300.0, 50.0, 10.0, tilt_limit=40.0)
+    I_G = ca.mtimes([tk.Ryaw, ca.DM(inertia), tk.Ryaw.T])
+    accel = ca.Function("accel", [sys.x], [ca.solve(I_G, free), ca.solve(I_G, capped)])
+    x = np.asarray(prims["Walk(slow)"].x_star(0.1), float).ravel()
+    a_free, a_cap = (np.asarray(a).ravel() for a in accel(x))
+    assert np.linalg.norm(a_free[:2]) < 40.0  # on the orbit: within the limit, unchanged
+    np.testing.assert_allclose(a_cap, a_free, atol=1e-9)
+    m = sys.model
+    kicked = x.copy()
+    kicked[m.nq + 3:m.nq + 5] += [2.0, -1.5]  # roll and pitch rates of a hard landing
+    a_free, a_cap = (np.asarray(a).ravel() for a in accel(kicked))
+    assert np.linalg.norm(a_free[:2]) > 100.0
+    assert np.linalg.norm(a_cap[:2]) == pytest.approx(40.0, rel=1e-6)
+    np.testing.assert_allclose(a_cap[:2] / 40.0, a_free[:2] / np.linalg.norm(a_free[:2]), atol=1e-9)
+    assert a_cap[2] == pytest.approx(a_free[2], abs=1e-9)  # yaw damping untouched

@@ -87,6 +87,10 @@ class TrotController(Strict):
                                               "height_accel_limit / kz, so a stiff height law (which holds the "
                                               "height under a mass or torque error) rises from a lower stance "
                                               "(a switch in from a crouch) at a bounded force; default: no limit")
+    tilt_accel_limit: Number | None = Field(default=None, gt=0, description="largest roll and pitch acceleration "
+                                            "(rad/s^2) the trunk's tilt PD asks (its norm, direction kept): stiff "
+                                            "tilt gains hold the orbit under a model error while the large tilt "
+                                            "error after a switch asks the feet a bounded moment; default: no limit")
     lift_fraction: Number = Field(default=0.0, ge=0, lt=1, description="share of the swing over which the swing "
                                   "foot's horizontal pull ramps in from 0: the foot lifts before it moves over; "
                                   "0: the path's pull from lift-off")

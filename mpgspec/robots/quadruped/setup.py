@@ -77,7 +77,7 @@ LEGACY = {"kz": 100.0, "dz": 20.0, "d_yaw": 10.0, "f_min": 10.0, "regularization
           "touchdown_height": 0.0, "swing_feedforward": 0.0}
 """Settings the trot's law had as fixed numbers before they were spec fields: the hash of the inputs
 holds them only when they differ, so that tables generated before stay valid."""
-OPTIONAL = ("accel_limit", "height_accel_limit", "friction")
+OPTIONAL = ("accel_limit", "height_accel_limit", "tilt_accel_limit", "friction")
 """Settings added later whose default is none: the hash holds them only when they are given."""
 
 

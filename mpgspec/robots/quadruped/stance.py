@@ -50,14 +50,18 @@ def trunk(sys) -> Trunk:
                  H=sub(dyn.nle_expr), sub=sub)
 
 
-def level_trunk_moment(tk: Trunk, inertia: np.ndarray, k_tilt: float, d_tilt: float, d_yaw: float) -> ca.SX:
-    """Moment about the CoM that levels the trunk (roll, pitch PD in the heading frame) and damps yaw."""
+def level_trunk_moment(tk: Trunk, inertia: np.ndarray, k_tilt: float, d_tilt: float, d_yaw: float,
+                       tilt_limit: float = float("inf")) -> ca.SX:
+    """Moment about the CoM that levels the trunk (roll, pitch PD in the heading frame) and damps yaw.
+    With a finite tilt_limit, the roll and pitch acceleration the PD asks is scaled down to that norm
+    (direction kept): stiff tilt gains hold the orbit, a large error after a switch asks a bounded moment."""
     E = ca.mtimes(tk.Ryaw, tk.R.T)
     e_R = 0.5 * ca.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1])
     I_G = ca.mtimes([tk.Ryaw, ca.DM(inertia), tk.Ryaw.T])  # the nominal inertia turned with the heading
-    alpha = ca.vertcat(k_tilt * e_R[0] - d_tilt * tk.omega[0], k_tilt * e_R[1] - d_tilt * tk.omega[1],
-                       -d_yaw * tk.omega[2])
-    return ca.mtimes(I_G, alpha)
+    tilt = ca.vertcat(k_tilt * e_R[0] - d_tilt * tk.omega[0], k_tilt * e_R[1] - d_tilt * tk.omega[1])
+    if np.isfinite(tilt_limit):
+        tilt = tilt * ca.fmin(1, tilt_limit / ca.sqrt(ca.sumsqr(tilt) + 1e-12))
+    return ca.mtimes(I_G, ca.vertcat(tilt, -d_yaw * tk.omega[2]))
 
 
 def split_wrench(tk: Trunk, flags: dict, feet, wrench: ca.SX, moment_weight: float, reg: float) -> ca.SX:

@@ -72,6 +72,7 @@ class TrotGains:
     placement_fraction: float = 0.8  # share of the swing after which the foot is over its target
     accel_limit: float = float("inf")  # largest horizontal CoM acceleration the stance wrench asks (m/s^2)
     height_accel_limit: float = float("inf")  # largest vertical CoM acceleration the height stiffness asks (m/s^2)
+    tilt_accel_limit: float = float("inf")  # largest roll/pitch acceleration the tilt PD asks (rad/s^2)
     lift_fraction: float = 0.0  # share of the swing over which the swing foot's horizontal pull ramps in
     swing_feedforward: bool = False  # the path's acceleration through the leg's inertia
     friction: float = float("nan")  # friction coefficient the stance forces are designed for (nan: the system's)
@@ -153,7 +154,7 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
     force = tk.mass * ca.vertcat(g.kv * _limited(v_cmd - cdot[:2], g.accel_limit / g.kv),
                                  tk.grav + g.kz * _limited(g.height - com[2], g.height_accel_limit / max(g.kz, 1e-12))
                                  - g.dz * cdot[2])
-    wrench = ca.vertcat(force, level_trunk_moment(tk, inertia, g.k_tilt, g.d_tilt, g.d_yaw))
+    wrench = ca.vertcat(force, level_trunk_moment(tk, inertia, g.k_tilt, g.d_tilt, g.d_yaw, g.tilt_accel_limit))
     f_all = split_wrench(tk, flags, feet, wrench, g.moment_weight, g.regularization)
     dyn = sys.dyn
     mu = float(sys.friction) if np.isnan(g.friction) else g.friction
@@ -269,6 +270,7 @@ def gains_of(c, speed: float, sys, ec=None) -> TrotGains:
                      cone_fraction=float(c.cone_fraction), placement_fraction=float(c.placement_fraction),
                      accel_limit=float("inf") if c.accel_limit is None else float(c.accel_limit),
                      height_accel_limit=float("inf") if c.height_accel_limit is None else float(c.height_accel_limit),
+                     tilt_accel_limit=float("inf") if c.tilt_accel_limit is None else float(c.tilt_accel_limit),
                      lift_fraction=float(c.lift_fraction), swing_feedforward=bool(c.swing_feedforward),
                      friction=float("nan") if c.friction is None else float(c.friction),
                      pair_a=pair_a, pair_b=pair_b)
