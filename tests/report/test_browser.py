@@ -342,9 +342,10 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
     assert int(calls.replace(",", "")) == report["timing"]["oracle_calls"]
     assert int(edges) == len(report["edges"])
     radius = {p["name"]: p["roa_radius"] for p in report["primitives"]}
-    walk_r, in_place_r = _claim(r"\(empirical: r = ([\d.]+) for the walks at speed and ([\d.]+) in place\)", readme)
-    assert all(_as_written(r, walk_r) for n, r in radius.items() if n.startswith("Walk(") and n != "Walk(in_place)")
-    assert _as_written(radius["Walk(in_place)"], in_place_r)
+    walk_r, fast_r, in_place_r = _claim(r"\(empirical: r = ([\d.]+) at slow and medium speed, ([\d.]+) at fast and "
+                                        r"([\d.]+) in place;", readme)
+    assert _as_written(radius["Walk(slow)"], walk_r) and _as_written(radius["Walk(medium)"], walk_r)
+    assert _as_written(radius["Walk(fast)"], fast_r) and _as_written(radius["Walk(in_place)"], in_place_r)
     assert _as_written(radius["Lie"], _claim(r"ends inside E_Lie \(r = ([\d.]+)\)", readme)[0])
     assert _as_written(radius["Stand"], _claim(r"settles [\d.]+ \(in E's norm\) from its setpoint, outside E \(r = ([\d.]+)\)", readme)[0])
 
