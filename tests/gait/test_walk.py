@@ -59,9 +59,10 @@ def test_committed_gait_tables_regenerate_within_tolerance():
 
 
 def test_a_destabilised_gait_is_rejected_by_its_multipliers(spec, system):
-    """Without trunk roll/pitch damping the trot still has an orbit, but it repels."""
+    """Without trunk roll/pitch damping (and without the cap on the tilt law) the trot still has an orbit, but it
+    repels."""
     inst = next(i for i in spec.primitives if i.name == "Walk(in_place)")
-    ctrl = inst.spec.controller.model_copy(update={"d_tilt": 0.0})
+    ctrl = inst.spec.controller.model_copy(update={"d_tilt": 0.0, "tilt_accel_limit": None})
     orbit = find_orbit(StrideMap(system, ctrl, 0.001), _stand(system, ctrl), 0.0)
     assert orbit.status == "converged"
     assert orbit.spectral_radius > 1.0
@@ -86,8 +87,8 @@ def test_twenty_seconds_of_walking_from_the_orbit(prims, name):
 
 @pytest.mark.slow
 def test_nodes_of_one_gait_in_two_files_each_get_their_own_law(tmp_path):
-    """Walk nodes written in two files may differ in more than their speed (here the touchdown height, which
-    specs/a1 sets per node with `nodes`):
+    """Walk nodes written in two files may differ in more than their speed (here the touchdown height and the tilt
+    law, which specs/a1 sets per node with `nodes`):
     each table is the orbit of its own node's law, so verify finds every table current."""
     import re
     import shutil
@@ -100,12 +101,14 @@ def test_nodes_of_one_gait_in_two_files_each_get_their_own_law(tmp_path):
     walk = d / "primitives" / "walk.yaml"
     text = walk.read_text()
     every = "  speed: {in_place: 0.0, slow: 0.2, medium: 0.4, fast: 0.6}\n"
-    assert every in text and "  fast: {controller: {touchdown_height: 0.0007}}\n" in text
-    walk.write_text(text.replace(every, "  speed: {in_place: 0.0, slow: 0.2, medium: 0.4}\n").replace(
-        "  fast: {controller: {touchdown_height: 0.0007}}\n", ""))
+    node = "  fast: {controller: {touchdown_height: 0.0007, d_tilt: 60, tilt_accel_limit: 100}}\n"
+    assert every in text and node in text
+    walk.write_text(text.replace(every, "  speed: {in_place: 0.0, slow: 0.2, medium: 0.4}\n").replace(node, ""))
     fast = re.sub(r"nodes:\n(?:  .*\n)+", "", text.replace(every, "  speed: {fast: 0.6}\n"))
-    (d / "primitives" / "walk_fast.yaml").write_text(  # the fast node's own file, its touchdown height written out
-        re.sub(r"\n  touchdown_height: 0\.001\n", "\n  touchdown_height: 0.0007\n", fast))
+    fast, n = re.subn(r"\n  touchdown_height: 0\.001\n", "\n  touchdown_height: 0.0007\n", fast)
+    fast, m = re.subn(r"\n  d_tilt: 50\n  tilt_accel_limit: 40\n", "\n  d_tilt: 60\n  tilt_accel_limit: 100\n", fast)
+    assert n == m == 1
+    (d / "primitives" / "walk_fast.yaml").write_text(fast)  # the fast node's own file, its settings written out
     project = d / "project.yaml"
     project.write_text(project.read_text().replace("  - primitives/walk.yaml\n",
                                                    "  - primitives/walk.yaml\n  - primitives/walk_fast.yaml\n"))
@@ -113,7 +116,8 @@ def test_nodes_of_one_gait_in_two_files_each_get_their_own_law(tmp_path):
     gaits.write_text(gaits.read_text().split("transients:")[0])
     messages = []
     tables = generate(gaits, progress=messages.append)
-    assert sum(m.startswith("compiling the stride map") for m in messages) == 2
+    # one stride map per law: in place and slow (1 mm), medium (0.7 mm), fast (0.7 mm, its own tilt law)
+    assert sum(m.startswith("compiling the stride map") for m in messages) == 3
     spec = load_project(project)
     sys = compile_system(spec)
     for inst in (i for i in spec.primitives if i.base == "Walk"):  # what verify's staleness check compares
