@@ -117,3 +117,11 @@ class IDQPController(Strict):
                                 "of oracle steps. Omitted: solved at the start of every oracle step")
     warm_start: bool = Field(default=True, description="start each solve from the previous solution and its "
                              "active set")
+    ki: list[Number] | None = Field(default=None, min_length=3, max_length=3, description="integral gain of the "
+                                    "CoM task per axis (1/s^3): the law adds ki times the integral of the CoM's "
+                                    "error to the acceleration it asks, so a mass or motor error settles at the "
+                                    "setpoint instead of sagging; needs `rate` (the integral advances once per "
+                                    "solve and is carried with the held torques). Omitted: none")
+    ki_limit: Number = Field(default=3.0, gt=0, description="largest CoM acceleration (m/s^2) the integral adds per "
+                             "axis: the integral is clipped there, so it cannot wind up past what a model error "
+                             "asks")

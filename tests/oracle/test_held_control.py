@@ -137,3 +137,90 @@ def test_lie_to_stand_is_class_1_with_the_held_idqp(a1):
     g = build_graph(cp.prims, st, 1, 1)
     edge = g.edge("Lie", "Stand")
     assert edge is not None and edge.cls is TransitionClass.CLASS_1
+
+
+def _with_integral(path: Path, ki: str = "[300, 300, 2700]", limit: str = "8") -> Path:
+    """The project at `path` with Stand's ID-QP given integral action (ki, ki_limit)."""
+    stand = path.parent / "primitives" / "stand.yaml"
+    text, n = re.subn(r"\n  rate:", f"\n  ki: {ki}\n  ki_limit: {limit}\n  rate:", stand.read_text())
+    assert n == 1
+    stand.write_text(text)
+    return path
+
+
+def test_integral_action_needs_a_rate(tmp_path, capsys):
+    """Stand's integral advances once per solve: without a rate it is a spec error located at controller.ki."""
+    path = _with_integral(lie_and_stand(tmp_path / "a1"))
+    stand = tmp_path / "a1" / "primitives" / "stand.yaml"
+    stand.write_text(re.sub(r"\n  rate:[^\n]*", "", stand.read_text()))
+    rc = main(["verify", str(path), "--no-write", "-q"])
+    err = capsys.readouterr().err
+    line = 1 + stand.read_text().splitlines().index("  ki: [300, 300, 2700]")
+    assert rc == 2, err
+    assert f"{stand}:{line}" in err and "MPG104" in err and "integral action needs a control rate" in err, err
+    assert "Traceback" not in err
+
+
+def _settled(prim, settings, theta: tuple, T: float = 2.5) -> tuple[float, np.ndarray]:
+    """(CoM height minus x*'s, the state) after T s of prim's own flow from x* under (mass, friction, torque) scale."""
+    import casadi as ca
+
+    from mpgspec.robust.rigid import RigidRobustRollout
+
+    names = ["mass_scale", "friction", "torque_scale"]
+    rr = RigidRobustRollout(prim, names, "trunk", False, 1, settings, T, None, False, 0)
+    got = {}
+    run = rr._call
+
+    def keep(fn, n, args):
+        out = run(fn, n, args)
+        if fn is rr.chunk:
+            got["z"] = out[:rr.nz].copy()
+        return out
+
+    rr._call = keep
+    x0 = np.asarray(prim.x_star(0.0), float).ravel()
+    rr.run(x0[None], np.zeros(1), np.array([theta], float), np.zeros((1, 0, 1)), tol=1.0, until_entry=False)
+    x = got["z"][:prim.system.nx, 0]
+    com_z = ca.Function("com_z", [prim.system.x], [prim.system.extra_env["com_z"]])
+    return float(com_z(x)) - float(com_z(x0)), x
+
+
+def test_integral_action_settles_the_stance_under_a_motor_and_mass_error(a1, tmp_path):
+    """Known answer: with every link 10 % heavier on motors giving 90 % of their command, Stand's stiff ID-QP alone
+    sags its CoM by about 2 mm; a law with integral action settles at the setpoint's height (its error's integral
+    carried in the law's memory, advanced once per solve). At the nominal model both stay at x*: the integral
+    starts at 0 and the error there is 0."""
+    spec, prims, st = a1
+    plain = prims["Stand"]
+    spec_i = load_project(_with_integral(lie_and_stand(tmp_path / "a1i")))
+    with_i = compile_project(spec_i)["Stand"]
+    assert with_i.sampled.nw == plain.sampled.nw + 3 and with_i.info["id_qp"]["integral_gain"] == [300, 300, 2700]
+    sag, _ = _settled(plain, st, (1.1, 0.6, 0.9))
+    held, x = _settled(with_i, st, (1.1, 0.6, 0.9))
+    assert sag < -1.5e-3, sag
+    assert abs(held) < 2e-4, held
+    assert float(with_i.roa_margin(x, 0.0)) > float(plain.roa_margin(_settled(plain, st, (1.1, 0.6, 0.9))[1], 0.0))
+    for p in (plain, with_i):
+        dz, x_nom = _settled(p, st, (1.0, 0.6, 1.0), T=0.5)
+        assert abs(dz) < 1e-6 and float(p.roa_margin(x_nom, 0.0)) > 0.99 * float(p.radius)
+
+
+def test_the_integral_advances_once_per_solve_and_stops_at_its_limit(tmp_path):
+    """One solve adds the CoM error times the control period to the integral; at ki_limit / ki it stops."""
+    spec = load_project(_with_integral(lie_and_stand(tmp_path / "a1"), limit="3"))
+    stand = compile_project(spec)["Stand"]
+    law, nw = stand.sampled, stand.sampled.nw
+    x = np.asarray(stand.x_star(0.0), float).ravel()
+    low = x.copy()
+    low[2] -= 0.01  # the base, and with it the CoM, 1 cm low (the feet then off the ground: only the law is read)
+    s = 5.0  # after the CoM profile: the target is the setpoint's CoM
+    w = np.zeros(nw)
+    _, w1 = law.solve(low, 0.0, s, x, w)
+    assert np.asarray(w1).ravel()[-3:] == pytest.approx([0.0, 0.0, 0.01 / 1000], abs=1e-9)
+    _, w2 = law.solve(x, 0.0, s, x, w1)
+    assert np.asarray(w2).ravel()[-3:] == pytest.approx(np.asarray(w1).ravel()[-3:], abs=1e-12)  # no error: kept
+    w_cap = np.zeros(nw)
+    w_cap[-1] = 3.0 / 2700
+    _, w3 = law.solve(low, 0.0, s, x, w_cap)
+    assert np.asarray(w3).ravel()[-1] == pytest.approx(3.0 / 2700, rel=1e-12)  # clipped at ki_limit / ki

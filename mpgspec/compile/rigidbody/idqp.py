@@ -11,6 +11,11 @@ friction pyramid |lam_x|, |lam_y| <= mu / sqrt(2) lam_z, lam_z >= f_min, where m
 coefficient or a lower design one (`friction`): the pyramid's corners touch the cone of its mu, so
 forces designed for the plant's own mu keep no margin where the QP saturates them.
 
+With `ki`, integral action: the law's memory carries the CoM error integrated over its solves (one
+control period each, clipped so that ki times it stays within `ki_limit`), and a_d gains ki times it,
+so a mass or motor error that would sag the stance settles at the setpoint. The integral starts at 0
+at switch-in and at x*, where the error is 0, stays there: the nominal closed loop is unchanged.
+
 The QP is solved with CasADi's active-set solver qrqp, which can be code-generated, so it runs
 inside the jit-compiled oracle. Control rate: the oracle solves it at `rate` (default: at every
 oracle step's start) and holds the torques in between, each solve warm-started from the previous
@@ -73,13 +78,20 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
                         "friction cone C judges", location=ctx.ec.locate(("controller", "friction")),
                         key=f"{ctx.ec.owner}: controller.friction", expected=f"at most the system's friction "
                         f"{sys.friction:g}", found=f"{c.friction:g}", code="MPG104")
-    qp = _qp(c, ctx)
-    X, solve, nws, na = _warm_solve(c, qp, [sys.x, ctx.t, ctx.s, ctx.x_sw])
+    if c.ki is not None and c.rate is None:
+        raise SpecError("the ID-QP's integral action needs a control rate", location=ctx.ec.locate(("controller", "ki")),
+                        key=f"{ctx.ec.owner}: controller.rate", expected="a rate (Hz): the integral advances once per "
+                        "solve", found="no rate", code="MPG104")
+    integ = ca.SX.sym("com_integral", 3) if c.ki is not None else None
+    qp = _qp(c, ctx, integ)
+    X, solve, nws, na = _warm_solve(c, qp, [sys.x, ctx.t, ctx.s, ctx.x_sw], integ)
+    nws += 0 if integ is None else 3
     where = ("controller", "rate") if c.rate is not None else ("controller", "type")
     ctx.sampled = SampledLaw(1.0 / c.rate if c.rate is not None else None, solve, nws, ctx.ec.locate(where),
                              f"{ctx.ec.owner}: controller.rate")
     ctx.info["id_qp"] = {"solver": "qrqp", "variables": qp.nw, "constraints": na,
-                         "control_rate": ctx.sampled.describe(), "warm_start": bool(c.warm_start)}
+                         "control_rate": ctx.sampled.describe(), "warm_start": bool(c.warm_start),
+                         **({"integral_gain": [float(k) for k in c.ki]} if c.ki is not None else {})}
     return ca.Function("k_idqp", X, [solve(*X, ca.DM.zeros(nws))[0]])
 
 
@@ -99,6 +111,7 @@ class _QP:
     ok: ca.SX
     nw: int
     nu: int
+    err: ca.SX | None = None  # the CoM error the integral action integrates (None without it)
 
 
 def _contact_rows(sys, contacts, q, v):
@@ -114,8 +127,9 @@ def _contact_rows(sys, contacts, q, v):
     return M, H, J, drift, gamma
 
 
-def _tasks(c, ctx: ControlContext, q, v):
-    """The CoM task (Jc qddot + drift_c = a_d along the cubic profile) and the posture task S qddot = a_post."""
+def _tasks(c, ctx: ControlContext, q, v, integ=None):
+    """The CoM task (Jc qddot + drift_c = a_d along the cubic profile, with ki times the integral `integ` of
+    its error when given), the posture task S qddot = a_post and the CoM error y_d - com."""
     sys, x = ctx.sys, ctx.sys.x
     nq, nv, nu = sys.model.nq, sys.model.nv, sys.model.nu
     qd = sys.xdot[:nq]  # qdot(q, v), linear in v
@@ -129,6 +143,8 @@ def _tasks(c, ctx: ControlContext, q, v):
     kp, kd = ca.DM(c.kp), ca.DM(c.kd)
     yd, yd_dot, yd_acc = _profile_acc(ctx.s, c.profile_duration, y0, y0dot, yf, ca.DM.zeros(3))
     a_d = yd_acc - kp * (com - yd) - kd * (comdot - yd_dot)
+    if integ is not None:
+        a_d = a_d + ca.DM(c.ki) * integ
     S = ca.DM(np.hstack([np.zeros((nu, nv - nu)), np.eye(nu)]))
     qj, qj_star = x[nq - nu:nq], ctx.x_star[nq - nu:nq]
     vj = ca.mtimes(S, v)
@@ -138,10 +154,10 @@ def _tasks(c, ctx: ControlContext, q, v):
         a_post = pd_acc - c.posture_kp * (qj - pd_) - c.posture_kd * (vj - pd_dot)
     else:
         a_post = -c.posture_kp * (qj - qj_star) - c.posture_kd * vj
-    return Jc, drift_c, a_d, S, a_post
+    return Jc, drift_c, a_d, S, a_post, yd - com
 
 
-def _qp(c, ctx: ControlContext) -> _QP:
+def _qp(c, ctx: ControlContext, integ=None) -> _QP:
     """The QP over [u; lam]: qddot = D^-1 (B u + J^T lam - H) = Aq w + bq eliminated, the contact
     rows as equalities, u in U and lam in the inner friction pyramid."""
     sys = ctx.sys
@@ -150,7 +166,7 @@ def _qp(c, ctx: ControlContext) -> _QP:
     q, v = sys.x[:nq], sys.x[nq:nq + nv]  # contact flags and event clocks may follow
     M, H, J, drift, gamma = _contact_rows(sys, ctx.plan.feet, q, v)
     nc = J.shape[0]
-    Jc, drift_c, a_d, S, a_post = _tasks(c, ctx, q, v)
+    Jc, drift_c, a_d, S, a_post, err = _tasks(c, ctx, q, v, integ)
     B = ca.DM(m.actuation_matrix)
     parents = dof_parents(m)
     L, Dg = tree_ldl(M, parents)
@@ -176,7 +192,7 @@ def _qp(c, ctx: ControlContext) -> _QP:
     lbx[:nu], ubx[:nu] = sys.u_lo, sys.u_hi
     lbx[nu + 2::3] = c.f_min
     w_eq, ok = _no_inequality_active(Aq, Q, c.regularization, gqp, A_con, con, A_fc, lbx, ubx, nu)
-    return _QP(Hqp, gqp, A, lba, uba, lbx, ubx, w_eq, ok, nw, nu)
+    return _QP(Hqp, gqp, A, lba, uba, lbx, ubx, w_eq, ok, nw, nu, err if integ is not None else None)
 
 
 def _friction_pyramid(mu: float, nu: int, nc: int) -> ca.DM:
@@ -193,11 +209,14 @@ def _friction_pyramid(mu: float, nu: int, nc: int) -> ca.DM:
     return ca.DM(np.array(rows)) if rows else ca.DM(0, nw)
 
 
-def _warm_solve(c, qp: _QP, args: list):
+def _warm_solve(c, qp: _QP, args: list, integ=None):
     """(X, solve, nws, na): solve(x, t, s, x_sw, w) -> (u, w_next) by qrqp warm-started from w (the
-    previous solution and its multipliers), or the shortcut w_eq when no inequality is active."""
+    previous solution and its multipliers), or the shortcut w_eq when no inequality is active. With
+    integral action (`integ`, the QP's data depending on it) w ends with the integral, advanced by one
+    control period of the CoM error and clipped at ki_limit / ki; nws counts the warm start only."""
     nw = qp.nw
-    data = ca.Function("idqp_data", args, [ca.densify(qp.H), qp.g, ca.densify(qp.A), qp.lba, qp.uba, qp.w_eq, qp.ok])
+    data = ca.Function("idqp_data", args + ([integ] if integ is not None else []),
+                       [ca.densify(qp.H), qp.g, ca.densify(qp.A), qp.lba, qp.uba, qp.w_eq, qp.ok])
     solver = ca.conic("idqp", "qrqp", {"h": ca.Sparsity.dense(nw, nw), "a": ca.Sparsity.dense(qp.A.shape[0], nw)},
                       {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False,
                        "max_iter": c.max_iter})
@@ -213,11 +232,18 @@ def _warm_solve(c, qp: _QP, args: list):
     shortcut = ca.Function("idqp_shortcut", P + [W], [P[5], ca.vertcat(P[5], ca.DM.zeros(nw + na)) if nws else W])
     path = ca.Function.if_else("idqp_path", shortcut, active_set)
     X = [ca.MX.sym(n, *a.shape) for n, a in zip(("x", "t", "s", "x_sw"), args)]
-    Xw = ca.MX.sym("w", nws)
-    *Dm, ok_m = data(*X)
-    w_sol, w_next = path(ok_m, *Dm, Xw)
-    solve = ca.Function("k_idqp_warm", X + [Xw], [w_sol[:qp.nu], warm_or_cold(w_next) if nws else Xw],
-                        ["x", "t", "s", "x_sw", "w"], ["u", "w_next"])
+    ni = 0 if integ is None else 3
+    Xw = ca.MX.sym("w", nws + ni)
+    Wq, I = Xw[:nws], Xw[nws:]
+    *Dm, ok_m = data(*X, *([I] if ni else []))
+    w_sol, w_next = path(ok_m, *Dm, Wq)
+    w_next = warm_or_cold(w_next) if nws else Wq
+    if ni:  # one control period of the CoM error, clipped where ki I would pass ki_limit (no limit where ki = 0)
+        err = ca.Function("idqp_com_error", args, [qp.err])(*X)
+        cap = ca.DM([c.ki_limit / k if k > 0 else 0.0 for k in c.ki])
+        I_next = ca.fmin(ca.fmax(I + err / c.rate, -cap), cap)
+        w_next = ca.vertcat(w_next, warm_or_cold(I_next))
+    solve = ca.Function("k_idqp_warm", X + [Xw], [w_sol[:qp.nu], w_next], ["x", "t", "s", "x_sw", "w"], ["u", "w_next"])
     return X, solve, nws, na
 
 
