@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 from common import pd_lie, publish_rows  # noqa: E402
 
 EARLIER = {"kp": "[100, 100, 100]", "kd": "[20, 20, 20]", "posture_kp": "50", "posture_kd": "5",
-           "posture_profile": "false", "friction": None, "f_min": None}
+           "posture_profile": "false", "friction": None, "f_min": None, "ki": None, "ki_limit": None}
 """Stand's earlier law: these keys of its controller replaced (None: removed, the default)."""
 SOURCE = {"Stand": "Lie", "Lie": "Stand"}
 """The primitive each target is switched in from (its setpoint at t = 0)."""
