@@ -23,7 +23,8 @@ SPEC = Path(__file__).parents[2] / "specs" / "a1"
 
 
 def lie_and_stand(dst: Path, rate: str | None = None) -> Path:
-    """specs/a1 with Lie and Stand only (no walks, assertions or sequence); Stand at `rate` Hz."""
+    """specs/a1 with Lie and Stand only (no walks, assertions or sequence); Stand at `rate` Hz and without its
+    integral action (the hold is what this module tests; _with_integral puts it back)."""
     shutil.copytree(SPEC, dst, ignore=shutil.ignore_patterns("gaits", "gaits.yaml", "walk*.yaml"))
     proj = yaml.safe_load((dst / "project.yaml").read_text())
     proj["primitives"] = ["primitives/lie.yaml", "primitives/stand.yaml"]
@@ -32,6 +33,10 @@ def lie_and_stand(dst: Path, rate: str | None = None) -> Path:
     proj.pop("uncertainty", None)  # its robust assertions name the walks, Jump and Land
     proj.pop("crosscheck", None)  # replays the sequence, which is gone
     (dst / "project.yaml").write_text(yaml.safe_dump(proj, sort_keys=False))
+    stand = dst / "primitives" / "stand.yaml"
+    text, n = re.subn(r"\n  ki(?:_limit)?: [^\n]*", "", stand.read_text())
+    assert n == 2
+    stand.write_text(text)
     if rate is not None:
         stand = dst / "primitives" / "stand.yaml"
         text, n = re.subn(r"(\n  rate:) *[^ \n#]+", rf"\1 {rate}", stand.read_text())
