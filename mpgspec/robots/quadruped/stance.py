@@ -50,6 +50,14 @@ def trunk(sys) -> Trunk:
                  H=sub(dyn.nle_expr), sub=sub)
 
 
+def limited(e, bound: float):
+    """e scaled down to norm `bound` where it is longer (a saturation that keeps its direction);
+    e itself for an infinite bound."""
+    if not np.isfinite(bound):
+        return e
+    return e * ca.fmin(1, bound / ca.sqrt(ca.sumsqr(e) + 1e-12))
+
+
 def level_trunk_moment(tk: Trunk, inertia: np.ndarray, k_tilt: float, d_tilt: float, d_yaw: float,
                        tilt_limit: float = float("inf")) -> ca.SX:
     """Moment about the CoM that levels the trunk (roll, pitch PD in the heading frame) and damps yaw.
@@ -58,9 +66,8 @@ def level_trunk_moment(tk: Trunk, inertia: np.ndarray, k_tilt: float, d_tilt: fl
     E = ca.mtimes(tk.Ryaw, tk.R.T)
     e_R = 0.5 * ca.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1])
     I_G = ca.mtimes([tk.Ryaw, ca.DM(inertia), tk.Ryaw.T])  # the nominal inertia turned with the heading
-    tilt = ca.vertcat(k_tilt * e_R[0] - d_tilt * tk.omega[0], k_tilt * e_R[1] - d_tilt * tk.omega[1])
-    if np.isfinite(tilt_limit):
-        tilt = tilt * ca.fmin(1, tilt_limit / ca.sqrt(ca.sumsqr(tilt) + 1e-12))
+    tilt = limited(ca.vertcat(k_tilt * e_R[0] - d_tilt * tk.omega[0], k_tilt * e_R[1] - d_tilt * tk.omega[1]),
+                   tilt_limit)
     return ca.mtimes(I_G, ca.vertcat(tilt, -d_yaw * tk.omega[2]))
 
 

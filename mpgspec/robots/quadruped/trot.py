@@ -42,7 +42,7 @@ import numpy as np
 from ...compile.contacts import Schedule, wrap_clock
 from ...compile.laws.base import cubic_profile
 from ...errors import SpecError
-from .stance import level_trunk_moment, nominal_geometry, nominal_state, split_wrench, trunk
+from .stance import level_trunk_moment, limited, nominal_geometry, nominal_state, split_wrench, trunk
 
 
 @dataclass(frozen=True)
@@ -128,14 +128,6 @@ def quintic_profile(s, duration: float, p0: float, v0: float, pf: float, vf: flo
     return ca.if_else(after, pf, pos), ca.if_else(after, vf, vel), ca.if_else(after, 0, acc)
 
 
-def _limited(e, bound: float):
-    """e scaled down to norm `bound` where it is longer (a saturation that keeps its direction);
-    e itself for an infinite bound."""
-    if not np.isfinite(bound):
-        return e
-    return e * ca.fmin(1, bound / ca.sqrt(ca.sumsqr(e) + 1e-12))
-
-
 def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np.ndarray,
                 offsets: dict[str, np.ndarray]) -> ca.SX:
     """u(x, t) of the trot on a RigidBodyCompiledSystem; mode[f] is 1 while foot f is held.
@@ -151,8 +143,8 @@ def trot_torque(sys, g: TrotGains, t: ca.SX, mode: dict[str, ca.SX], inertia: np
     pos, vel, H, sub = tk.pos, tk.vel, tk.H, tk.sub
     v_cmd = ca.mtimes(Ryaw[:2, :2], ca.vertcat(g.speed, 0.0))  # g.speed may be a symbol (gait calibration)
     # trunk wrench about the CoM
-    force = tk.mass * ca.vertcat(g.kv * _limited(v_cmd - cdot[:2], g.accel_limit / g.kv),
-                                 tk.grav + g.kz * _limited(g.height - com[2], g.height_accel_limit / max(g.kz, 1e-12))
+    force = tk.mass * ca.vertcat(g.kv * limited(v_cmd - cdot[:2], g.accel_limit / g.kv),
+                                 tk.grav + g.kz * limited(g.height - com[2], g.height_accel_limit / max(g.kz, 1e-12))
                                  - g.dz * cdot[2])
     wrench = ca.vertcat(force, level_trunk_moment(tk, inertia, g.k_tilt, g.d_tilt, g.d_yaw, g.tilt_accel_limit))
     f_all = split_wrench(tk, flags, feet, wrench, g.moment_weight, g.regularization)
