@@ -85,7 +85,6 @@ def idqp_law(c, ctx: ControlContext) -> ca.Function:
     integ = ca.SX.sym("com_integral", 3) if c.ki is not None else None
     qp = _qp(c, ctx, integ)
     X, solve, nws, na = _warm_solve(c, qp, [sys.x, ctx.t, ctx.s, ctx.x_sw], integ)
-    nws += 0 if integ is None else 3
     where = ("controller", "rate") if c.rate is not None else ("controller", "type")
     ctx.sampled = SampledLaw(1.0 / c.rate if c.rate is not None else None, solve, nws, ctx.ec.locate(where),
                              f"{ctx.ec.owner}: controller.rate")
@@ -111,7 +110,7 @@ class _QP:
     ok: ca.SX
     nw: int
     nu: int
-    err: ca.SX | None = None  # the CoM error the integral action integrates (None without it)
+    err: ca.SX  # the CoM error y_d - com, which integral action integrates
 
 
 def _contact_rows(sys, contacts, q, v):
@@ -192,7 +191,7 @@ def _qp(c, ctx: ControlContext, integ=None) -> _QP:
     lbx[:nu], ubx[:nu] = sys.u_lo, sys.u_hi
     lbx[nu + 2::3] = c.f_min
     w_eq, ok = _no_inequality_active(Aq, Q, c.regularization, gqp, A_con, con, A_fc, lbx, ubx, nu)
-    return _QP(Hqp, gqp, A, lba, uba, lbx, ubx, w_eq, ok, nw, nu, err if integ is not None else None)
+    return _QP(Hqp, gqp, A, lba, uba, lbx, ubx, w_eq, ok, nw, nu, err)
 
 
 def _friction_pyramid(mu: float, nu: int, nc: int) -> ca.DM:
@@ -211,12 +210,14 @@ def _friction_pyramid(mu: float, nu: int, nc: int) -> ca.DM:
 
 def _warm_solve(c, qp: _QP, args: list, integ=None):
     """(X, solve, nws, na): solve(x, t, s, x_sw, w) -> (u, w_next) by qrqp warm-started from w (the
-    previous solution and its multipliers), or the shortcut w_eq when no inequality is active. With
-    integral action (`integ`, the QP's data depending on it) w ends with the integral, advanced by one
-    control period of the CoM error and clipped at ki_limit / ki; nws counts the warm start only."""
+    previous solution and its multipliers), or the shortcut w_eq when no inequality is active; nws entries
+    of w. With integral action (`integ`, the QP's data depending on it) w ends with the integral, advanced
+    by one control period of the CoM error (an output of the data) and clipped at ki_limit / ki."""
     nw = qp.nw
-    data = ca.Function("idqp_data", args + ([integ] if integ is not None else []),
-                       [ca.densify(qp.H), qp.g, ca.densify(qp.A), qp.lba, qp.uba, qp.w_eq, qp.ok])
+    ni = 0 if integ is None else 3
+    data = ca.Function("idqp_data", args + ([integ] if ni else []),
+                       [ca.densify(qp.H), qp.g, ca.densify(qp.A), qp.lba, qp.uba, qp.w_eq, qp.ok]
+                       + ([qp.err] if ni else []))
     solver = ca.conic("idqp", "qrqp", {"h": ca.Sparsity.dense(nw, nw), "a": ca.Sparsity.dense(qp.A.shape[0], nw)},
                       {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False,
                        "max_iter": c.max_iter})
@@ -232,19 +233,17 @@ def _warm_solve(c, qp: _QP, args: list, integ=None):
     shortcut = ca.Function("idqp_shortcut", P + [W], [P[5], ca.vertcat(P[5], ca.DM.zeros(nw + na)) if nws else W])
     path = ca.Function.if_else("idqp_path", shortcut, active_set)
     X = [ca.MX.sym(n, *a.shape) for n, a in zip(("x", "t", "s", "x_sw"), args)]
-    ni = 0 if integ is None else 3
     Xw = ca.MX.sym("w", nws + ni)
     Wq, I = Xw[:nws], Xw[nws:]
-    *Dm, ok_m = data(*X, *([I] if ni else []))
-    w_sol, w_next = path(ok_m, *Dm, Wq)
+    out = data(*X, I) if ni else data(*X)
+    w_sol, w_next = path(out[6], *out[:6], Wq)
     w_next = warm_or_cold(w_next) if nws else Wq
     if ni:  # one control period of the CoM error, clipped where ki I would pass ki_limit (no limit where ki = 0)
-        err = ca.Function("idqp_com_error", args, [qp.err])(*X)
         cap = ca.DM([c.ki_limit / k if k > 0 else 0.0 for k in c.ki])
-        I_next = ca.fmin(ca.fmax(I + err / c.rate, -cap), cap)
+        I_next = ca.fmin(ca.fmax(I + out[7] / c.rate, -cap), cap)
         w_next = ca.vertcat(w_next, warm_or_cold(I_next))
     solve = ca.Function("k_idqp_warm", X + [Xw], [w_sol[:qp.nu], w_next], ["x", "t", "s", "x_sw", "w"], ["u", "w_next"])
-    return X, solve, nws, na
+    return X, solve, nws + ni, na
 
 
 def _no_inequality_active(Aq, Q, sigma: float, gqp, A_con, con, A_fc, lbx, ubx, nu: int):
