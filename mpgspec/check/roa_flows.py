@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..certify.hybrid_orbit import HybridFlow
+from ..compile.numeric import by_column
 from ..compile.primitive import CompiledPrimitive
 from ..spec.models import PrimitiveClass
 from .assumptions import HYBRID_DT, AssumptionCheck
@@ -54,19 +55,12 @@ def boundary_starts(p: CompiledPrimitive, n: int, seed: int) -> np.ndarray:
 
 
 def _run_each(flow: HybridFlow, X: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """One chunk of every flow; when the batch's compiled call fails (a law that finds no input, say),
-    each flow alone, a failing one left not finite: that flow's evidence, not the end of the check."""
-    try:
-        return flow.run(X, t, 1)
-    except RuntimeError:
-        Y, h = np.full_like(X, np.nan), np.full(X.shape[1], np.nan)
-        for j in range(X.shape[1]):
-            try:
-                Yj, hj = flow.run(X[:, [j]], t[[j]], 1)
-            except RuntimeError:
-                continue
-            Y[:, j], h[j] = Yj[:, 0], hj[0]
-        return Y, h
+    """One chunk of every flow; a flow whose compiled step fails (a law that finds no input, say) is left
+    not finite: that flow's evidence, not the end of the check (compile/numeric.by_column)."""
+    outs, _failed = by_column(lambda x, tt: flow.run(x, tt[0], 1), [X, t[None, :]])
+    if outs is None:
+        return np.full_like(X, np.nan), np.full(X.shape[1], np.nan)
+    return outs[0], outs[1][0]
 
 
 def roa_invariant(p: CompiledPrimitive, tol: float = 1e-9, samples: int = SAMPLES, seed: int = 0,

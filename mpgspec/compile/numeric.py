@@ -121,6 +121,29 @@ _HASHES_KEPT = 256
 _HASHES_LOCK = threading.Lock()
 
 
+def by_column(fn, args: list[np.ndarray]) -> tuple[list[np.ndarray] | None, list[int]]:
+    """(outputs, failed columns) of fn(*args) over the columns of args (each output at least 2-D): when
+    the batch's call fails (RuntimeError: a compiled evaluation reporting an error, such as a control law
+    that finds no input), each column alone, a failing one NaN in every output (None when all fail), so
+    a failure is that column's evidence, not its batch's."""
+    try:
+        return [np.atleast_2d(o) for o in fn(*args)], []
+    except RuntimeError:
+        n = args[0].shape[1]
+        outs, failed = None, []
+        for c in range(n):
+            try:
+                res = [np.atleast_2d(o) for o in fn(*[a[:, [c]] for a in args])]
+            except RuntimeError:
+                failed.append(c)
+                continue
+            if outs is None:
+                outs = [np.full((o.shape[0], n), np.nan) for o in res]
+            for o, r in zip(outs, res):
+                o[:, c] = r[:, 0]
+        return outs, failed
+
+
 def content_hash(fn: ca.Function) -> str:
     """sha256 of fn's serialization, computed once per Function object: a primitive's digest, its loop
     library's name and its records' keys all hash the same loops (the A1's take about 30 ms each)."""

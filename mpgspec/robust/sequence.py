@@ -21,6 +21,7 @@ import casadi as ca
 import numpy as np
 
 from ..compile.contacts import grid_clock
+from ..compile.numeric import by_column
 from ..compile.primitive import CompiledPrimitive
 from ..execute.crosscheck.executor import ExecutorPlan
 from ..oracle.flow import rk4
@@ -147,25 +148,8 @@ class DisturbedSequences:
 
     def _apply(self, fn, cols: np.ndarray, args: list[np.ndarray]):
         """fn on the columns `cols` of args, and the columns whose call failed (a control law that
-        found no solution): each is re-run alone."""
-        try:
-            return [np.atleast_2d(o) for o in fn(*[a[:, cols] for a in args])], []
-        except RuntimeError:
-            outs, failed = None, []
-            for q, c in enumerate(cols):
-                try:
-                    res = fn(*[a[:, [c]] for a in args])
-                except RuntimeError:
-                    failed.append(q)
-                    continue
-                res = [np.atleast_2d(o) for o in res]
-                if outs is None:
-                    outs = [np.full((o.shape[0], len(cols)), np.nan) for o in res]
-                for o, r in zip(outs, res):
-                    o[:, q] = r[:, 0]
-            if outs is None:
-                return None, failed
-            return outs, failed
+        found no solution): each is re-run alone (compile/numeric.by_column)."""
+        return by_column(fn, [a[:, cols] for a in args])
 
     def run(self, graph, table, mode: str) -> dict:
         """Safe fraction, per-run outcome and the switches made per edge of one mode ('naive' or

@@ -74,3 +74,23 @@ def test_content_hash_is_the_serializations_and_computed_once_per_function():
     finally:
         ca.Function.serialize = real
     assert calls == []  # remembered for this object
+
+
+def test_by_column_runs_a_failed_batch_column_by_column():
+    """A batch whose call raises is run one column at a time: a failing column is NaN in every output and
+    named, the others get what they get alone; when every column fails there are no outputs."""
+    from mpgspec.compile.numeric import by_column
+
+    def fn(x, y):
+        if (x[0] < 0).any():
+            raise RuntimeError("Evaluation failed")
+        return x * 2, (x + y).sum(axis=0)
+
+    x, y = np.array([[1.0, -1.0, 3.0], [4.0, 5.0, 6.0]]), np.ones((2, 3))
+    outs, failed = by_column(fn, [x[:, [0, 2]], y[:, [0, 2]]])
+    assert failed == [] and outs[0].tolist() == [[2.0, 6.0], [8.0, 12.0]] and outs[1].tolist() == [[7.0, 11.0]]
+    outs, failed = by_column(fn, [x, y])
+    assert failed == [1]
+    assert np.isnan(outs[0][:, 1]).all() and np.isnan(outs[1][0, 1])
+    assert outs[0][:, [0, 2]].tolist() == [[2.0, 6.0], [8.0, 12.0]] and outs[1][0, [0, 2]].tolist() == [7.0, 11.0]
+    assert by_column(fn, [x[:, [1]], y[:, [1]]]) == (None, [0])
