@@ -133,28 +133,34 @@ class RobustRollout:
 
     @functools.cached_property
     def grad(self) -> ca.Function | None:
-        """(x0, t0, theta, D, w) -> d(w' vec(Y))/d vec(D): the push gradient of one weighted sample, in
-        reverse mode; compiled on first use (most targets' searches end before it is needed), None
-        where no gradient goes through the law."""
+        """(z, Dc, lz, lo) -> (d/dz, d/dDc) of lz' z_L + <lo, outs> over one chunk from z: the chunk's
+        adjoint, through which gradients runs the reverse sweep chunk by chunk back from the sample it
+        differentiates (so a gradient costs the steps up to that sample, not the horizon); in reverse
+        mode, compiled on first use (most targets' searches end before it is needed), None where no
+        gradient goes through the law."""
         if not self.searchable:
             return None
-        name = self._name
-        step, first = self._reverse_parts()
-        nx = self.prim.system.nx
-        x0, t0 = ca.MX.sym("x0", nx), ca.MX.sym("t0")
-        TH, D = ca.MX.sym("theta", self.nth), ca.MX.sym("D", self.nd, self.K)
-        n = np.arange(self.N)
-        S = np.zeros((self.K, self.N))
-        on = self.seg < self.K
-        S[self.seg[on], n[on]] = 1.0
-        z0 = ca.vertcat(x0, t0, ca.MX(0), x0, TH)
-        _, outs = step.mapaccum("robust_acc", self.N)(z0, ca.mtimes(D, ca.DM(S)))
-        Y = ca.horzcat(first(x0, t0, 0, TH, D[:, 0])[0], outs)  # (nh + 1) x (N + 1), from switch-in
-        w = ca.MX.sym("w", Y.numel())
-        fn = cse(ca.Function(name + "_grad", [x0, t0, TH, D, w], [ca.gradient(ca.dot(w, ca.vec(Y)), ca.vec(D))]))
+        step, _ = self._reverse_parts()
+        L = self.CHUNK
+        zc, Dc = ca.MX.sym("z", self.nz), ca.MX.sym("Dc", self.nd, L)
+        lz, lo = ca.MX.sym("lz", self.nz), ca.MX.sym("lo", self.nh + 1, L)
+        zL, outs = step.mapaccum("robust_acc", L)(zc, Dc)
+        obj = ca.dot(lz, zL[:, -1]) + ca.dot(lo, outs)
+        fn = cse(ca.Function(self._name + "_grad", [zc, Dc, lz, lo],
+                             [ca.vertcat(ca.gradient(obj, zc), ca.vec(ca.gradient(obj, Dc)))]))
         if self.settings.jit:
             fn = compile_many([fn], self.GRAD_FLAGS, libs=self.libs)[0]
         return fn
+
+    @functools.cached_property
+    def grad_first(self) -> ca.Function:
+        """(x0, t0, theta, d0, w) -> d(w' [h; RoA margin] at switch-in)/d d0: the first sample's own
+        dependence on the push (its ground forces), in CasADi's virtual machine (rarely called)."""
+        _, first = self._reverse_parts()
+        x0, t0 = ca.MX.sym("x0", self.prim.system.nx), ca.MX.sym("t0")
+        TH, d0, w = ca.MX.sym("theta", self.nth), ca.MX.sym("d0", self.nd), ca.MX.sym("w", self.nh + 1)
+        y0 = first(x0, t0, 0, TH, d0)[0]
+        return ca.Function(self._name + "_grad_first", [x0, t0, TH, d0, w], [ca.gradient(ca.dot(w, y0), d0)])
 
     def _reverse_parts(self) -> tuple[ca.Function, ca.Function]:
         """(step, first) with reverse derivatives, for the gradient: here the step's own."""
@@ -262,12 +268,50 @@ class RobustRollout:
         return Y, last, cut
 
     def gradients(self, X0, T0, TH, D, rows, ks) -> np.ndarray:
-        """d Y[row, k] / d D (n, nd, K) of n rollouts, one (row, k) sample each."""
-        n = len(X0)
-        W = np.zeros(((self.nh + 1) * (self.N + 1), n))
-        W[np.asarray(ks) * (self.nh + 1) + np.asarray(rows), np.arange(n)] = 1.0
-        G = self._call(self.grad, n, [X0.T, T0[None, :], self._th(TH, n), self._d(D, n), W])
-        return G.T.reshape(n, self.K, self.nd).transpose(0, 2, 1)
+        """d Y[row, k] / d D (n, nd, K) of n rollouts, one (row, k) sample each: the chunk starts up to
+        each sample's chunk by the forward chunks, then the reverse sweep through the chunks' adjoints
+        (grad) from that chunk back to switch-in."""
+        n, nh, L, nd = len(X0), self.nh, self.CHUNK, self.nd
+        rows, ks = np.asarray(rows, int), np.asarray(ks, int)
+        D = np.asarray(D, float).reshape(n, nd, self.K)
+        G = np.zeros((n, nd, self.K))
+        S0 = np.zeros((1, n))
+        f0 = self._call(self.first, n, [X0.T, T0[None, :], S0, self._th(TH, n), self._d(D, n)])
+        at0 = np.flatnonzero(ks == 0)  # the sample at switch-in: the first sample's own dependence on d
+        for q in at0:
+            w = np.zeros(nh + 1)
+            w[rows[q]] = 1.0
+            G[q, :, 0] = np.asarray(self.grad_first(X0[q], T0[q], self._th(TH[q:q + 1], 1), D[q, :, 0], w)).ravel()
+        last = np.where(ks > 0, (ks - 1) // L, -1)  # the chunk holding each sample
+        if last.max(initial=-1) < 0:
+            return G
+        Dx = np.concatenate([D, np.zeros((n, nd, 1))], axis=2)  # segment K: no disturbance
+        seg = [self.seg[np.minimum(np.arange(c0, c0 + L), self.N - 1)] for c0 in range(0, L * (last.max() + 1), L)]
+        Zs = [np.vstack([X0.T, T0[None, :], S0, X0.T, self._th(TH, n), f0[nh + 1:]])]
+        for c in range(last.max()):  # forward: the state at the start of each chunk that is needed
+            on = np.flatnonzero(last > c)
+            Z = np.full_like(Zs[0], np.nan)
+            Z[:, on] = self._call(self.chunk, len(on), [Zs[c][:, on], self._chunk_d(Dx, on, seg[c])])[: self.nz]
+            Zs.append(Z)
+        lz = np.zeros((self.nz, n))
+        for c in range(last.max(), -1, -1):  # reverse: from each sample's chunk back to switch-in
+            on = np.flatnonzero(last >= c)
+            lo = np.zeros((nh + 1, L, n))
+            here = on[last[on] == c]
+            lo[rows[here], (ks[here] - 1) % L, here] = 1.0
+            out = self._call(self.grad, len(on), [Zs[c][:, on], self._chunk_d(Dx, on, seg[c]), lz[:, on],
+                                                  lo[:, :, on].transpose(0, 2, 1).reshape(nh + 1, len(on) * L)])
+            lz[:, on] = out[: self.nz]
+            gD = out[self.nz:].reshape(nd, L, len(on), order="F")
+            for j in np.flatnonzero(seg[c] < self.K):  # each step's push is its segment's
+                G[on, :, seg[c][j]] += gD[:, j].T
+        return G
+
+    def _chunk_d(self, Dx: np.ndarray, on: np.ndarray, seg: np.ndarray) -> np.ndarray:
+        """The pushes (nd, columns x CHUNK) of rollouts `on` over one chunk whose steps have segments `seg`."""
+        if not self.nd:
+            return np.zeros((0, len(on) * self.CHUNK))
+        return Dx[on][:, :, seg].transpose(1, 0, 2).reshape(self.nd, len(on) * self.CHUNK)
 
     def _th(self, TH, n):
         return np.asarray(TH, float).reshape(n, -1).T if self.nth else np.zeros((0, n))

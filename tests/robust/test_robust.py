@@ -97,6 +97,31 @@ def test_rollout_agrees_with_oracle_and_gradient_with_finite_differences(built):
         assert g[0, j] == pytest.approx(fd / (2 * eps), rel=1e-4, abs=1e-8)
 
 
+
+def test_gradient_at_chunk_edges_matches_finite_differences(built):
+    """The reverse sweep runs chunk by chunk back from each sample: samples at switch-in, at the first
+    step, at a chunk's last and next step, and several at once in one call, each against central differences."""
+    cp, _ = built
+    prims = cp.prims
+    rr = RobustRollout(prims["Swing(1)"], plant(cp.spec, ["m"]), [0], 4, cp.settings, 3.0)
+    L = rr.CHUNK
+    ks = [0, 1, L, L + 1, 2 * L + 37]
+    n = len(ks)
+    x0 = np.tile(prims["Hang"].x_star(0.0), (n, 1)) + 0.01 * np.arange(n)[:, None]
+    T0, th = np.full(n, 0.3), np.full((n, 1), 0.95)
+    D = np.tile(np.array([[[0.2, -0.1, 0.3, 0.1]]]), (n, 1, 1))
+    rows = [0, 0, 1, 0, 1][:n] if rr.nh else [0] * n
+    g = rr.gradients(x0, T0, th, D, rows, ks)
+    eps = 1e-6
+    for q, (r, k) in enumerate(zip(rows, ks)):
+        for j in range(4):
+            Dp, Dm = D[q:q + 1].copy(), D[q:q + 1].copy()
+            Dp[0, 0, j] += eps
+            Dm[0, 0, j] -= eps
+            run = lambda D_: rr.run(x0[q:q + 1], T0[q:q + 1], th[q:q + 1], D_, tol=np.inf)[0][0, r, k]  # noqa: E731
+            assert g[q, 0, j] == pytest.approx((run(Dp) - run(Dm)) / (2 * eps), rel=1e-4, abs=1e-8), (k, j)
+    assert np.any(g[2:] != 0)
+
 def test_pendulum_robust_graph_and_worst_cases(built, rob):
     cp, vg = built
     d = rob.to_dict()
