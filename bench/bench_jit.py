@@ -6,7 +6,7 @@ side by side, for one target primitive.
 
 Everything runs in one process on specs/a1 (closed loops compiled, E not sized: the margin's
 ellipsoid does not change the code's size). For the target's robust rollout (first sample, chunk of
-100 steps, gradient wrt the push) and its oracle chunk (the project's chunk length and error
+100 steps, the chunk's adjoint the push gradient sweeps back through) and its oracle chunk (the project's chunk length and error
 estimate; its large loop always has cse, the row tries cse on the MX graph around it too), and the period of its hybrid flow (the Floquet verifiers'), built with and without cse
 (oracle/jit.CSE), each in a fresh private compile cache:
 C bytes (from the MPGSPEC_JIT_LOG compile log) and gcc CPU seconds (one library at a time, with and
@@ -109,8 +109,10 @@ def inputs(fn: ca.Function, prim, rr, rng, n: int) -> list[list[np.ndarray]]:
         elif fn.name().endswith("_chunk"):
             z = np.concatenate([x, [0.0, 0.0], x, th, np.zeros(rr.nz - 2 * x.size - 4)])
             args = [z, 20 * rng.uniform(-1, 1, (3, rr.CHUNK))]
-        elif fn.name().endswith("_grad"):
-            args = [x, 0.0, th, 20 * rng.uniform(-1, 1, (3, rr.K)), rng.uniform(0, 1, fn.size1_in(4))]
+        elif fn.name().endswith("_grad"):  # a chunk's adjoint: (z, pushes, weights of z_L, weights of the outputs)
+            z = np.concatenate([x, [0.0, 0.0], x, th, np.zeros(rr.nz - 2 * x.size - 4)])
+            args = [z, 20 * rng.uniform(-1, 1, (3, rr.CHUNK)), rng.uniform(0, 1, fn.size1_in(2)),
+                    rng.uniform(0, 1, (fn.size1_in(3), fn.size2_in(3)))]
         else:
             args = [np.concatenate([initial_state(prim, x, 0.0), np.zeros(fn.size1_in(0) - 2 * x.size - 2)])]
         out.append(args)
@@ -187,7 +189,7 @@ def main(argv=None) -> int:
         R = 1 if k == "robust gradient" else args.repeats
         t = rounds({"plain": lambda: f0.call(args_k[0]), "cse": lambda: f1.call(args_k[0])}, R)
         r0, r1 = recs[False][k], recs[True][k]
-        steps = {"robust chunk": rr.CHUNK, "oracle chunk": st.chunk}.get(k, 1)
+        steps = {"robust chunk": rr.CHUNK, "robust gradient": rr.CHUNK, "oracle chunk": st.chunk}.get(k, 1)
         per = "us per step" if steps > 1 else "ms per call"
         scale = 1e6 / steps if steps > 1 else 1e3
         rows.append((f"{k}: C bytes without / with cse (ratio)",

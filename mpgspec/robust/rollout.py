@@ -133,14 +133,14 @@ class RobustRollout:
 
     @functools.cached_property
     def grad(self) -> ca.Function | None:
-        """(z, Dc, lz, lo) -> (d/dz, d/dDc) of lz' z_L + <lo, outs> over one chunk from z: the chunk's
+        """(z, Dc, lz, lo) -> [d/dz; vec(d/dDc)] of lz' z_L + <lo, outs> over one chunk from z: the chunk's
         adjoint, through which gradients runs the reverse sweep chunk by chunk back from the sample it
         differentiates (so a gradient costs the steps up to that sample, not the horizon); in reverse
         mode, compiled on first use (most targets' searches end before it is needed), None where no
         gradient goes through the law."""
         if not self.searchable:
             return None
-        step, _ = self._reverse_parts()
+        step, _ = self._reverse
         L = self.CHUNK
         zc, Dc = ca.MX.sym("z", self.nz), ca.MX.sym("Dc", self.nd, L)
         lz, lo = ca.MX.sym("lz", self.nz), ca.MX.sym("lo", self.nh + 1, L)
@@ -155,12 +155,18 @@ class RobustRollout:
     @functools.cached_property
     def grad_first(self) -> ca.Function:
         """(x0, t0, theta, d0, w) -> d(w' [h; RoA margin] at switch-in)/d d0: the first sample's own
-        dependence on the push (its ground forces), in CasADi's virtual machine (rarely called)."""
-        _, first = self._reverse_parts()
+        dependence on the push (its ground forces), for a sample at switch-in; in CasADi's virtual
+        machine (one column at a time, the first sample only)."""
+        _, first = self._reverse
         x0, t0 = ca.MX.sym("x0", self.prim.system.nx), ca.MX.sym("t0")
         TH, d0, w = ca.MX.sym("theta", self.nth), ca.MX.sym("d0", self.nd), ca.MX.sym("w", self.nh + 1)
         y0 = first(x0, t0, 0, TH, d0)[0]
         return ca.Function(self._name + "_grad_first", [x0, t0, TH, d0, w], [ca.gradient(ca.dot(w, y0), d0)])
+
+    @functools.cached_property
+    def _reverse(self) -> tuple[ca.Function, ca.Function]:
+        """_reverse_parts, built once (grad and grad_first share them)."""
+        return self._reverse_parts()
 
     def _reverse_parts(self) -> tuple[ca.Function, ca.Function]:
         """(step, first) with reverse derivatives, for the gradient: here the step's own."""
@@ -273,6 +279,8 @@ class RobustRollout:
         (grad) from that chunk back to switch-in."""
         n, nh, L, nd = len(X0), self.nh, self.CHUNK, self.nd
         rows, ks = np.asarray(rows, int), np.asarray(ks, int)
+        if ks.size and (ks.min() < 0 or ks.max() > self.N):
+            raise ValueError(f"samples must lie in 0..{self.N}, not {ks.min()}..{ks.max()}")
         D = np.asarray(D, float).reshape(n, nd, self.K)
         G = np.zeros((n, nd, self.K))
         S0 = np.zeros((1, n))

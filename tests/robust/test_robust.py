@@ -121,6 +121,8 @@ def test_gradient_at_chunk_edges_matches_finite_differences(built):
             run = lambda D_: rr.run(x0[q:q + 1], T0[q:q + 1], th[q:q + 1], D_, tol=np.inf)[0][0, r, k]  # noqa: E731
             assert g[q, 0, j] == pytest.approx((run(Dp) - run(Dm)) / (2 * eps), rel=1e-4, abs=1e-8), (k, j)
     assert np.any(g[2:] != 0)
+    with pytest.raises(ValueError, match="samples must lie"):  # past the horizon: no sample there
+        rr.gradients(x0[:1], T0[:1], th[:1], D[:1], [0], [rr.N + 1])
 
 def test_pendulum_robust_graph_and_worst_cases(built, rob):
     cp, vg = built
