@@ -34,7 +34,7 @@ sys.path.insert(0, str(ROOT))
 import casadi as ca  # noqa: E402
 import numpy as np  # noqa: E402
 import common  # noqa: E402  (bench/common.py)
-from common import markdown_table, med_ratio, rounds, stamp, write_section  # noqa: E402
+from common import markdown_table, med_ratio, rounds  # noqa: E402
 
 from mpgspec import api  # noqa: E402
 from mpgspec.oracle.jit import compile_many, cse  # noqa: E402
@@ -121,12 +121,8 @@ def main(argv=None) -> int:
                  (f"**{name}: horizon / chunks**", f"**{med_ratio(h, c):.2f}x**"),
                  (f"{name}: samples' steps (of {f['N']})", f"{f['ks'][0]}-{f['ks'][-1]}, median {int(np.median(f['ks']))}"),
                  (f"{name}: gradients equal, bit for bit", str(f["same"]))]
-    table = markdown_table(rows)
-    head = stamp(mach, "bench_robust_grad.py", False, args.repeats, time.perf_counter() - T0) + " specs/a1, one process."
-    section = f"{HEADING}\n\n{head}\n\n{table}\n\nSee the docstring of bench/bench_robust_grad.py for the meaning of each row.\n"
-    print("\n" + section)
-    if not args.no_write:
-        write_section(ROOT / "bench" / "RESULTS.md", HEADING, section)
+    common.publish(HEADING, mach, "bench_robust_grad.py", args.repeats, time.perf_counter() - T0,
+                   markdown_table(rows), not args.no_write)
     return 0 if all(f["same"] for f in facts.values()) else 1
 
 
