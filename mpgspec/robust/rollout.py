@@ -231,11 +231,9 @@ class RobustRollout:
         limit = np.full(n, N) if limit is None else np.minimum(np.asarray(limit, int), N)
         Y = np.full((n, nh + 1, N + 1), np.nan)
         D = np.asarray(D, float).reshape(n, self.nd, self.K)
-        S0 = np.full((1, n), float(s0))
-        f0 = self._call(self.first, n, [X0.T, T0[None, :], S0, self._th(TH, n), self._d(D, n)])
+        f0, Z = self._start(X0, T0, TH, D, s0)
         Y[:, :, 0] = f0[: nh + 1].T
         last = np.zeros(n, int)
-        Z = np.vstack([X0.T, T0[None, :], S0, X0.T, self._th(TH, n), f0[nh + 1:]])
         D = np.concatenate([D, np.zeros((n, self.nd, 1))], axis=2)  # segment K: no disturbance
 
         def hits(y, upto):  # (decided, unsafe) within the samples up to index `upto` of y
@@ -261,9 +259,7 @@ class RobustRollout:
             if not active.size:
                 break
             na, take = len(active), min(L, N - c0)
-            seg = self.seg[np.minimum(np.arange(c0, c0 + L), N - 1)]
-            Dc = D[active][:, :, seg] if self.nd else np.zeros((na, 0, L))
-            out = self._call(self.chunk, na, [Z[:, active], Dc.transpose(1, 0, 2).reshape(self.nd, na * L)])
+            out = self._call(self.chunk, na, [Z[:, active], self._chunk_d(D, active, self._segments(c0))])
             Z[:, active] = out[: self.nz]
             Yc = out[self.nz:].reshape(nh + 1, L, na, order="F")[:, :take].transpose(2, 0, 1)
             Y[active, :, c0 + 1: c0 + 1 + take] = Yc
@@ -283,8 +279,7 @@ class RobustRollout:
             raise ValueError(f"samples must lie in 0..{self.N}, not {ks.min()}..{ks.max()}")
         D = np.asarray(D, float).reshape(n, nd, self.K)
         G = np.zeros((n, nd, self.K))
-        S0 = np.zeros((1, n))
-        f0 = self._call(self.first, n, [X0.T, T0[None, :], S0, self._th(TH, n), self._d(D, n)])
+        f0, Z0 = self._start(X0, T0, TH, D, 0.0)
         at0 = np.flatnonzero(ks == 0)  # the sample at switch-in: the first sample's own dependence on d
         for q in at0:
             w = np.zeros(nh + 1)
@@ -294,8 +289,8 @@ class RobustRollout:
         if last.max(initial=-1) < 0:
             return G
         Dx = np.concatenate([D, np.zeros((n, nd, 1))], axis=2)  # segment K: no disturbance
-        seg = [self.seg[np.minimum(np.arange(c0, c0 + L), self.N - 1)] for c0 in range(0, L * (last.max() + 1), L)]
-        Zs = [np.vstack([X0.T, T0[None, :], S0, X0.T, self._th(TH, n), f0[nh + 1:]])]
+        seg = [self._segments(c0) for c0 in range(0, L * (last.max() + 1), L)]
+        Zs = [Z0]
         for c in range(last.max()):  # forward: the state at the start of each chunk that is needed
             on = np.flatnonzero(last > c)
             Z = np.full_like(Zs[0], np.nan)
@@ -314,6 +309,18 @@ class RobustRollout:
             for j in np.flatnonzero(seg[c] < self.K):  # each step's push is its segment's
                 G[on, :, seg[c][j]] += gD[:, j].T
         return G
+
+    def _start(self, X0, T0, TH, D, s0: float) -> tuple[np.ndarray, np.ndarray]:
+        """(first's outputs, z at switch-in) of n rollouts: [h; RoA margin; hold] at switch-in and
+        z = [x; t; s; x_sw; theta; hold], s0 the time since switch-in."""
+        n = len(X0)
+        S0 = np.full((1, n), float(s0))
+        f0 = self._call(self.first, n, [X0.T, T0[None, :], S0, self._th(TH, n), self._d(D, n)])
+        return f0, np.vstack([X0.T, T0[None, :], S0, X0.T, self._th(TH, n), f0[self.nh + 1:]])
+
+    def _segments(self, c0: int) -> np.ndarray:
+        """The disturbance segment of each step of the chunk starting at step c0 (past the horizon: the last step's)."""
+        return self.seg[np.minimum(np.arange(c0, c0 + self.CHUNK), self.N - 1)]
 
     def _chunk_d(self, Dx: np.ndarray, on: np.ndarray, seg: np.ndarray) -> np.ndarray:
         """The pushes (nd, columns x CHUNK) of rollouts `on` over one chunk whose steps have segments `seg`."""

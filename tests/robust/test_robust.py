@@ -97,7 +97,6 @@ def test_rollout_agrees_with_oracle_and_gradient_with_finite_differences(built):
         assert g[0, j] == pytest.approx(fd / (2 * eps), rel=1e-4, abs=1e-8)
 
 
-
 def test_gradient_at_chunk_edges_matches_finite_differences(built):
     """The reverse sweep runs chunk by chunk back from each sample: samples at switch-in, at the first
     step, at a chunk's last and next step, and several at once in one call, each against central differences."""
@@ -123,6 +122,7 @@ def test_gradient_at_chunk_edges_matches_finite_differences(built):
     assert np.any(g[2:] != 0)
     with pytest.raises(ValueError, match="samples must lie"):  # past the horizon: no sample there
         rr.gradients(x0[:1], T0[:1], th[:1], D[:1], [0], [rr.N + 1])
+
 
 def test_pendulum_robust_graph_and_worst_cases(built, rob):
     cp, vg = built
