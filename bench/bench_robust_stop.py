@@ -35,15 +35,10 @@ import numpy as np  # noqa: E402
 import common  # noqa: E402  (bench/common.py)
 from common import markdown_table, med_ratio, rounds, stamp, write_section  # noqa: E402
 
-from mpgspec import api  # noqa: E402
-from mpgspec.pipeline.stages import build  # noqa: E402
 from mpgspec.robust.cells import run_target  # noqa: E402
-from mpgspec.robust.graph import target_jobs  # noqa: E402
 from mpgspec.robust.rollout import RobustRollout  # noqa: E402
 from mpgspec.robust.scenarios import Scenarios  # noqa: E402
-from mpgspec.spec.loader import load_project  # noqa: E402
 
-SPEC = ROOT / "specs" / "a1" / "project.yaml"
 HEADING = "## Robust cells stop once decided"
 STOP = RobustRollout.run_groups
 WAVES = Scenarios.waves
@@ -85,10 +80,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     T0 = time.perf_counter()
     mach = common.machine(casadi=ca.__version__, numpy=np.__version__, revision=common.revision(ROOT))
-    spec = load_project(SPEC)
-    cp, vg = build(spec, api.settings_for(spec), executor=api.executor(1, None, cache=True))
-    _, jobs = target_jobs(spec, cp.prims, cp.settings, vg.graph)
-    jobs = {j.target: j for j in jobs if j.target in args.targets}
+    cp, jobs = common.a1_target_jobs(args.targets)
     fns, facts = {}, {}
     modes = ("waves", "stop", "full")
     for name, job in jobs.items():

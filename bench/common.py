@@ -112,6 +112,20 @@ def run_build(build, spec, settings, oracle_cls):
     return prims, g, timing, oracle_of
 
 
+def a1_target_jobs(targets) -> tuple:
+    """(specs/a1's compiled project, its robust target jobs by target name among `targets`): the nominal graph
+    built first, its oracle calls from the result cache when they are there."""
+    from mpgspec import api
+    from mpgspec.pipeline.stages import build
+    from mpgspec.robust.graph import target_jobs
+    from mpgspec.spec.loader import load_project
+
+    spec = load_project(Path(__file__).resolve().parent.parent / "specs" / "a1" / "project.yaml")
+    cp, vg = build(spec, api.settings_for(spec), executor=api.executor(1, None, cache=True))
+    _, jobs = target_jobs(spec, cp.prims, cp.settings, vg.graph)
+    return cp, {j.target: j for j in jobs if j.target in targets}
+
+
 def write_section(results: Path, heading: str, section: str) -> None:
     """Replace the `heading` section of the results file with `section` (append it if missing)."""
     text = results.read_text() if results.exists() else "# Oracle benchmark results\n"
