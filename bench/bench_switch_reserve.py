@@ -1,5 +1,5 @@
 """The reserves at every switch the A1's Table II graph run can make: for each edge the run takes, the
-cells the executor may switch through (the sequence's switching rule and `reserve`, as
+cells the executor may switch through (the sequence's switching rule, `reserve` and `keep`, as
 mpgspec.execute.crosscheck.executor.ExecutorPlan applies them; a transient's hand-over at every
 verified clock), their largest |u| against the inputs' bound and their least friction-cone value
 (the least sampled value of the oracle's rollout from switch-in until it entered E_B). Read from a
@@ -45,7 +45,8 @@ def reserves(report: dict) -> list[dict]:
     for a, b in taken:
         tr, t = g.edge(a, b), trs[(a, b)]
         transient = cls[a] == "transient"
-        clocks = executor_clocks(tr, transient, table.get("switch", "first"), table.get("reserve"), bound)
+        clocks = executor_clocks(tr, transient, table.get("switch", "first"), table.get("reserve"), bound,
+                                 table.get("keep"))
         fams = [f.split("[")[0] for f in t["h_families"]]
         cells = t["cells"]
         rows = []
@@ -94,7 +95,7 @@ def main(argv=None) -> int:
     when = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     lt = report["lookup_table"]
     head = (f"{when}, {revision(ROOT)}; `python bench/bench_switch_reserve.py` on {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path} "
-            f"(switch: {lt.get('switch')}, reserve: {lt.get('reserve')}). Simulated (the nominal oracle's rollouts), "
+            f"(switch: {lt.get('switch')}, reserve: {lt.get('reserve')}, keep: {lt.get('keep')}). Simulated (the nominal oracle's rollouts), "
             "per edge of the graph run over the cells its executor may switch through.")
     if not a.no_write:
         write_section(ROOT / "bench" / "RESULTS.md", HEADING, f"{HEADING}\n\n{head}\n\n{text}\n")

@@ -252,8 +252,8 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
       past the change the first set vouches for the rest. The failures there are rare (a swing foot a little
       low or late: about 1 in 100 of them at 0.01 on the A1's walks), so they need many starts; the short
       run keeps them cheap, and they go first: a radius they fail needs no full periods.
-    Then up to `confirm_rounds` fresh sets of both at the radius found, 10 % less after each that fails (as
-    the sampling verifier confirms its radius); none passing leaves no radius.
+    Then up to `confirm_rounds` fresh sets of both at the radius found, `confirm_shrink` (0.9) times it after
+    each that fails (as the sampling verifier confirms its radius); none passing leaves no radius.
     A start outside C at its radius (some h < -tol there, such as a swing foot below the ground just after
     lift-off) is left out at that radius: the oracle takes a rollout into E only at a sample where it judged
     every h >= -tol (tol: its h_tolerance), so E needs to hold only where C does."""
@@ -316,10 +316,11 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
     starts = draw()
     r, capped, calls = bisect(lambda r: passes(r, starts, log), 0.0, float(o.get("r0", 0.05)),
                               float(o.get("r_max", 2.0)), float(o.get("rtol", 0.05)), grow=2.0)
-    for _ in range(int(o.get("confirm_rounds", 5))):  # fresh starts at the radius found, 10 % less until they pass
+    shrink = float(o.get("confirm_shrink", 0.9))
+    for _ in range(int(o.get("confirm_rounds", 5))):  # fresh starts at the radius found, smaller until they pass
         if r <= 0 or passes(r, draw(), confirm):
             break
-        r *= 0.9
+        r *= shrink
     else:
         r = 0.0 if confirm else r
     held = held_feet(prim.contacts) is not None
@@ -332,4 +333,4 @@ def _tube(flow: HybridFlow, Xs: np.ndarray, W: np.ndarray, periods: int, o: dict
                "time_s": time.perf_counter() - t_start,
                "starts": "the same starts scaled to each radius" + (", projected onto the contact manifold of the "
                                                                      "feet held at their phase" if held else "")
-               + ", inside C; then fresh ones at the radius found, 10 % less until they pass (confirm_rounds)"}
+               + f", inside C; then fresh ones at the radius found, {shrink:g} times it until they pass (confirm_rounds)"}

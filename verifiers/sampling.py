@@ -85,7 +85,7 @@ def search(sim: Simulator, phases, rng: np.random.Generator, o: dict) -> tuple[f
         confirm.append(info)
         if passed:
             break
-        r *= 0.9
+        r *= float(o.get("confirm_shrink", 0.9))
     else:
         r = 0.0 if confirm else r
     sims = sim.n * (len(log) + len(confirm))

@@ -84,6 +84,9 @@ class SearchOptions(BaseModel):
     r_max: Positive | None = Field(default=None, description="largest radius tried")
     rtol: Annotated[Number, Field(gt=0, lt=1)] | None = Field(default=None, description="relative width where the bisection stops")
     confirm_rounds: StrictInt = Field(default=5, ge=0, le=100, description="rounds of fresh samples at the final radius")
+    confirm_shrink: Annotated[Number, Field(ge=0.5, lt=1)] = Field(
+        default=0.9, description="factor the radius shrinks by after a round of fresh samples fails (finer: a closer "
+        "estimate of the radius fresh samples pass, more rounds)")
     samples: StrictInt = Field(default=256, ge=1, le=MAX_SAMPLES, description="rollouts per level")
     seed: StrictInt = Field(default=0, ge=0)
     conv: Positive | None = Field(default=None, description="contraction that counts as converged")

@@ -18,7 +18,7 @@ GROUP = "mpgspec.roa"
 _BUILTIN = {"lyapunov": "verifiers.lyapunov:verifier", "sos": "verifiers.sos:verifier",
             "floquet": "verifiers.floquet:verifier", "sampling": "verifiers.sampling:verifier"}
 
-_SEARCH = ("r0", "r_max", "rtol", "confirm_rounds", "samples", "seed", "conv", "dt")
+_SEARCH = ("r0", "r_max", "rtol", "confirm_rounds", "confirm_shrink", "samples", "seed", "conv", "dt")
 BUILTIN_OPTIONS: dict[str, frozenset[str]] = {
     **{name: frozenset(model.model_fields) for name, model in OPTION_MODELS.items()},
     "sampling": frozenset(_SEARCH + ("horizon",)),

@@ -120,6 +120,23 @@ class Transition:
         return self.best_t_B[i] if abs(self.t_A[i] - t_A) < 1e-9 else None
 
     @property
+    def row_keeps(self) -> list[dict[str, float] | None]:
+        """Per t_A: the least sampled value of each safety function family (friction_cone for
+        friction_cone[FR_foot]) in the cell it switches through, to KEEP_DIGITS as report.json keeps it."""
+        out = []
+        for i, t_b in enumerate(self.best_t_B):
+            if t_b is None:
+                out.append(None)
+                continue
+            least: dict[str, float] = {}
+            for name, v in self.evidence[i][int(np.argmin(np.abs(self.t_B - t_b)))].min_margins.items():
+                if v is not None and np.isfinite(v):
+                    fam = family(name)
+                    least[fam] = min(least.get(fam, np.inf), float(f"{float(v):.{KEEP_DIGITS}g}"))
+            out.append(least)
+        return out
+
+    @property
     def row_peaks(self) -> list[list[float] | None]:
         """Per t_A: the largest |u| of each input in the cell it switches through (its best t_B)."""
         return [None if t_b is None else list(self.evidence[i][int(np.argmin(np.abs(self.t_B - t_b)))].peak_input)
@@ -131,26 +148,41 @@ MARGIN_SHARE = 0.8
 PEAK_DIGITS = 4
 """Significant digits of a cell's peak input as report.json keeps them: the reserve compares these, so that
 a run from the report switches where the verify's run did."""
+KEEP_DIGITS = 4
+"""Significant digits of a cell's least safety function values as report.json keeps them (the `keep` rule)."""
 
 
-def switch_clocks(tr, rule: str = "first", reserve: float | None = None, bound=None) -> list[float | None]:
+def family(name: str) -> str:
+    """A safety function's family: its name before an index (friction_cone[FR_foot] -> friction_cone)."""
+    return name.split("[", 1)[0]
+
+
+def switch_clocks(tr, rule: str = "first", reserve: float | None = None, bound=None,
+                  keep: dict[str, float] | None = None) -> list[float | None]:
     """Per t_A of a transition (Transition or a report's): the t_B an executor switches in at, None
     where it does not switch. 'first': at every verified t_A, so the first one the run meets is taken;
     'margin': only at the verified t_A whose row margin is at least MARGIN_SHARE of the edge's best
     (an executor in a periodic primitive then waits for the well-kept switches of its cycle; where the
     margins were not measured, as 'first'). With `reserve` and the inputs' bounds (largest |u| each),
     a t_A whose cell asks more than reserve x bound of some input, or whose peaks are unknown, is not
-    taken either. A row checked from the boundary of E_A (row_from_roa) with a sample not safe is never
+    taken either. With `keep` ({family: least value}), a t_A whose cell's least sampled value of a named
+    safety function family (one the target has) is below the value given, or whose values are unknown,
+    is not taken. A row checked from the boundary of E_A (row_from_roa) with a sample not safe is never
     taken: the executor leaves A from anywhere in E_A."""
     out = _by_rule(tr, rule)
+    if keep:
+        least = list(getattr(tr, "row_keeps", None) or [])
+        out = [b if i < len(least) and least[i] is not None and
+               all(least[i].get(f, np.inf) >= float(v) for f, v in keep.items()) else None
+               for i, b in enumerate(out)]
     if reserve is None or bound is None:
         return out
     lim = reserve * np.asarray(bound, float)
     peaks = list(getattr(tr, "row_peaks", None) or [])
-    keep = [i < len(peaks) and peaks[i] is not None and len(peaks[i]) == len(lim) and
-            all(p is not None and float(f"{p:.{PEAK_DIGITS}g}") <= m for p, m in zip(peaks[i], lim))
-            for i in range(len(out))]
-    return [b if k else None for b, k in zip(out, keep)]
+    within = [i < len(peaks) and peaks[i] is not None and len(peaks[i]) == len(lim) and
+              all(p is not None and float(f"{p:.{PEAK_DIGITS}g}") <= m for p, m in zip(peaks[i], lim))
+              for i in range(len(out))]
+    return [b if k else None for b, k in zip(out, within)]
 
 
 def input_bounds(system) -> np.ndarray:
@@ -158,11 +190,12 @@ def input_bounds(system) -> np.ndarray:
     return np.maximum(np.abs(system.u_lo), np.abs(system.u_hi))
 
 
-def executor_clocks(tr, transient: bool, rule: str, reserve: float | None = None, bound=None) -> list[float | None]:
+def executor_clocks(tr, transient: bool, rule: str, reserve: float | None = None, bound=None,
+                    keep: dict[str, float] | None = None) -> list[float | None]:
     """switch_clocks as the graph executor takes them: a transient hands over to its next at the end of its
-    domain, at every verified clock (no rule or reserve chooses a time there); any other source by the
-    sequence's rule and reserve."""
-    return switch_clocks(tr, "first") if transient else switch_clocks(tr, rule, reserve, bound)
+    domain, at every verified clock (no rule, reserve or keep chooses a time there); any other source by the
+    sequence's rule, reserve and keep."""
+    return switch_clocks(tr, "first") if transient else switch_clocks(tr, rule, reserve, bound, keep)
 
 
 def switch_shares(tr) -> list[float]:

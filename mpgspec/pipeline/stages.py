@@ -4,6 +4,7 @@ assertions, cross-check, robust graph, Definition-1 assumptions and the verdict)
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import time
 from dataclasses import dataclass
 
@@ -21,7 +22,7 @@ from ..execute.sequence import SequenceRun, simulate_sequence
 from ..graph.build import build_graph
 from ..graph.certified import certify_windows
 from ..graph.traces import traces_stage
-from ..graph.transition import MotionPrimitiveGraph
+from ..graph.transition import MotionPrimitiveGraph, family
 from ..oracle.executors import Executor, InProcess
 from ..oracle.joint import Map, concurrently, run, together
 from ..oracle.looplib import build_all as build_loop_libraries
@@ -40,7 +41,21 @@ from ..spec.project import asserted_edges
 def compile_project(spec: ProjectSpec) -> dict[str, CompiledPrimitive]:
     """System and every primitive of a project as CasADi Functions, keyed by node name."""
     sys = compile_system(spec)
-    return {inst.name: compile_primitive(inst, sys) for inst in spec.primitives}
+    prims = {inst.name: compile_primitive(inst, sys) for inst in spec.primitives}
+    _check_keep(spec, prims)
+    return prims
+
+
+def _check_keep(spec: ProjectSpec, prims: dict[str, CompiledPrimitive]) -> None:
+    """A located SpecError for a family in sequence.keep that no primitive's safe set has."""
+    seq = spec.project.sequence
+    known = sorted({family(h) for p in prims.values() for h in p.h_names})
+    for k in (seq.keep or {}) if seq is not None else {}:
+        if k not in known:
+            near = difflib.get_close_matches(k, known, n=1)
+            raise SpecError("unknown safety function family", location=spec.locate(("sequence", "keep", k)),
+                            key=f"sequence.keep.{k[:60]}", expected=("one of " + ", ".join(known))[:300],
+                            found=repr(k[:60]), hint=f"did you mean {near[0]!r}?" if near else "", code="MPG304")
 
 
 @dataclass
@@ -136,7 +151,7 @@ def graph_stage(cp: CompiledProject, progress: Progress | None = None,
             progress(spec.name, f"switches from E_A's boundary ({many} samples a row)", 0, 0)
         seq = spec.project.sequence
         from_roa_calls = check_from_roa(g, prims, settings, samples, executor, cb, seq.switch if seq else "first",
-                                        seq.reserve if seq else None)
+                                        seq.reserve if seq else None, seq.keep if seq else None)
     t1 = time.perf_counter()
     names = list(prims)
     pairs = [(a, b) for a in names for b in names if a != b]
@@ -172,6 +187,8 @@ def check_stage(cp: CompiledProject, vg: VerifiedGraph, progress: Progress | Non
     table = {"weight": weight, "switch": switch, "next": lookup_table(g, weight)}
     if spec.project.sequence is not None and spec.project.sequence.reserve is not None:
         table["reserve"] = float(spec.project.sequence.reserve)
+    if spec.project.sequence is not None and spec.project.sequence.keep:
+        table["keep"] = {k: float(v) for k, v in spec.project.sequence.keep.items()}
     runs = {}
     if spec.project.sequence is not None:
         if progress:

@@ -10,6 +10,7 @@ Kept light (json and networkx) so that `mpgspec plan` answers from a report in w
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -79,6 +80,7 @@ class ReportTransition:
     row_margins: list = field(default_factory=list)
     row_peaks: list = field(default_factory=list)
     row_from_roa: list = field(default_factory=list)
+    row_keeps: list = field(default_factory=list)
 
     @cached_property
     def t_A(self):
@@ -95,24 +97,43 @@ class ReportTransition:
         return self.best_t_B[i] if abs(self.t_A[i] - t_A) < 1e-9 else None
 
 
-def _row_peaks(t: dict) -> list:
-    """Per t_A of a report's transition: the peak |u| of each input in the cell of its best t_B (None
-    where it has none or the cells do not say)."""
+def _per_row(t: dict, key: str, read) -> list:
+    """Per t_A of a report's transition: read(grids, i, j) of its cells' `key` grids at the cell of its best
+    t_B (column j), None where it has none or the cells do not say; [] without such grids."""
     c, best, t_B = t.get("cells"), t.get("best_t_B") or [], t.get("t_B") or []
-    grids = c.get("peak_input") if isinstance(c, dict) else None
+    grids = c.get(key) if isinstance(c, dict) else None
     if not isinstance(grids, list) or not t_B:
         return []
     out = []
     for i, t_b in enumerate(best):
-        if t_b is None:
-            out.append(None)
-            continue
-        j = min(range(len(t_B)), key=lambda k: abs(t_B[k] - t_b))
         try:
-            out.append([g[i][j] for g in grids])
-        except (IndexError, TypeError):
+            out.append(None if t_b is None else read(grids, i, min(range(len(t_B)), key=lambda k: abs(t_B[k] - t_b))))
+        except (IndexError, KeyError, TypeError, ValueError):
             out.append(None)
     return out
+
+
+def _row_peaks(t: dict) -> list:
+    """Per t_A of a report's transition: the peak |u| of each input in the cell of its best t_B."""
+    return _per_row(t, "peak_input", lambda grids, i, j: [g[i][j] for g in grids])
+
+
+def _row_keeps(t: dict, target_h: list) -> list:
+    """Per t_A of a report's transition: the least value of each safety function family in the cell of
+    its best t_B ({family: value}); the grids are by h_families, else by the target's safety functions."""
+    names = t.get("h_families") or target_h
+
+    def read(grids, i, j):
+        if not isinstance(names, list) or len(grids) != len(names):
+            raise ValueError("the cells' families do not match")
+        least: dict = {}
+        for name, g in zip(names, grids):
+            if g[i][j] is not None:
+                fam = str(name).split("[", 1)[0]  # the family (graph.transition.family)
+                least[fam] = min(least.get(fam, math.inf), float(g[i][j]))
+        return least
+
+    return _per_row(t, "min_margins", read)
 
 
 class ReportGraph:
@@ -128,6 +149,7 @@ class ReportGraph:
             self.G.add_node(p["name"], **{"class": p["class"], "period": p.get("period"), "domain": p.get("domain"),
                                           "next": p.get("next")})
         trs = {(t["from"], t["to"]): t for t in report.get("transitions", [])}
+        h_of = {p["name"]: list(p.get("safety_functions") or []) for p in report.get("primitives", [])}
         self.transitions: dict[tuple[str, str], ReportTransition] = {}
         for e in report.get("edges", []):
             t = trs.get((e["from"], e["to"]), {})
@@ -136,7 +158,8 @@ class ReportGraph:
             self.transitions[(e["from"], e["to"])] = ReportTransition(
                 e["from"], e["to"], e["class"], list(t.get("t_A", [])), list(t.get("best_t_B", [])),
                 [tuple(w) for w in t.get("windows", [])], {k: e[k] for k in WEIGHTS if e.get(k) is not None},
-                list(t.get("row_margins") or []), _row_peaks(t), list((t.get("from_roa") or {}).get("rows") or []))
+                list(t.get("row_margins") or []), _row_peaks(t), list((t.get("from_roa") or {}).get("rows") or []),
+                _row_keeps(t, h_of.get(e["to"], [])))
 
     @property
     def nodes(self) -> list[str]:

@@ -298,6 +298,8 @@ class LookupTable(_Strict):
                                               "verified t_A, or the well-kept ones (sequence.switch)")
     reserve: Num = Field(None, description="sequence.reserve: switches are taken only through cells whose peak |u| "
                                            "is at most this share of each input's bound")
+    keep: dict[str, float] | None = Field(None, description="sequence.keep: switches are taken only through cells "
+                                          "whose least value of each named safety function family is at least this")
     next: dict[str, dict[str, str | None]] = Field(description="next[current][goal] = primitive to switch to")
 
 

@@ -46,13 +46,14 @@ def samples_of(samples: int | dict[str, int], source: str) -> int:
     return int(samples.get(source, 0)) if isinstance(samples, dict) else int(samples)
 
 
-def _rows(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], rule: str, reserve: float | None):
+def _rows(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], rule: str, reserve: float | None,
+          keep: dict[str, float] | None = None):
     """(a, b, i, t_A, t_B, taken) of every verified row from a non-transient source; taken: whether the
-    sequence's switching rule and reserve take it (switch_clocks on the grid before this check)."""
+    sequence's switching rule, reserve and keep take it (switch_clocks on the grid before this check)."""
     for (a, b), tr in g.transitions.items():
         if g.edge(a, b) is None or prims[a].cls is PrimitiveClass.TRANSIENT:
             continue
-        taken = switch_clocks(tr, rule, reserve, input_bounds(prims[b].system))
+        taken = switch_clocks(tr, rule, reserve, input_bounds(prims[b].system), keep)
         for i, t_b in enumerate(tr.best_t_B):
             if t_b is not None:
                 yield a, b, i, float(tr.t_A[i]), float(t_b), taken[i] is not None
@@ -64,7 +65,7 @@ FRACTIONS = (1.0, 0.5, 0.25)
 
 def check_from_roa(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive], settings: OracleSettings,
                    samples: int | dict[str, int], executor: Executor | None = None, progress=None, rule: str = "first",
-                   reserve: float | None = None) -> int:
+                   reserve: float | None = None, keep: dict[str, float] | None = None) -> int:
     """Fill each edge's row_from_roa (per t_A: [share of r_A, safe samples, samples drawn on E_A's
     boundary], None where the row is not checked) and from_roa_worst (the worst sample on E_A's
     boundary that was not safe); returns the oracle calls made. `samples`: per row, or by source primitive.
@@ -72,14 +73,14 @@ def check_from_roa(g: MotionPrimitiveGraph, prims: dict[str, CompiledPrimitive],
     A row is checked at r_A; when a sample there is not safe, at each smaller share of FRACTIONS in
     turn. Its share is the first at which every sample is safe (0 when none is: the row is refused),
     and the executor switches through the row only within that share of r_A from x_A*(t_A). A verified
-    row the sequence's `rule` and `reserve` never take (graph.transition.switch_clocks) is not checked and
+    row the sequence's `rule`, `reserve` and `keep` never take (graph.transition.switch_clocks) is not checked and
     is refused: [0, 0, 0]."""
     executor = executor or InProcess()
     for tr in g.transitions.values():
         tr.row_from_roa = [None] * len(tr.t_A) if g.edge(tr.source, tr.target) is not None else []
         tr.from_roa_worst = None
     todo = []
-    for a, b, i, t_a, t_b, taken in _rows(g, prims, rule, reserve):
+    for a, b, i, t_a, t_b, taken in _rows(g, prims, rule, reserve, keep):
         if taken:
             todo.append((a, b, i, t_a, t_b))
         else:

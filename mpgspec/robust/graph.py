@@ -242,14 +242,14 @@ def target_jobs(spec, prims: dict, settings, g: MotionPrimitiveGraph) -> tuple[S
 def _by_target(spec, prims: dict, g: MotionPrimitiveGraph, among: set) -> dict[str, list]:
     """Target -> [(source, transition, t_A rows)] of the nominal edges among `among`: the rows are the
     cells to check, among those the graph executor switches through under the sequence's rule and
-    reserve (executor_clocks) where it takes any."""
+    reserve and keep (executor_clocks) where it takes any."""
     seq = spec.project.sequence
-    rule, reserve = (seq.switch, seq.reserve) if seq is not None else ("first", None)
+    rule, reserve, keep = (seq.switch, seq.reserve, seq.keep) if seq is not None else ("first", None, None)
     by_target: dict[str, list] = {}
     for (a, b), tr in g.transitions.items():
         if tr.cls is not TransitionClass.NONE and a in among and b in among:
             taken = executor_clocks(tr, prims[a].cls is PrimitiveClass.TRANSIENT, rule, reserve,
-                                    input_bounds(prims[b].system))
+                                    input_bounds(prims[b].system), keep)
             by_target.setdefault(b, []).append((a, tr, cell_rows(tr, spec.project.uncertainty.cells, taken)))
     return by_target
 

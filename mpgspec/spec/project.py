@@ -1,6 +1,7 @@
 """Spec model of a project: system, primitives, oracle settings, assumptions, assertions, sequence."""
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal, Union
 
 from pydantic import Discriminator, Field, Tag, field_validator, model_validator
@@ -154,6 +155,20 @@ class Sequence(Strict):
         default=None, gt=0, le=1, description="with it, the graph run also leaves a primitive only through cells "
         "whose peak |u| is at most this share of each input's bound (a torque reserve at every switch it chooses; "
         "a transient hands over at the end of its domain whatever its cell asks)")
+    keep: dict[Text, Number] | None = Field(
+        default=None, description="with it, the graph run also leaves a primitive only through cells whose least "
+        "sampled value of each named safety function family (friction_cone for friction_cone[FR_foot], ...), where "
+        "the target has it, is at least the value given in h's units ({friction_cone: 5}: 5 N of friction at every "
+        "switch it chooses; a transient hands over at the end of its domain whatever its cell keeps)")
+
+    @field_validator("keep")
+    @classmethod
+    def _families(cls, v):
+        for k, x in (v or {}).items():
+            if not k or "[" in k or not math.isfinite(float(x)) or float(x) <= 0:
+                raise ValueError(f"keep: {k!r}: {x!r}: expected a safety function family (no index) and a positive "
+                                 "finite least value")
+        return v
 
     @field_validator("commands")
     @classmethod

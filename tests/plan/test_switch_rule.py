@@ -142,3 +142,51 @@ def test_the_executor_plan_keeps_a_reserve_alike_from_the_report_and_in_memory(p
                 dropped += c0 is not None
     assert dropped > 0 and any(c is not None for a, b in kept.edges if prims[a].cls.value != "transient"
                                for c in kept.edges[(a, b)][1])
+
+
+@dataclass
+class _Kept:
+    best_t_B: list
+    row_keeps: list
+    row_margins: list = field(default_factory=list)
+
+
+def test_keep_drops_the_rows_whose_cell_keeps_too_little():
+    e = _Kept([0.0, None, 0.1, 0.2, 0.3], [{"friction_cone": 6.0, "q_max": 0.1}, None, {"friction_cone": 4.999999},
+                                          {"q_max": 0.0}, None])
+    assert switch_clocks(e, "first") == e.best_t_B
+    # a cell below the value is dropped; a target without the family keeps its row; unknown values drop it
+    assert switch_clocks(e, "first", keep={"friction_cone": 5.0}) == [0.0, None, None, 0.2, None]
+    assert switch_clocks(e, "first", keep={"friction_cone": 5.0, "q_max": 0.05}) == [0.0, None, None, None, None]
+    assert switch_clocks(e, "first", keep={"friction_cone": 4.0}) == [0.0, None, 0.1, 0.2, None]
+    # with a reserve as well, a row must pass both
+    p = _Peaked([0.0, 0.1], [[1.0, 1.0], [9.0, 1.0]])
+    p.row_keeps = [{"friction_cone": 1.0}, {"friction_cone": 9.0}]
+    assert switch_clocks(p, "first", 0.8, [5.0, 4.0], {"friction_cone": 2.0}) == [None, None]
+    assert switch_clocks(p, "first", None, [5.0, 4.0], {"friction_cone": 0.5}) == [0.0, 0.1]
+
+
+def test_the_executor_plan_keeps_alike_from_the_report_and_in_memory(pendulum):
+    """With sequence.keep the plan takes, from the report or the graph in memory, the same clocks: the
+    rule's, less those whose cell keeps the family below the value (report.json's 4 digits on both)."""
+    report, prims = pendulum.report, pendulum.compiled.prims
+    g = ReportGraph(report)
+    seq = pendulum.compiled.spec.project.sequence
+    full = ExecutorPlan.of(g, report["lookup_table"]["next"], seq, prims)
+    taken = [m["speed_limit"] for (a, b), (_t, clocks, _s) in full.edges.items() if prims[a].cls.value != "transient"
+             for c, m in zip(clocks, g.edge(a, b).row_keeps) if c is not None]
+    value = float(np.median(taken))  # about half of the rows the rule takes keep less than this
+    keep = seq.model_copy(update={"keep": {"speed_limit": value}})
+    kept = ExecutorPlan.of(g, report["lookup_table"]["next"], keep, prims)
+    assert kept.edges == ExecutorPlan.of(pendulum.mpg, report["lookup_table"]["next"], keep, prims).edges
+    dropped = left = 0
+    for (a, b), (_t_A, clocks, _shares) in kept.edges.items():
+        for c, c0, m in zip(clocks, full.edges[(a, b)][1], g.edge(a, b).row_keeps):
+            if prims[a].cls.value == "transient":
+                assert c == c0
+            elif c is not None:
+                assert c == c0 and m["speed_limit"] >= value
+                left += 1
+            else:
+                dropped += c0 is not None
+    assert dropped > 0 and left > 0

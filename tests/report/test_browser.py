@@ -352,11 +352,15 @@ def test_the_readmes_a1_graph_and_numbers_are_the_reports(pages):
     firsts = {}
     for v in report["sequence"]["runs"]["naive"]["violations"]:
         firsts.setdefault(v["h"].split("[")[0], v)
-    t_tc, t_q, t_fc, f_fc = _claim(r"Walk\(fast\) hits `trunk_clearance` at ([\d.]+) s, then `q_min` of a calf at "
-                                   r"([\d.]+) s and a friction cone at ([\d.]+) s \((-[\d.]+) N\),", readme)
+    t_tc, t_q, t_gap, up = _claim(r"Walk\(fast\) hits `trunk_clearance` at ([\d.]+) s, then `q_min` of a calf at "
+                                  r"([\d.]+) s and `touchdown_gap` at ([\d.]+) s \(a landing foot ([\d.]+) mm up at its "
+                                  r"scheduled touchdown; its stance feet stay inside the friction cone", readme)
     assert _as_written(firsts["trunk_clearance"]["t"], t_tc) and _as_written(firsts["q_min"]["t"], t_q)
-    walk_fc = firsts["friction_cone"]  # the first friction-cone violation, the walk's before the jump's below
-    assert walk_fc["primitive"] == "Walk(fast)" and _as_written(walk_fc["t"], t_fc) and _as_written(walk_fc["value"], f_fc)
+    gap = firsts["touchdown_gap"]  # h = 0.003 - foot_z
+    assert gap["primitive"] == "Walk(fast)" and _as_written(gap["t"], t_gap)
+    assert _as_written(1000 * (0.003 - gap["value"]), up)
+    assert not [v for v in report["sequence"]["runs"]["naive"]["violations"]
+                if v["primitive"] == "Walk(fast)" and v["h"].startswith("friction_cone")]
     t_j, f_j = _claim(r"Walk\(fast\) -> Jump leaves the friction cone at ([\d.]+) s \((-[\d.]+) N\)", readme)
     jump = [v for v in report["sequence"]["runs"]["naive"]["violations"]
             if v["primitive"] == "Jump" and v["h"].startswith("friction_cone")][0]

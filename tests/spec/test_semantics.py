@@ -391,3 +391,25 @@ def test_pd_output_must_be_a_function_of_the_state(tmp_path):
 def test_the_unchanged_base_project_verifies(tmp_path):
     rc, p = run(tmp_path, BASE)
     assert rc in (0, 1) and not p.errors and p.report is not None
+
+
+# ----------------------------------------------------------------------------- sequence.keep
+SEQ = "sequence:\n  start: A\n  duration: 1\n  commands: [{t: 0, goal: B}]\n  keep: {KEEP}\n"
+
+
+def test_keep_must_name_a_safety_function_family(tmp_path):
+    err = spec_error(tmp_path, BASE + SEQ.replace("KEEP", "wal: 1"), "MPG304", "unknown safety function family",
+                     "'wal'", "wall", at="keep:")
+    assert err["key"] == "sequence.keep.wal"
+
+
+@pytest.mark.parametrize("keep", ["'wall[0]': 1", "wall: -1", "wall: 0", "wall: .nan"])
+def test_keep_needs_a_family_and_a_positive_value(tmp_path, keep):
+    rc, p = run(tmp_path, BASE + SEQ.replace("KEEP", keep))
+    assert rc == 2 and p.errors and "keep" in p.errors[0]["text"], p.errors
+
+
+def test_keep_of_a_known_family_runs(tmp_path):
+    rc, p = run(tmp_path, BASE + SEQ.replace("KEEP", "wall: 1"))
+    assert rc in (0, 1) and not p.errors
+    assert p.report["lookup_table"]["keep"] == {"wall": 1.0}

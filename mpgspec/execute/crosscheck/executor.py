@@ -44,7 +44,8 @@ class ExecutorPlan:
             tr = graph.edge(a, b)
             if tr is not None:
                 clocks = executor_clocks(tr, prims[a].cls is PrimitiveClass.TRANSIENT, seq.switch,
-                                         getattr(seq, "reserve", None), input_bounds(prims[b].system))
+                                         getattr(seq, "reserve", None), input_bounds(prims[b].system),
+                                         getattr(seq, "keep", None))
                 edges[(a, b)] = ([float(v) for v in tr.t_A], [None if v is None else float(v) for v in clocks],
                                  switch_shares(tr))
         return cls(seq.start, tuple((float(c.t), c.goal) for c in seq.commands), table, edges)
