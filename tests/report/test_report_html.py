@@ -237,11 +237,15 @@ def test_warnings_are_counted_alike_everywhere(sample_text):
 
 
 def test_the_sequence_says_how_its_switches_are_chosen(sample_text):
-    """The switching rule and the torque reserve of the graph run are stated where the runs are."""
+    """The switching rule, the torque reserve and the kept margins of the graph run are stated where the runs are."""
     r = json.loads(sample_text)
     plain = render_html(r)
     assert "at the first verified t_A it meets." in plain and "of each input's bound" not in plain
+    assert "cells that keep" not in plain
     r["lookup_table"].update(switch="margin", reserve=0.8)
     html = render_html(r)
     assert "at least 0.8 of its edge's best, and only through cells whose law asks at most 0.8 of each input's bound." \
         in html
+    r["lookup_table"]["keep"] = {"friction_cone": 5.0, "q_max": 0.1}
+    assert ("of each input's bound, and only through cells that keep friction_cone at least 5.0, q_max at least 0.1."
+            in render_html(r))
