@@ -122,7 +122,8 @@ class Transition:
     @property
     def row_keeps(self) -> list[dict[str, float] | None]:
         """Per t_A: the least sampled value of each safety function family (friction_cone for
-        friction_cone[FR_foot]) in the cell it switches through, to KEEP_DIGITS as report.json keeps it."""
+        friction_cone[FR_foot]) in the cell it switches through, to KEEP_DIGITS as report.json keeps it
+        (a family whose functions have no value there is absent)."""
         out = []
         for i, t_b in enumerate(self.best_t_B):
             if t_b is None:
@@ -166,8 +167,8 @@ def switch_clocks(tr, rule: str = "first", reserve: float | None = None, bound=N
     margins were not measured, as 'first'). With `reserve` and the inputs' bounds (largest |u| each),
     a t_A whose cell asks more than reserve x bound of some input, or whose peaks are unknown, is not
     taken either. With `keep` ({family: least value}), a t_A whose cell's least sampled value of a named
-    safety function family (one the target has) is below the value given, or whose values are unknown,
-    is not taken. A row checked from the boundary of E_A (row_from_roa) with a sample not safe is never
+    safety function family is below the value given is not taken (a family the cell has no value of asks
+    nothing; a row whose values are unknown altogether, such as a report without them, is not taken). A row checked from the boundary of E_A (row_from_roa) with a sample not safe is never
     taken: the executor leaves A from anywhere in E_A."""
     out = _by_rule(tr, rule)
     if keep:

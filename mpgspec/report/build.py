@@ -78,9 +78,11 @@ def transition_entry(tr, h_names: list[str]) -> dict:
     cells = [[{"verdict": e.verdict, "status": e.status, "reason": e.reason.value, "t_stop": _round(e.t_stop),
                "t_enter": _round(e.t_enter), "violated": e.violated, "checked": e.checked, "refined": e.refined,
                "margin": _round(e.margin), "error_bound": _round(e.error_bound),
-               "peak_input": [_round(v) for v in e.peak_input], "peak_demand": [_round(v) for v in e.peak_demand],
+               # rounded once, by compact_cells (4 digits): the switching rule's reserve and keep compare
+               # the in-memory values rounded the same way (graph.transition PEAK_DIGITS, KEEP_DIGITS)
+               "peak_input": [_f(v) for v in e.peak_input], "peak_demand": [_f(v) for v in e.peak_demand],
                "saturated": e.saturated,
-               "min_margins": [_round(_least(e.min_margins, m)) for m in members],
+               "min_margins": [_least(e.min_margins, m) for m in members],
                "best_roa_margin": _round(e.best_roa_margin), "message": e.message, "method": e.method}
               for e in row] for row in ev]
     flat = [e for row in ev for e in row]

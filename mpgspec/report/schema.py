@@ -177,7 +177,7 @@ class FromRoA(_Strict):
                                                      "drawn on E_A's boundary] at the row's best t_B; null where not "
                                                      "checked. The executor switches through the row only within "
                                                      "that share of r_A from x_A*(t_A); 0: never ([0, 0, 0]: not "
-                                                     "checked, the sequence's rule or reserve never takes the row)")
+                                                     "checked, the sequence's rule, reserve or keep never takes the row)")
     worst: dict | None = Field(None, description="the worst sample not safe: t_A, t_B, sample, status, violated, "
                                                  "margin, reason (null: every sample safe)")
 

@@ -2,7 +2,7 @@
 
 For every nominal transition A -> B (among `nodes`, when given), up to `cells` t_A rows that have
 a verified t_B are taken (the t_B the plan would switch in at), spread over the rows the graph executor
-switches through (the sequence's rule and reserve, the checks from E_A's boundary) when it takes any,
+switches through (the sequence's rule, reserve and keep, the checks from E_A's boundary) when it takes any,
 so that a robust cell is a switch the executor makes. Each such cell is run for a set of
 scenarios: the corners of the box of uncertain parameters and start errors (at most `corners` of
 them, seeded), its centre, `samples` seeded random points, each with the disturbance at 0, +bound

@@ -190,3 +190,18 @@ def test_the_executor_plan_keeps_alike_from_the_report_and_in_memory(pendulum):
             else:
                 dropped += c0 is not None
     assert dropped > 0 and left > 0
+
+
+def test_the_rows_the_rules_compare_read_alike_from_the_report_and_in_memory(pendulum):
+    """The peaks and kept values reserve and keep compare are the same numbers in memory and in report.json
+    (rounded once, to its 4 digits), on every edge, so a run from the report switches where verify's did."""
+    g = ReportGraph(pendulum.report)
+    rows = 0
+    for (a, b), tr in pendulum.mpg.transitions.items():
+        rt = g.edge(a, b)
+        if rt is None:
+            continue
+        assert tr.row_keeps == rt.row_keeps, (a, b)
+        assert [None if p is None else [float(f"{v:.4g}") for v in p] for p in tr.row_peaks] == rt.row_peaks, (a, b)
+        rows += sum(k is not None for k in tr.row_keeps)
+    assert rows > 100

@@ -82,8 +82,10 @@ def land_law(c, ctx) -> ca.SX:
 def _torque_limited(sys, tk, mode: dict, feet, wrench: ca.SX, hold: ca.SX, c) -> ca.SX:
     """u with the trunk's vertical force f_z scaled down where it would ask a stance joint more than
     c.torque_limit: the split is linear in the wrench, so u = a + f_z b (a: the rest of the wrench, the
-    legs' nonlinear effects and the legs in the air; b: per unit f_z), and f_z is at most the least
-    (limit -+ a_j) / |b_j| over the joints (not below 0: the feet are never asked to pull)."""
+    legs' nonlinear effects and the legs in the air; b: per unit f_z), and f_z is kept in the interval where
+    every stance joint asks at most the limit, |a_j + f_z b_j| <= limit, its ends taken no further than 0
+    (where a_j alone exceeds the limit, f_z = 0 leaves a_j: only the vertical force is scaled, and the
+    motors' bound still applies)."""
     nj = sys.model.nq - 7
     rhs = ca.horzcat(ca.vertcat(wrench[:2], 0, wrench[3:]), ca.DM([0, 0, 1, 0, 0, 0]))
     f2 = split_wrench(tk, mode, feet, rhs, float(c.moment_weight), float(c.regularization))
@@ -91,9 +93,12 @@ def _torque_limited(sys, tk, mode: dict, feet, wrench: ca.SX, hold: ca.SX, c) ->
     b = leg_torques(sys, tk, mode, f2[:, 1], ca.SX.zeros(nj)) - leg_torques(sys, tk, mode, ca.SX.zeros(f2.shape[0]),
                                                                               ca.SX.zeros(nj))
     lim, fz = float(c.torque_limit), wrench[2]
-    for j in range(sys.model.nu):
+    for j in range(sys.model.nu):  # the interval's upper end
         room = ca.if_else(b[j] > 0, (lim - a[j]) / ca.fmax(b[j], 1e-9), (lim + a[j]) / ca.fmax(-b[j], 1e-9))
         fz = ca.if_else(ca.fabs(b[j]) > 1e-9, ca.fmin(fz, ca.fmax(room, 0)), fz)
+    for j in range(sys.model.nu):  # and its lower end (a pull the rest of the wrench asks)
+        room = ca.if_else(b[j] > 0, (lim + a[j]) / ca.fmax(b[j], 1e-9), (lim - a[j]) / ca.fmax(-b[j], 1e-9))
+        fz = ca.if_else(ca.fabs(b[j]) > 1e-9, ca.fmax(fz, -ca.fmax(room, 0)), fz)
     return a + fz * b
 
 

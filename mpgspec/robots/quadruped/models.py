@@ -164,8 +164,9 @@ class LandController(Strict):
     kp_joint: Number = Field(default=20.0, ge=0, description="joint stiffness of a leg in the air (N m/rad)")
     kd_joint: Number = Field(default=3.0, ge=0, description="joint damping of a leg in the air (N m s/rad)")
     torque_limit: Number | None = Field(default=None, gt=0, description="largest joint torque (N m) the law asks of "
-                                        "a leg in contact: the trunk's vertical force is scaled down where it would "
-                                        "ask more (the landing speed is then taken out at bounded torques, not at a "
-                                        "damping peak at the touchdown); default: no limit")
+                                        "a leg in contact: the trunk's vertical force is scaled towards 0 where "
+                                        "it would ask more (the landing speed is then taken out at bounded torques, not "
+                                        "at a damping peak at the touchdown; the rest of the wrench is not scaled); "
+                                        "default: no limit")
     moment_weight: Number = _trunk("moment_weight")
     regularization: Number = _trunk("regularization")
