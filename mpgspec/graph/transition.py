@@ -119,38 +119,40 @@ class Transition:
         i = int(np.argmin(np.abs(self.t_A - t_A)))
         return self.best_t_B[i] if abs(self.t_A[i] - t_A) < 1e-9 else None
 
+    def _switched_cells(self) -> list[OracleEvidence | None]:
+        """Per t_A: the cell it switches through (its best t_B), None where it has none."""
+        return [None if t_b is None else self.evidence[i][int(np.argmin(np.abs(self.t_B - t_b)))]
+                for i, t_b in enumerate(self.best_t_B)]
+
     @property
     def row_keeps(self) -> list[dict[str, float] | None]:
         """Per t_A: the least sampled value of each safety function family (friction_cone for
-        friction_cone[FR_foot]) in the cell it switches through, to KEEP_DIGITS as report.json keeps it
+        friction_cone[FR_foot]) in the cell it switches through, to CELL_DIGITS as report.json keeps it
         (a family whose functions have no value there is absent)."""
-        out = []
-        for i, t_b in enumerate(self.best_t_B):
-            if t_b is None:
+        out: list[dict[str, float] | None] = []
+        for e in self._switched_cells():
+            if e is None:
                 out.append(None)
                 continue
             least: dict[str, float] = {}
-            for name, v in self.evidence[i][int(np.argmin(np.abs(self.t_B - t_b)))].min_margins.items():
+            for name, v in e.min_margins.items():
                 if v is not None and np.isfinite(v):
                     fam = family(name)
-                    least[fam] = min(least.get(fam, np.inf), float(f"{float(v):.{KEEP_DIGITS}g}"))
+                    least[fam] = min(least.get(fam, np.inf), float(f"{float(v):.{CELL_DIGITS}g}"))
             out.append(least)
         return out
 
     @property
     def row_peaks(self) -> list[list[float] | None]:
         """Per t_A: the largest |u| of each input in the cell it switches through (its best t_B)."""
-        return [None if t_b is None else list(self.evidence[i][int(np.argmin(np.abs(self.t_B - t_b)))].peak_input)
-                for i, t_b in enumerate(self.best_t_B)]
+        return [None if e is None else list(e.peak_input) for e in self._switched_cells()]
 
 
 MARGIN_SHARE = 0.8
 """Under the 'margin' rule, a t_A is taken when its row margin is at least this share of the edge's best."""
-PEAK_DIGITS = 4
-"""Significant digits of a cell's peak input as report.json keeps them: the reserve compares these, so that
-a run from the report switches where the verify's run did."""
-KEEP_DIGITS = 4
-"""Significant digits of a cell's least safety function values as report.json keeps them (the `keep` rule)."""
+CELL_DIGITS = 4
+"""Significant digits of a cell's peak inputs and least safety function values as report.json keeps them:
+the reserve and keep compare these, so that a run from the report switches where the verify's run did."""
 
 
 def family(name: str) -> str:
@@ -181,7 +183,7 @@ def switch_clocks(tr, rule: str = "first", reserve: float | None = None, bound=N
     lim = reserve * np.asarray(bound, float)
     peaks = list(getattr(tr, "row_peaks", None) or [])
     within = [i < len(peaks) and peaks[i] is not None and len(peaks[i]) == len(lim) and
-              all(p is not None and float(f"{p:.{PEAK_DIGITS}g}") <= m for p, m in zip(peaks[i], lim))
+              all(p is not None and float(f"{p:.{CELL_DIGITS}g}") <= m for p, m in zip(peaks[i], lim))
               for i in range(len(out))]
     return [b if k else None for b, k in zip(out, within)]
 

@@ -41,9 +41,7 @@ from ..spec.project import asserted_edges
 def compile_project(spec: ProjectSpec) -> dict[str, CompiledPrimitive]:
     """System and every primitive of a project as CasADi Functions, keyed by node name."""
     sys = compile_system(spec)
-    prims = {inst.name: compile_primitive(inst, sys) for inst in spec.primitives}
-    _check_keep(spec, prims)
-    return prims
+    return {inst.name: compile_primitive(inst, sys) for inst in spec.primitives}
 
 
 def _check_keep(spec: ProjectSpec, prims: dict[str, CompiledPrimitive]) -> None:
@@ -108,6 +106,7 @@ def compile_stage(spec: ProjectSpec, settings: OracleSettings, progress: Progres
         progress(spec.name, "compile (closed loops as CasADi functions)", 0, len(spec.primitives))
     prims = compile_project(spec)
     check_uncertainty_compiled(spec, prims)
+    _check_keep(spec, prims)
     _check_capabilities(spec, settings, prims)
     for p in prims.values():  # a control period must be a whole number of oracle steps
         if p.sampled is not None:

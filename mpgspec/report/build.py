@@ -79,7 +79,7 @@ def transition_entry(tr, h_names: list[str]) -> dict:
                "t_enter": _round(e.t_enter), "violated": e.violated, "checked": e.checked, "refined": e.refined,
                "margin": _round(e.margin), "error_bound": _round(e.error_bound),
                # rounded once, by compact_cells (4 digits): the switching rule's reserve and keep compare
-               # the in-memory values rounded the same way (graph.transition PEAK_DIGITS, KEEP_DIGITS)
+               # the in-memory values rounded the same way (graph.transition CELL_DIGITS)
                "peak_input": [_f(v) for v in e.peak_input], "peak_demand": [_f(v) for v in e.peak_demand],
                "saturated": e.saturated,
                "min_margins": [_least(e.min_margins, m) for m in members],
